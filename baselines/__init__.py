@@ -1,0 +1,1 @@
+"""Non-learning planners and PPO training built on :mod:`ipp_toolkit`."""

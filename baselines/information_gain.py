@@ -1,0 +1,217 @@
+"""Greedy information gain (Carbone et al. 2021): each UAV takes its most informative next step."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.mapping import LOGODDS_CLIP, class_weights, entropy_from_logodds
+from ipp_toolkit.planners import AgentView, Planner
+from ipp_toolkit.sensor import Camera
+from ipp_toolkit.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS
+
+__all__ = ["InformationGainPlanner", "expected_gain"]
+
+Rect = tuple[int, int, int, int]
+
+_HORIZONTAL = tuple(ACTION_NAMES.index(name) for name in ("north", "east", "south", "west"))
+_VERTICAL = tuple(ACTION_NAMES.index(name) for name in ("up", "down"))
+_CLIP = np.float32(LOGODDS_CLIP)
+
+
+def expected_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
+                  accuracy: float, delta_logodds: np.ndarray,
+                  weight_interesting: float = 1.0, weight_uninteresting: float = 0.0,
+                  ) -> np.ndarray:
+    """Expected weighted-entropy reduction per cell of one reading at one altitude.
+
+    With p the cell's probability, a the accuracy and q = P(reading = 1) = p a + (1-p)(1-a),
+    the posteriors are l1 = clip(l + d1) and l0 = clip(l + d0), and the gain is
+    ``q W(p1) (H(p) - H(p1)) + (1 - q) W(p0) (H(p) - H(p0))`` in bits, W the class weights of
+    the posterior (as in the reward).
+
+    Args:
+        logodds: (h, w) float32 log-odds l of the cells.
+        prob: (h, w) float32 sigmoid(l) (the map's cache).
+        entropy: (h, w) float32 H(p) in bits (the map's cache).
+        accuracy: probability a that a reading at this altitude is correct.
+        delta_logodds: (2,) float32 log-odds increments (d0, d1) of a reading 0 / 1.
+        weight_interesting, weight_uninteresting: the reward's class weights.
+
+    Returns:
+        (h, w) float32 expected gain per cell.
+    """
+    a = np.float32(accuracy)
+    d0, d1 = (np.float32(d) for d in delta_logodds)
+    joint1 = prob * a  # P(cell = 1, reading = 1)
+    q = prob * (a + a - np.float32(1.0))
+    q += np.float32(1.0) - a
+    # Bayes' rule gives the posterior probabilities with one division each instead of a
+    # sigmoid of l1 / l0; they only feed the weights, whose bands (p > 0.5, |p - 0.5| <= 1e-3)
+    # lie far inside the log-odds clip, so clipping cannot change them.
+    p1 = joint1 / q
+    not_q = np.float32(1.0) - q
+    p0 = prob - joint1
+    p0 /= not_q
+    # d1 > 0 > d0 (accuracy > 0.5), so each posterior can only cross one side of the clip.
+    l1 = logodds + d1
+    np.minimum(l1, _CLIP, out=l1)
+    l0 = logodds + d0
+    np.maximum(l0, -_CLIP, out=l0)
+    gain1 = entropy - entropy_from_logodds(l1)
+    gain1 *= class_weights(p1, weight_interesting, weight_uninteresting)
+    gain1 *= q
+    gain0 = entropy - entropy_from_logodds(l0)
+    gain0 *= class_weights(p0, weight_interesting, weight_uninteresting)
+    gain0 *= not_q
+    gain1 += gain0
+    return gain1
+
+
+def _bounding_box(rects: np.ndarray) -> Rect:
+    """Union bounding box of (K, 4) rectangles (row0, row1, col0, col1)."""
+    return (int(rects[:, 0].min()), int(rects[:, 1].max()), int(rects[:, 2].min()),
+            int(rects[:, 3].max()))
+
+
+class InformationGainPlanner(Planner):
+    """Greedy one-step information gain on each UAV's local map (Carbone et al. 2021).
+
+    Agents decide in index order. Agent k values each valid action by the expected
+    weighted-entropy reduction of its own local map, summed over the footprint it would see
+    from the action's target waypoint (:func:`expected_gain`: expectation over the predictive
+    distribution of the reading, weights of the posterior like the reward). Coordination uses
+    only what agent k hears: cells under the chosen next footprints of lower-index teammates
+    in ``view.teammates`` count ``overlap_discount`` times their gain, and a 2-D target cell
+    such a teammate already chose is avoided (the same-target rule would hold agent k back)
+    unless nothing else is valid. Ties go to the lowest action index, so all-zero gains give
+    the first valid action. Deterministic; the seed is unused.
+
+    Cost: per agent and step the gain is evaluated once over the union bounding box of the
+    four horizontal candidates (they share the current altitude) and once over each of the
+    up and down footprints, in float32, reusing the maps' cached probability and entropy and
+    computing the posterior entropies with ``entropy_from_logodds``. Each candidate's value
+    is then a float64 slice sum of its box: with only four candidates per box that is ~20x
+    cheaper than a summed-area table (two cumsums over the box, ~0.8 ms at 15 m and
+    r_M = 0.1 m, against ~0.04 ms for the four sums). cProfile puts nearly all the time in
+    ``class_weights`` and ``entropy_from_logodds`` on the boxes; a joint act() of 4 agents at
+    r_M = 0.1 m takes ~3 ms at 15 m, ~2 ms at 10 m and ~1 ms at 5 m (one core).
+
+    ``overlap_discount`` default 0.5. Measured on 10 test missions
+    (``reset_mission(config, 0, mission=0..9, namespace="test")``, 4 agents, D = 25 m,
+    r_M = 0.5 m, B = 15), mean final entropy over interesting cells / mean F1 of the global
+    map (random planner: 0.708 / 0.683; lawnmower at 5 m: 0.527 / 0.711)::
+
+        overlap_discount 0.0:  entropy 0.390 (sd 0.059)  F1 0.794
+        overlap_discount 0.5:  entropy 0.380 (sd 0.055)  F1 0.801
+        overlap_discount 1.0:  entropy 0.374 (sd 0.049)  F1 0.804   (no coordination)
+
+    (Measured while ``ipp_toolkit.terrain`` was a placeholder giving a straight north-south
+    split with 30-60 % interesting cells; re-measure on the real terrains.)
+
+    0.5 beats 0.0 on these 10 missions, but the margin is within the noise: on 50 missions
+    the three give 0.389, 0.388 and 0.387. A second reading of a cell still carries
+    information at 10-15 m (accuracy 0.735 / 0.625), so ignoring teammates' cells entirely
+    (0.0) throws away real gain.
+
+    Args:
+        overlap_discount: factor in [0, 1] on the gain of cells a heard lower-index teammate
+            will already observe (0 = ignore them, 1 = no coordination).
+    """
+
+    name = "ig"
+    needs_observations = False
+
+    def __init__(self, overlap_discount: float = 0.5) -> None:
+        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
+            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
+        self.overlap_discount = float(overlap_discount)
+        self._config: EnvConfig | None = None
+        self._camera: Camera | None = None
+
+    def reset(self, config: EnvConfig, seed: int) -> None:
+        """Build the camera geometry for ``config`` (reused while the config is unchanged)."""
+        if config != self._config:
+            self._camera = Camera(config.world, config.sensor)
+            self._config = config
+
+    def act(self, views: list[AgentView]) -> np.ndarray:
+        """(N,) int64 greedy actions, chosen in agent order; each valid under its mask."""
+        camera, config = self._camera, self._config
+        if camera is None or config is None:
+            raise RuntimeError("call reset(config, seed) before act()")
+        weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
+        n = len(views)
+        actions = np.empty(n, dtype=np.int64)
+        targets = np.empty((n, 3), dtype=np.int64)  # chosen next waypoint of each agent
+        for k, view in enumerate(views):
+            if view.index != k:
+                raise ValueError(f"views must come in agent order: view {k} is agent "
+                                 f"{view.index}")
+            mates = view.teammates[view.teammates < k]  # heard and already decided
+            mask = view.mask.astype(bool)
+            if not mask.any():
+                raise ValueError(f"agent {k} has no valid action")
+            candidates = view.position[None, :].astype(np.int64) + ACTION_DELTAS  # (6, 3)
+            claimed = (candidates[:, None, :2] == targets[mates][None, :, :2]).all(-1).any(-1)
+            allowed = mask & ~claimed
+            if not allowed.any():
+                allowed = mask
+            mate_rects = camera.rects[targets[mates, 2], targets[mates, 1],
+                                      targets[mates, 0]]  # (K, 4)
+            values = self._action_values(view, camera, weights, candidates, allowed, mate_rects)
+            # argmax returns the first maximum: ties go to the lowest action index.
+            action = int(np.argmax(np.where(allowed, values, -np.inf)))
+            actions[k] = action
+            targets[k] = candidates[action]
+        return actions
+
+    def _action_values(self, view: AgentView, camera: Camera, weights: tuple[float, float],
+                       candidates: np.ndarray, allowed: np.ndarray,
+                       mate_rects: np.ndarray) -> np.ndarray:
+        """(6,) float64 expected gain of each allowed action (0 for the others).
+
+        Args:
+            view: the deciding agent's view.
+            camera: footprints and sensor model of the config.
+            weights: the reward's class weights (interesting, uninteresting).
+            candidates: (6, 3) int target waypoint of each action.
+            allowed: (6,) bool actions to evaluate.
+            mate_rects: (K, 4) int footprints already claimed by lower-index teammates.
+        """
+        values = np.zeros(N_ACTIONS, dtype=np.float64)
+        # One gain evaluation per altitude: the horizontal moves share the current one.
+        groups = [[a for a in _HORIZONTAL if allowed[a]]] + [[a] for a in _VERTICAL if allowed[a]]
+        for group in groups:
+            if not group:
+                continue
+            ix, iy, iz = candidates[group].T
+            altitude = int(iz[0])
+            rects = camera.rects[altitude, iy, ix]  # (len(group), 4)
+            box = _bounding_box(rects)
+            r0, r1, c0, c1 = box
+            cells = (slice(r0, r1), slice(c0, c1))
+            gain = expected_gain(view.local_logodds[cells], view.local_prob[cells],
+                                 view.local_entropy[cells], camera.accuracy[altitude],
+                                 camera.delta_logodds[altitude], *weights)
+            self._discount(gain, box, mate_rects)
+            for a, (q0, q1, s0, s1) in zip(group, rects.tolist(), strict=True):
+                values[a] = gain[q0 - r0:q1 - r0, s0 - c0:s1 - c0].sum(dtype=np.float64)
+        return values
+
+    def _discount(self, gain: np.ndarray, box: Rect, mate_rects: np.ndarray) -> None:
+        """Scale, in place, the gain of cells inside ``box`` under teammates' next footprints."""
+        if len(mate_rects) == 0 or self.overlap_discount == 1.0:
+            return
+        r0, r1, c0, c1 = box
+        covered = np.zeros(gain.shape, dtype=bool)
+        for q0, q1, s0, s1 in mate_rects.tolist():
+            top, bottom = max(q0, r0), min(q1, r1)
+            left, right = max(s0, c0), min(s1, c1)
+            if top < bottom and left < right:
+                covered[top - r0:bottom - r0, left - c0:right - c0] = True
+        # A mask, not one multiplication per footprint: a cell several teammates will see is
+        # still discounted once.
+        np.multiply(gain, np.float32(self.overlap_discount), out=gain, where=covered)

@@ -1,0 +1,414 @@
+"""Configuration of a mission: dataclasses with validation, YAML in and out.
+
+Every number of the simulator is a field here; the defaults reproduce the paper (SPEC §1-§3).
+Validation happens at construction and names the bad field and value, so a typo in a YAML
+file fails at load time rather than deep inside numpy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+__all__ = [
+    "WorldConfig",
+    "SensorConfig",
+    "TerrainConfig",
+    "TeamConfig",
+    "RewardConfig",
+    "FeatureConfig",
+    "EnvConfig",
+    "TERRAIN_KINDS",
+    "load_config",
+    "save_config",
+    "config_from_dict",
+    "config_to_dict",
+]
+
+TERRAIN_KINDS = ("split", "split-axis", "blobs", "raster")
+NAN_POLICIES = ("raise", "min", "max", "mean")
+
+
+def _fail(section: str, name: str, value: Any, why: str) -> None:
+    raise ValueError(f"invalid config: {section}.{name} = {value!r}: {why}")
+
+
+def _positive(section: str, name: str, value: float) -> None:
+    if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+        _fail(section, name, value, "must be a positive finite number")
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """The area and its discretisations (SPEC §1).
+
+    Attributes:
+        area_size: side of the square area in metres.
+        resolution: map cell side r_M in metres; ``area_size / resolution`` must be an integer.
+        grid_spacing: distance between planning waypoints in metres (also the step length).
+        altitudes: the flight levels in metres, lowest first.
+        prior: prior probability of "interesting" for every map cell.
+    """
+
+    area_size: float = 50.0
+    resolution: float = 0.1
+    grid_spacing: float = 5.0
+    altitudes: tuple[float, ...] = (5.0, 10.0, 15.0)
+    prior: float = 0.5
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "altitudes", tuple(float(a) for a in self.altitudes))
+        _positive("world", "area_size", self.area_size)
+        _positive("world", "resolution", self.resolution)
+        _positive("world", "grid_spacing", self.grid_spacing)
+        cells = self.area_size / self.resolution
+        if abs(cells - round(cells)) > 1e-6 * cells:
+            _fail("world", "resolution", self.resolution,
+                  f"area_size {self.area_size} is not a whole number of cells")
+        waypoints = self.area_size / self.grid_spacing
+        if abs(waypoints - round(waypoints)) > 1e-9 * waypoints or round(waypoints) < 1:
+            _fail("world", "grid_spacing", self.grid_spacing,
+                  f"area_size {self.area_size} is not a whole number of grid steps")
+        if len(self.altitudes) < 1:
+            _fail("world", "altitudes", self.altitudes, "needs at least one altitude")
+        if any((not math.isfinite(a)) or a <= 0 for a in self.altitudes):
+            _fail("world", "altitudes", self.altitudes, "altitudes must be positive")
+        if list(self.altitudes) != sorted(set(self.altitudes)):
+            _fail("world", "altitudes", self.altitudes, "must be strictly increasing")
+        steps = np.diff(self.altitudes)
+        if len(steps) and not np.allclose(steps, self.grid_spacing):
+            _fail("world", "altitudes", self.altitudes,
+                  f"must be spaced by grid_spacing ({self.grid_spacing} m): "
+                  "one action moves one step")
+        if not 0.0 < self.prior < 1.0:
+            _fail("world", "prior", self.prior, "must lie strictly between 0 and 1")
+
+    @property
+    def map_cells(self) -> int:
+        """Number of map cells per side (500 at the defaults)."""
+        return int(round(self.area_size / self.resolution))
+
+    @property
+    def grid_points(self) -> int:
+        """Number of waypoints per side of the planning grid (11 at the defaults)."""
+        return int(round(self.area_size / self.grid_spacing)) + 1
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The downward camera and its altitude-dependent noise (SPEC §1).
+
+    Attributes:
+        fov_deg: full square field of view in degrees.
+        accuracy: probability that a cell reading is correct, one per altitude of the world.
+    """
+
+    fov_deg: float = 60.0
+    accuracy: tuple[float, ...] = (0.99, 0.735, 0.625)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "accuracy", tuple(float(a) for a in self.accuracy))
+        if not 0.0 < self.fov_deg < 180.0:
+            _fail("sensor", "fov_deg", self.fov_deg, "must lie in (0, 180)")
+        if any(not 0.5 < a < 1.0 for a in self.accuracy):
+            _fail("sensor", "accuracy", self.accuracy,
+                  "each accuracy must lie in (0.5, 1): a reading must carry information "
+                  "and a perfect sensor breaks the log-odds filter")
+
+
+@dataclass(frozen=True)
+class TerrainConfig:
+    """How the ground truth of a mission is generated (SPEC §1, §8).
+
+    Attributes:
+        kind: ``split`` (straight boundary at any angle), ``split-axis`` (the authors' four
+            axis-aligned splits), ``blobs`` (thresholded smooth random field) or ``raster``.
+        share_min, share_max: range of the interesting share for ``split``/``blobs``.
+        blob_scale: correlation length of the ``blobs`` field in metres.
+        raster: path of a .npy/.png/.tif file for ``raster`` (or pass an array to the
+            terrain generator directly).
+        threshold: raster cells whose area-averaged value is >= threshold are interesting.
+        nan_policy: what to do with NaN raster cells: ``raise`` or fill with the raster's
+            ``min``, ``max`` or ``mean``.
+    """
+
+    kind: str = "split"
+    share_min: float = 0.30
+    share_max: float = 0.60
+    blob_scale: float = 5.0
+    raster: str | None = None
+    threshold: float | None = None
+    nan_policy: str = "raise"
+
+    def __post_init__(self) -> None:
+        if self.kind not in TERRAIN_KINDS:
+            _fail("terrain", "kind", self.kind,
+                  f"unknown terrain kind; choose one of {TERRAIN_KINDS}")
+        if not 0.0 < self.share_min <= self.share_max < 1.0:
+            _fail("terrain", "share_min/share_max", (self.share_min, self.share_max),
+                  "need 0 < share_min <= share_max < 1")
+        _positive("terrain", "blob_scale", self.blob_scale)
+        if self.nan_policy not in NAN_POLICIES:
+            _fail("terrain", "nan_policy", self.nan_policy, f"choose one of {NAN_POLICIES}")
+        if self.threshold is not None and not math.isfinite(self.threshold):
+            _fail("terrain", "threshold", self.threshold, "must be finite")
+        if self.kind == "raster":
+            if self.raster is None:
+                _fail("terrain", "raster", self.raster, "kind 'raster' needs a file path")
+            if self.threshold is None:
+                _fail("terrain", "threshold", self.threshold, "kind 'raster' needs a threshold")
+        if self.raster is not None:
+            object.__setattr__(self, "raster", os.fspath(self.raster))
+
+
+START_POSITIONS: dict[int, tuple[tuple[float, float], ...]] = {
+    2: ((10, 10), (40, 40)),
+    4: ((10, 10), (40, 10), (40, 40), (10, 40)),
+    8: ((10, 10), (40, 10), (40, 40), (10, 40), (25, 10), (40, 25), (25, 40), (10, 25)),
+}
+
+
+@dataclass(frozen=True)
+class TeamConfig:
+    """The UAV team, its starts, its communication and its action rules (SPEC §2, §8).
+
+    Attributes:
+        n_agents: team size N.
+        budget: number of steps B after the start measurement.
+        start: ``fixed`` (documented positions for N = 2, 4, 8; the paper's) or ``random``
+            (distinct 2-D cells from the mission's seed). ``fixed`` for another N is an error.
+        start_altitude: altitude of every start position in metres.
+        comm_range: communication radius D in metres (3-D distance); 0 = none, ``inf`` = full.
+        message_drop: probability that one message (sender, receiver, step) is lost.
+        invalid_action: ``raise`` (a masked action is an error) or ``hold`` (the UAV stays and
+            still measures; the no-mask ablation).
+    """
+
+    n_agents: int = 4
+    budget: int = 15
+    start: str = "fixed"
+    start_altitude: float = 15.0
+    comm_range: float = 25.0
+    message_drop: float = 0.0
+    invalid_action: str = "raise"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.comm_range, str):
+            try:
+                object.__setattr__(self, "comm_range", float(self.comm_range))
+            except ValueError:
+                _fail("team", "comm_range", self.comm_range, "must be a number of metres or 'inf'")
+        if not isinstance(self.n_agents, int | np.integer) or isinstance(self.n_agents, bool) \
+                or self.n_agents < 1:
+            _fail("team", "n_agents", self.n_agents, "must be an integer >= 1")
+        if not isinstance(self.budget, int | np.integer) or self.budget < 1:
+            _fail("team", "budget", self.budget, "must be an integer >= 1")
+        if self.start not in ("fixed", "random"):
+            _fail("team", "start", self.start, "choose 'fixed' or 'random'")
+        if self.start == "fixed" and self.n_agents not in START_POSITIONS:
+            _fail("team", "start", self.start,
+                  f"fixed starts exist for {sorted(START_POSITIONS)} agents, not {self.n_agents}; "
+                  "use start: random")
+        if not isinstance(self.comm_range, int | float) or math.isnan(self.comm_range) \
+                or self.comm_range < 0:
+            _fail("team", "comm_range", self.comm_range, "must be >= 0 (metres) or inf")
+        if not 0.0 <= self.message_drop <= 1.0:
+            _fail("team", "message_drop", self.message_drop, "must lie in [0, 1]")
+        if self.invalid_action not in ("raise", "hold"):
+            _fail("team", "invalid_action", self.invalid_action, "choose 'raise' or 'hold'")
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Team reward and the class weights of the weighted entropy (SPEC §3).
+
+    Attributes:
+        alpha: scale of the relative weighted-entropy reduction (must be > 0).
+        beta: constant added every step (a time penalty when negative).
+        weight_interesting: weight w1 of cells believed interesting (p > 0.5).
+        weight_uninteresting: weight w2 of cells believed uninteresting (p < 0.5).
+    """
+
+    alpha: float = 22.0
+    beta: float = -0.5
+    weight_interesting: float = 1.0
+    weight_uninteresting: float = 0.0
+
+    def __post_init__(self) -> None:
+        _positive("reward", "alpha", self.alpha)
+        if not math.isfinite(self.beta):
+            _fail("reward", "beta", self.beta, "must be finite")
+        for name in ("weight_interesting", "weight_uninteresting"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                _fail("reward", name, value, "must lie in [0, 1]")
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Which 11 x 11 feature planes the actor and the critic see (SPEC §4, §8).
+
+    Actor planes, in this order when switched on: ``budget``, ``agent_id``, ``position`` (a),
+    ``local_map`` (b), ``local_entropy`` (c), ``measurement_entropy`` (d), ``footprints`` (e).
+    Critic-only planes: ``all_positions`` (f), ``global_map`` (g), ``global_entropy`` (h),
+    ``all_footprints`` (i), ``other_actions`` (j, six planes).
+
+    Attributes:
+        centred: the position plane (a) is an 11 x 11 window centred on the agent (+-25 m at
+            the defaults) with out-of-area cells marked -1; otherwise it is the absolute grid.
+        agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
+            N agents reads valid ids for any team of up to this many agents.
+    """
+
+    budget: bool = True
+    agent_id: bool = True
+    position: bool = True
+    local_map: bool = True
+    local_entropy: bool = True
+    measurement_entropy: bool = True
+    footprints: bool = True
+    all_positions: bool = True
+    global_map: bool = True
+    global_entropy: bool = True
+    all_footprints: bool = True
+    other_actions: bool = True
+    centred: bool = True
+    agent_id_scale: int = 8
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.agent_id_scale, int | np.integer) or self.agent_id_scale < 1:
+            _fail("features", "agent_id_scale", self.agent_id_scale, "must be an integer >= 1")
+        if not any(getattr(self, name) for name in ACTOR_PLANES):
+            _fail("features", "actor planes", "all off", "the actor needs at least one plane")
+
+
+ACTOR_PLANES = ("budget", "agent_id", "position", "local_map", "local_entropy",
+                "measurement_entropy", "footprints")
+STATE_PLANES = ("budget", "all_positions", "global_map", "global_entropy", "all_footprints")
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Everything that defines a mission; nested sections mirror the YAML file."""
+
+    world: WorldConfig = field(default_factory=WorldConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    terrain: TerrainConfig = field(default_factory=TerrainConfig)
+    team: TeamConfig = field(default_factory=TeamConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+
+    def __post_init__(self) -> None:
+        if len(self.sensor.accuracy) != len(self.world.altitudes):
+            _fail("sensor", "accuracy", self.sensor.accuracy,
+                  f"needs one value per altitude {self.world.altitudes}")
+        cells_2d = self.world.grid_points ** 2
+        if self.team.n_agents > cells_2d:
+            _fail("team", "n_agents", self.team.n_agents,
+                  f"more agents than the {cells_2d} 2-D cells of the planning grid")
+        if not any(math.isclose(self.team.start_altitude, a) for a in self.world.altitudes):
+            _fail("team", "start_altitude", self.team.start_altitude,
+                  f"unknown altitude; choose one of {self.world.altitudes}")
+        if self.team.start == "fixed":
+            for x, y in START_POSITIONS[self.team.n_agents]:
+                if max(x, y) > self.world.area_size or (x % self.world.grid_spacing) or (
+                        y % self.world.grid_spacing):
+                    _fail("team", "start", self.team.start,
+                          f"fixed start ({x}, {y}) is not a waypoint of this world; use random")
+        if self.features.agent_id and self.team.n_agents > self.features.agent_id_scale:
+            _fail("features", "agent_id_scale", self.features.agent_id_scale,
+                  f"smaller than the team ({self.team.n_agents} agents)")
+
+    def replace(self, **sections: Any) -> EnvConfig:
+        """Copy with some fields replaced, e.g. ``cfg.replace(team={"n_agents": 8})``.
+
+        A section may be given as a dataclass or as a dict of field overrides.
+        """
+        updates = {}
+        for name, value in sections.items():
+            if name not in _SECTIONS:
+                raise ValueError(f"invalid config: unknown section {name!r}; "
+                                 f"choose from {sorted(_SECTIONS)}")
+            if isinstance(value, Mapping):
+                value = _build(_SECTIONS[name], {**dataclasses.asdict(getattr(self, name)),
+                                                  **value}, name)
+            updates[name] = value
+        return dataclasses.replace(self, **updates)
+
+
+_SECTIONS: dict[str, type] = {
+    "world": WorldConfig,
+    "sensor": SensorConfig,
+    "terrain": TerrainConfig,
+    "team": TeamConfig,
+    "reward": RewardConfig,
+    "features": FeatureConfig,
+}
+
+
+def _build(cls: type, values: Mapping[str, Any], section: str) -> Any:
+    if not isinstance(values, Mapping):
+        raise ValueError(f"invalid config: section {section!r} must be a mapping, got {values!r}")
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"invalid config: unknown key(s) {unknown} in section {section!r}; "
+                         f"known keys: {sorted(known)}")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def config_from_dict(values: Mapping[str, Any] | None) -> EnvConfig:
+    """Build an :class:`EnvConfig` from nested dicts; unknown sections or keys are rejected."""
+    values = dict(values or {})
+    unknown = sorted(set(values) - set(_SECTIONS))
+    if unknown:
+        raise ValueError(f"invalid config: unknown section(s) {unknown}; "
+                         f"known sections: {sorted(_SECTIONS)}")
+    return EnvConfig(**{name: _build(cls, values[name], name)
+                        for name, cls in _SECTIONS.items() if name in values})
+
+
+def config_to_dict(config: EnvConfig) -> dict[str, Any]:
+    """Nested plain dict of a config (tuples as lists, inf as the string 'inf'), YAML/JSON-safe."""
+
+    def plain(value: Any) -> Any:
+        if isinstance(value, tuple):
+            return [plain(v) for v in value]
+        if isinstance(value, float) and math.isinf(value):
+            return "inf"
+        return value
+
+    return {name: {k: plain(v) for k, v in dataclasses.asdict(getattr(config, name)).items()}
+            for name in _SECTIONS}
+
+
+def load_config(path: str | os.PathLike[str]) -> EnvConfig:
+    """Read a YAML config; missing sections and keys take their defaults."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise ValueError(f"cannot read config file {str(path)!r}: {err.strerror}") from err
+    try:
+        values = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ValueError(f"config file {str(path)!r} is not valid YAML: {err}") from err
+    if values is not None and not isinstance(values, Mapping):
+        raise ValueError(f"config file {str(path)!r} must hold a mapping of sections")
+    return config_from_dict(values)
+
+
+def save_config(config: EnvConfig, path: str | os.PathLike[str]) -> None:
+    """Write a config as YAML (atomically: a temporary file renamed into place)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False))
+    os.replace(tmp, path)

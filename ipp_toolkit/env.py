@@ -1,0 +1,252 @@
+"""PettingZoo ``ParallelEnv`` shell over the mission core (SPEC §4).
+
+Spaces per agent (G = 11 at the defaults, C = number of actor planes switched on, 7 by
+default):
+
+* observation: ``Dict(observation=Box(-1, 1, (C, G, G), float32),
+  action_mask=Box(0, 1, (6,), int8))``; the mask is also in ``infos[agent]["action_mask"]``.
+* action: ``Discrete(6)``: 0 up, 1 north (+y), 2 east (+x), 3 south, 4 west, 5 down.
+* ``state()``: ``Box(0, 1, (C_state, G, G), float32)``, the centralised critic's global planes.
+
+Every agent gets the same team reward. After ``budget`` steps every agent is terminated (a
+true terminal, not a truncation). Seeding: ``reset(seed=s)`` starts mission 0 of run ``s``;
+later ``reset()`` calls without a seed run missions 1, 2, ... of the same run, and
+``reset(options={"mission": k})`` jumps to mission k, so evaluations can replay a mission.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from .config import EnvConfig
+from .features import (
+    actor_observations,
+    actor_plane_names,
+    critic_observations,
+    global_state,
+    state_plane_names,
+)
+from .mission import (
+    InvalidActionError,
+    MissionGeometry,
+    MissionState,
+    agent_label,
+    reset_mission,
+    step_mission,
+)
+from .team import N_ACTIONS
+
+__all__ = ["IPPEnv", "parallel_env"]
+
+
+class IPPEnv(ParallelEnv):
+    """Multi-UAV informative path planning as a PettingZoo parallel environment.
+
+    Args:
+        config: the mission configuration (defaults reproduce the paper).
+        render_mode: ``None`` or ``"rgb_array"``.
+        namespace: random-stream namespace: ``train``, ``validation`` or ``test``.
+        ground_truth: (H, W) bool terrain used for every mission instead of the generator.
+        raster: (h, w) array for ``terrain.kind = "raster"`` instead of the file.
+    """
+
+    metadata = {"name": "ipp_v0", "render_modes": ["rgb_array"], "is_parallelizable": True,
+                "render_fps": 2}
+
+    def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
+                 namespace: str = "train", ground_truth: np.ndarray | None = None,
+                 raster: np.ndarray | None = None):
+        self.config = config if config is not None else EnvConfig()
+        if not isinstance(self.config, EnvConfig):
+            raise ValueError(f"config must be an EnvConfig, got {type(self.config).__name__}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode {render_mode!r} is not supported; "
+                             f"choose from {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        self.namespace = namespace
+        self.geometry = MissionGeometry(self.config)
+        self._ground_truth = ground_truth
+        self._raster = raster
+        n = self.config.team.n_agents
+        self.possible_agents = [agent_label(k) for k in range(n)]
+        self.agents: list[str] = []
+        self._index = {agent: k for k, agent in enumerate(self.possible_agents)}
+        g = self.geometry.grid_points
+        features = self.config.features
+        self._observation_space = spaces.Dict({
+            "observation": spaces.Box(-1.0, 1.0, (len(actor_plane_names(features)), g, g),
+                                      dtype=np.float32),
+            "action_mask": spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8),
+        })
+        self._action_space = spaces.Discrete(N_ACTIONS)
+        self.state_space = spaces.Box(0.0, 1.0, (len(state_plane_names(features)), g, g),
+                                      dtype=np.float32)
+        self._seed: int | None = None
+        self._mission_index = -1
+        self.mission: MissionState | None = None
+
+    # PettingZoo's tests assert the very same space object on every call: return the one built.
+    def observation_space(self, agent: str) -> spaces.Space:
+        self._agent_index(agent)
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        self._agent_index(agent)
+        return self._action_space
+
+    def _agent_index(self, agent: str) -> int:
+        try:
+            return self._index[agent]
+        except KeyError:
+            raise ValueError(f"unknown agent {agent!r}; agents are {self.possible_agents}") \
+                from None
+
+    def reset(self, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[dict, dict]:
+        """Start a mission; see the module docstring for the seeding rules.
+
+        Args:
+            seed: run seed; starts mission 0 of that run.
+            options: ``{"mission": k}`` jumps to mission k of the current run.
+
+        Returns:
+            observations and infos per agent.
+        """
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+                raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+            self._seed = int(seed)
+            self._mission_index = 0
+        else:
+            if self._seed is None:
+                # Unseeded: fresh OS entropy, so copies of one env never replay each other.
+                self._seed = int(np.random.SeedSequence().entropy % (2**63))
+            self._mission_index += 1
+        if options and "mission" in options:
+            mission = options["mission"]
+            if isinstance(mission, bool) or not isinstance(mission, int | np.integer) \
+                    or mission < 0:
+                raise ValueError(f"options['mission'] must be a non-negative integer, "
+                                 f"got {mission!r}")
+            self._mission_index = int(mission)
+        self.mission = reset_mission(self.config, self._seed, self._mission_index,
+                                     self.namespace, self.geometry, self._ground_truth,
+                                     self._raster)
+        self.agents = list(self.possible_agents)
+        observations, masks = self._observe()
+        return observations, self._infos(masks)
+
+    def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
+        """Advance all agents by one step.
+
+        Args:
+            actions: one action index per live agent.
+
+        Returns:
+            observations, rewards, terminations, truncations and infos per agent.
+
+        Raises:
+            ValueError: an agent is missing or unknown, or an action is masked or out of range.
+        """
+        if self.mission is None:
+            raise RuntimeError("call reset() before step()")
+        if not self.agents:
+            if actions:
+                raise RuntimeError("the mission is over; call reset()")
+            return {}, {}, {}, {}, {}
+        unknown = sorted(set(actions) - set(self.agents))
+        if unknown:
+            raise InvalidActionError(f"actions for unknown or finished agents {unknown}; "
+                                     f"live agents are {self.agents}")
+        missing = [agent for agent in self.agents if agent not in actions]
+        if missing:
+            raise InvalidActionError(f"no action for agent(s) {missing}")
+        joint = []
+        for agent in self.agents:
+            action = actions[agent]
+            if isinstance(action, np.ndarray):
+                if action.size != 1:
+                    raise InvalidActionError(f"agent {agent!r}: action {action!r} must be "
+                                             "one integer")
+                action = action.reshape(()).item()
+            if isinstance(action, bool) or not isinstance(action, int | np.integer):
+                raise InvalidActionError(f"agent {agent!r}: action {action!r} must be an "
+                                         f"integer in 0..{N_ACTIONS - 1}")
+            joint.append(int(action))
+        reward = step_mission(self.mission, np.asarray(joint, dtype=np.int64))
+        observations, masks = self._observe()
+        done = self.mission.done
+        agents = list(self.agents)
+        rewards = dict.fromkeys(agents, reward)
+        terminations = dict.fromkeys(agents, done)
+        truncations = dict.fromkeys(agents, False)
+        infos = self._infos(masks)
+        if done:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def _observe(self) -> tuple[dict[str, dict[str, np.ndarray]], np.ndarray]:
+        planes = actor_observations(self.mission, self.config.features)
+        masks = self.mission.masks()
+        observations = {agent: {"observation": planes[k], "action_mask": masks[k]}
+                        for k, agent in enumerate(self.possible_agents)}
+        return observations, masks
+
+    def _infos(self, masks: np.ndarray) -> dict[str, dict[str, Any]]:
+        metrics = self.mission.history[-1].as_dict()
+        return {agent: {"action_mask": masks[k].copy(), "blocked": bool(self.mission.blocked[k]),
+                        "step": self.mission.step, "metrics": dict(metrics)}
+                for k, agent in enumerate(self.possible_agents)}
+
+    def state(self) -> np.ndarray:
+        """(C_state, G, G) float32 global planes for the centralised critic."""
+        if self.mission is None:
+            raise RuntimeError("call reset() before state()")
+        return global_state(self.mission, self.config.features)
+
+    def critic_observations(self, joint_action: dict[str, int] | np.ndarray) -> np.ndarray:
+        """(N, C_critic, G, G) per-agent critic inputs for a joint action chosen now."""
+        if self.mission is None:
+            raise RuntimeError("call reset() before critic_observations()")
+        if isinstance(joint_action, dict):
+            joint_action = np.array([joint_action[a] for a in self.possible_agents])
+        return critic_observations(self.mission, self.config.features, joint_action)
+
+    def action_mask(self, agent: str) -> np.ndarray:
+        """(6,) int8 valid actions of ``agent`` now."""
+        if self.mission is None:
+            raise RuntimeError("call reset() before action_mask()")
+        return self.mission.masks()[self._agent_index(agent)]
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame (h, w, 3) uint8: terrain, global map, UAVs, footprints, local maps."""
+        if self.render_mode is None:
+            return None
+        if self.mission is None:
+            raise RuntimeError("call reset() before render()")
+        from .rendering import render_mission
+
+        m = self.mission
+        return render_mission(
+            ground_truth=m.ground_truth,
+            global_prob=m.maps.prob[m.global_index],
+            local_probs=m.maps.prob[: m.n_agents],
+            positions=m.positions_m(),
+            footprints=m.footprints,
+            area_size=self.config.world.area_size,
+            altitudes=self.config.world.altitudes,
+            step=m.step,
+            budget=m.budget,
+        )
+
+    def close(self) -> None:
+        """Nothing to release; present for the PettingZoo API."""
+
+
+def parallel_env(config: EnvConfig | None = None, **kwargs: Any) -> IPPEnv:
+    """PettingZoo-style factory: ``parallel_env(config, render_mode=...)``."""
+    return IPPEnv(config, **kwargs)

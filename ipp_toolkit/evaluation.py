@@ -1,0 +1,934 @@
+"""Evaluation runner: N test missions per planner, per-step metric curves, resumable (SPEC §7-§8).
+
+:func:`evaluate` flies missions ``0 .. missions - 1`` of run ``seed`` in a namespace (``test`` by
+default: terrains disjoint from ``train`` and ``validation``) with every planner. Mission k is
+the same for every planner and any number of workers: its terrain, starts and sensor noise
+come from ``reset_mission(config, seed, k, namespace)`` and the planner is reset with a seed
+derived from ``(namespace, seed, k)`` only.
+
+With ``out_dir`` every finished mission is stored at once as a shard, written atomically, so an
+interrupted run resumes where it stopped::
+
+    out_dir/
+        config.json                          identity: config, seed, namespace (+ version)
+        shards/<label>/planner.json          the planner spec behind the label
+        shards/<label>/mission_00007.json    the rows (+ trajectory) of one mission
+        results.csv                          every row of the requested planners and missions
+        trajectories/<label>_mission0.npz    recorded missions (ground truth, final map, path)
+
+Results are tidy rows, one per (planner, mission, step) with the columns
+:data:`RESULT_COLUMNS`; :meth:`EvaluationResult.curves` turns them into (missions, B + 1)
+arrays. :func:`load_results` reads a folder back.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import csv
+import io
+import json
+import math
+import multiprocessing
+import os
+import pickle
+import re
+import sys
+import time
+import uuid
+import warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+from tqdm import tqdm
+
+from .config import EnvConfig, config_from_dict, config_to_dict
+from .mission import MissionGeometry, reset_mission, step_mission
+from .planners import (
+    ENTRY_POINT_GROUP,
+    Planner,
+    PlannerFactory,
+    agent_views,
+    make_planner,
+    planner_factory,
+)
+from .seeding import mission_streams
+
+__all__ = [
+    "RESULT_COLUMNS",
+    "METRICS",
+    "PlannerSpec",
+    "EvaluationError",
+    "EvaluationResult",
+    "run_mission",
+    "evaluate",
+    "load_results",
+    "planner_seed",
+]
+
+RESULT_COLUMNS = ("planner", "agents", "comm", "terrain", "seed", "mission", "step",
+                  "entropy", "f1", "rmse", "reward", "plan_ms")
+"""Columns of a result row: identity (planner label, team size, communication range in metres,
+terrain, run seed, mission index, step s = 0..B), the global map's metrics after step s, the
+team reward of step s and the planner's wall-clock time for step s in milliseconds (both NaN
+at s = 0)."""
+
+METRICS = ("entropy", "f1", "rmse", "reward", "plan_ms")
+"""The numeric per-step columns that :meth:`EvaluationResult.curves` accepts."""
+
+_INT_COLUMNS = frozenset({"agents", "seed", "mission", "step"})
+_FLOAT_COLUMNS = frozenset({"comm", "entropy", "f1", "rmse", "reward", "plan_ms"})
+_FORMAT = 1  # version of the shard and config.json layout
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+class EvaluationError(ValueError):
+    """An evaluation folder cannot be used: it holds results of another configuration or of
+    another planner under the same label, or a file in it is malformed."""
+
+
+# --------------------------------------------------------------------------------------------
+# Planner specs
+
+
+@dataclass(frozen=True)
+class PlannerSpec:
+    """A planner to evaluate: a registry name, its keyword options and its label.
+
+    Attributes:
+        name: registry name, e.g. ``"ig"`` or ``"coma"`` (see :func:`make_planner`).
+        options: keyword options for ``make_planner`` (e.g. ``{"checkpoint": "run/ckpt.pt"}``);
+            must be JSON-serialisable (path-like values are stored as strings).
+        label: name of the planner in results and tables; defaults to ``name``.
+    """
+
+    name: str
+    options: dict = field(default_factory=dict)
+    label: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"planner name must be a non-empty string, got {self.name!r}")
+        if not isinstance(self.options, Mapping):
+            raise ValueError(f"options of planner {self.name!r} must be a mapping, "
+                             f"got {self.options!r}")
+        options = {str(k): os.fspath(v) if isinstance(v, os.PathLike) else v
+                   for k, v in self.options.items()}
+        try:
+            json.dumps(options, allow_nan=False)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"options of planner {self.name!r} must be JSON-serialisable "
+                             f"(they are stored with the results): {err}") from None
+        object.__setattr__(self, "options", options)
+        if self.label is not None and (not isinstance(self.label, str) or not self.label.strip()):
+            raise ValueError(f"planner label must be a non-empty string or None, "
+                             f"got {self.label!r}")
+
+    def __hash__(self) -> int:
+        return hash((self.name, json.dumps(self.options, sort_keys=True), self.label))
+
+    @property
+    def effective_label(self) -> str:
+        """The label used in results: ``label`` or, when it is None, ``name``."""
+        return self.label if self.label is not None else self.name
+
+    @classmethod
+    def parse(cls, text: str) -> PlannerSpec:
+        """Parse ``"NAME"`` or ``"NAME=CHECKPOINT"`` (the command line's planner syntax).
+
+        ``"ig"`` gives name ``ig`` without options; ``"coma=runs/x/ckpt.pt"`` gives name
+        ``coma`` with ``options={"checkpoint": "runs/x/ckpt.pt"}``. The label is the name.
+        """
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError(f"planner must be NAME or NAME=CHECKPOINT, got {text!r}")
+        name, sep, value = (part.strip() for part in text.strip().partition("="))
+        if not name or (sep and not value):
+            raise ValueError(f"planner must be NAME or NAME=CHECKPOINT, got {text!r}")
+        return cls(name=name, options={"checkpoint": value} if sep else {}, label=name)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe description ``{"name", "options", "label"}`` (label resolved)."""
+        return {"name": self.name, "options": dict(self.options), "label": self.effective_label}
+
+
+def _as_specs(planners: str | Sequence[str | PlannerSpec]) -> list[PlannerSpec]:
+    if isinstance(planners, str | PlannerSpec):
+        items: list[Any] = ([p for p in planners.split(",") if p.strip()]
+                            if isinstance(planners, str) else [planners])
+    else:
+        items = list(planners)
+    if not items:
+        raise ValueError("no planner given: pass at least one planner name or PlannerSpec")
+    specs = []
+    for item in items:
+        if isinstance(item, PlannerSpec):
+            specs.append(item)
+        elif isinstance(item, str):
+            specs.append(PlannerSpec.parse(item))
+        else:
+            raise ValueError(f"a planner must be a name or a PlannerSpec, got {item!r}")
+    return specs
+
+
+def _file_stem(label: str) -> str:
+    """``label`` as a file-name-safe word (the same rule as ``reports.safe_name``)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("._") or "planner"
+
+
+def planner_seed(seed: int, mission: int, namespace: str = "test") -> int:
+    """The seed a planner is reset with for mission ``mission`` of run ``seed``.
+
+    Derived from ``(namespace, seed, mission)`` only (a stream independent of the mission's
+    terrain, start, sensor and message streams), so it is the same for every planner and any
+    number of workers.
+    """
+    root = mission_streams(namespace, seed, mission).terrain
+    # The terrain stream is child 0 of the mission's root; child 4 is never used by a mission.
+    child = np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key[:-1], 4))
+    return int(child.generate_state(1, np.uint32)[0])
+
+
+# --------------------------------------------------------------------------------------------
+# One mission
+
+
+def _terrain_name(config: EnvConfig) -> str:
+    terrain = config.terrain
+    if terrain.kind == "raster" and terrain.raster is not None:
+        return Path(terrain.raster).name
+    return terrain.kind
+
+
+def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
+                namespace: str = "test", geometry: MissionGeometry | None = None,
+                record_trajectory: bool = False, label: str | None = None) -> dict[str, Any]:
+    """Fly mission ``mission`` of run ``seed`` with ``planner``.
+
+    The planner is reset with :func:`planner_seed` ``(seed, mission, namespace)``; then, per
+    step, it gets the agents' views and its ``act`` is timed (``plan_ms``).
+
+    Args:
+        config: the mission configuration (budget B, N agents).
+        planner: the planner; ``planner.needs_observations`` decides whether the views carry
+            the actor planes.
+        seed: run seed (>= 0).
+        mission: mission index (>= 0).
+        namespace: random-stream namespace (``test`` for held-out terrains).
+        geometry: a prebuilt :class:`MissionGeometry` of ``config`` (built when omitted).
+        record_trajectory: also return the path, the ground truth and the final global map.
+        label: value of the ``planner`` column; defaults to ``planner.name``.
+
+    Returns:
+        ``{"rows": [...], "trajectory": None | {...}}``. ``rows`` holds B + 1 dicts with the
+        keys :data:`RESULT_COLUMNS`, one per step s = 0..B (``reward`` and ``plan_ms`` are NaN
+        at s = 0). ``trajectory`` holds ``positions`` (B + 1, N, 3) float64 metres,
+        ``footprints`` (B + 1, N, 4) int64 rectangles, ``ground_truth`` (H, W) bool,
+        ``final_prob`` (H, W) float16 of the global map, ``area_size`` and ``resolution``
+        (floats, metres).
+    """
+    state = reset_mission(config, seed, mission, namespace, geometry)
+    planner.reset(config, seed=planner_seed(seed, mission, namespace))
+    base = {
+        "planner": label if label is not None else str(getattr(planner, "name", "planner")),
+        "agents": int(config.team.n_agents),
+        "comm": float(config.team.comm_range),
+        "terrain": _terrain_name(config),
+        "seed": int(seed),
+        "mission": int(mission),
+    }
+    rewards = [math.nan]
+    times = [math.nan]
+    positions = [state.positions_m().astype(np.float64)]
+    footprints = [state.footprints.astype(np.int64)]
+    while not state.done:
+        views = agent_views(state, planner.needs_observations)
+        start = time.perf_counter()
+        actions = planner.act(views)
+        times.append((time.perf_counter() - start) * 1000.0)
+        rewards.append(float(step_mission(state, actions)))
+        if record_trajectory:
+            positions.append(state.positions_m().astype(np.float64))
+            footprints.append(state.footprints.astype(np.int64))
+    rows = []
+    for step, metrics in enumerate(state.history):
+        rows.append({**base, "step": step, "entropy": float(metrics.entropy),
+                     "f1": float(metrics.f1), "rmse": float(metrics.rmse),
+                     "reward": rewards[step], "plan_ms": times[step]})
+    trajectory = None
+    if record_trajectory:
+        trajectory = {
+            "ground_truth": np.asarray(state.ground_truth, dtype=bool).copy(),
+            "final_prob": state.maps.prob[state.global_index].astype(np.float16),
+            "positions": np.stack(positions),
+            "footprints": np.stack(footprints),
+            "area_size": float(config.world.area_size),
+            "resolution": float(config.world.resolution),
+        }
+    return {"rows": rows, "trajectory": trajectory}
+
+
+# --------------------------------------------------------------------------------------------
+# Running many missions (in this process or in a worker process)
+
+
+def _limit_torch_threads() -> None:
+    """One intra-op thread for torch, if a planner imported it (it is never imported here)."""
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        with contextlib.suppress(Exception):
+            if torch.get_num_threads() != 1:
+                torch.set_num_threads(1)
+
+
+@dataclass
+class _Entry:
+    spec: PlannerSpec
+    factory: PlannerFactory | None = None  # sent to workers; None: look the name up there
+
+
+class _Runner:
+    """Flies (label, mission) tasks of one evaluation; caches the geometry and the planners."""
+
+    def __init__(self, config: EnvConfig, seed: int, namespace: str,
+                 entries: Mapping[str, _Entry], record: frozenset[int],
+                 single_thread: bool = False):
+        self.config = config
+        self.seed = seed
+        self.namespace = namespace
+        self.entries = dict(entries)
+        self.record = record
+        self.single_thread = single_thread
+        self._geometry: MissionGeometry | None = None
+        self._planners: dict[str, Planner] = {}
+
+    @property
+    def geometry(self) -> MissionGeometry:
+        if self._geometry is None:
+            self._geometry = MissionGeometry(self.config)
+        return self._geometry
+
+    def planner(self, label: str) -> Planner:
+        planner = self._planners.get(label)
+        if planner is None:
+            entry = self.entries[label]
+            spec = entry.spec
+            try:
+                if entry.factory is not None:
+                    planner = entry.factory(**spec.options)
+                    if not isinstance(planner, Planner):
+                        raise TypeError(f"planner factory {spec.name!r} returned "
+                                        f"{type(planner).__name__}, not a Planner")
+                else:
+                    planner = make_planner(spec.name, **spec.options)
+            except Exception as err:
+                err.add_note(f"while building planner {label!r} ({spec.name} with options "
+                             f"{spec.options})")
+                raise
+            if self.single_thread:
+                _limit_torch_threads()
+            self._planners[label] = planner
+        return planner
+
+    def run(self, label: str, mission: int) -> tuple[str, int, dict[str, Any]]:
+        planner = self.planner(label)
+        try:
+            result = run_mission(self.config, planner, self.seed, mission, self.namespace,
+                                 self.geometry, record_trajectory=mission in self.record,
+                                 label=label)
+        except Exception as err:
+            err.add_note(f"while flying mission {mission} (seed {self.seed}, namespace "
+                         f"{self.namespace!r}) with planner {label!r}")
+            raise
+        if self.single_thread:
+            _limit_torch_threads()
+        return label, mission, result
+
+
+_WORKER: _Runner | None = None
+
+
+def _init_worker(runner: _Runner) -> None:
+    """Process-pool initializer: one thread per worker, then keep the runner for the tasks."""
+    global _WORKER
+    for name in _THREAD_VARIABLES:
+        os.environ[name] = "1"
+    runner.single_thread = True
+    _limit_torch_threads()
+    _WORKER = runner
+
+
+def _worker_task(label: str, mission: int) -> tuple[str, int, dict[str, Any]]:
+    if _WORKER is None:  # pragma: no cover - only if the initializer did not run
+        raise RuntimeError("evaluation worker used without its initializer")
+    return _WORKER.run(label, mission)
+
+
+@contextlib.contextmanager
+def _single_thread_environment() -> Iterator[None]:
+    """Set the thread-count variables while worker processes start (they inherit them)."""
+    saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
+    try:
+        for name in _THREAD_VARIABLES:
+            os.environ[name] = "1"
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+def _transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
+    """The factory of ``spec`` to send to worker processes (pickled by reference).
+
+    None when a worker finds the planner by itself (an entry point).
+
+    Raises:
+        ValueError: the factory lives where a spawned worker cannot import it (a local
+            scope, or ``__main__`` of an interactive session or notebook).
+    """
+    factory = planner_factory(spec.name)
+    main = sys.modules.get("__main__")
+    importable = not (getattr(factory, "__module__", None) == "__main__"
+                      and getattr(main, "__file__", None) is None)
+    if importable:
+        try:
+            pickle.dumps(factory)
+        except Exception:
+            importable = False
+    if importable:
+        return factory
+    if spec.name in {ep.name for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}:
+        return None
+    raise ValueError(f"planner {spec.name!r} is registered by "
+                     f"{getattr(factory, '__qualname__', factory)!r}, which worker processes "
+                     "cannot import (a local or interactive definition): define it in an "
+                     "importable module, or use workers=1")
+
+
+# --------------------------------------------------------------------------------------------
+# Files
+
+
+def _atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
+    """Write ``path`` through a temporary file in the same folder and ``os.replace``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "xb") as handle:
+            write(handle)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def _write_json(path: Path, value: Any) -> None:
+    data = json.dumps(value, indent=1).encode("utf-8")
+    _atomic_write(path, lambda handle: handle.write(data))
+
+
+def _identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, Any]:
+    from . import __version__
+
+    # Through JSON so that it compares equal to what is read back from config.json.
+    return json.loads(json.dumps({"format": _FORMAT, "config": config_to_dict(config),
+                                  "seed": int(seed), "namespace": namespace,
+                                  "version": __version__}))
+
+
+def _flat_differences(old: Any, new: Any, prefix: str) -> list[str]:
+    if isinstance(old, dict) and isinstance(new, dict):
+        keys = sorted(set(old) | set(new))
+        return [d for k in keys
+                for d in _flat_differences(old.get(k), new.get(k), f"{prefix}.{k}" if prefix
+                                           else str(k))]
+    return [] if old == new else [prefix]
+
+
+def _read_identity(folder: Path) -> dict[str, Any]:
+    path = folder / "config.json"
+    try:
+        stored = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise EvaluationError(f"{str(folder)!r} holds no evaluation: {str(path)!r} is "
+                              "missing") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise EvaluationError(f"cannot read {str(path)!r}: {err}") from None
+    if not isinstance(stored, dict) or not {"config", "seed", "namespace"} <= set(stored):
+        raise EvaluationError(f"{str(path)!r} is not an evaluation identity: it needs the "
+                              "keys 'config', 'seed' and 'namespace'")
+    return stored
+
+
+def _check_folder(folder: Path, identity: dict[str, Any],
+                  specs: Sequence[PlannerSpec]) -> bool:
+    """Check that ``folder`` may take these results; returns whether config.json exists."""
+    if folder.exists() and not folder.is_dir():
+        raise EvaluationError(f"out_dir {str(folder)!r} exists and is not a folder")
+    if not (folder / "config.json").exists():
+        if (folder / "shards").exists():
+            raise EvaluationError(f"out_dir {str(folder)!r} holds shards/ but no config.json: "
+                                  "cannot tell which configuration they belong to")
+        return False
+    stored = _read_identity(folder)
+    differing = []
+    for key in ("config", "seed", "namespace"):
+        differing += _flat_differences(stored.get(key), identity[key], key)
+    if differing:
+        raise EvaluationError(
+            f"out_dir {str(folder)!r} holds results of another configuration (differing: "
+            f"{', '.join(differing)}); use another folder or the same configuration")
+    if stored.get("version") != identity["version"]:
+        warnings.warn(f"{str(folder)!r} was written by ipp-toolkit {stored.get('version')}, "
+                      f"this is {identity['version']}: stored missions are reused",
+                      stacklevel=3)
+    for spec in specs:
+        path = folder / "shards" / _file_stem(spec.effective_label) / "planner.json"
+        if not path.exists():
+            continue
+        try:
+            stored_spec = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise EvaluationError(f"cannot read {str(path)!r}: {err}") from None
+        if stored_spec != spec.to_dict():
+            raise EvaluationError(
+                f"out_dir {str(folder)!r} holds missions of planner label "
+                f"{spec.effective_label!r} made with {stored_spec!r}, not {spec.to_dict()!r}; "
+                "give this planner another label or use another folder")
+    return True
+
+
+def _shard_path(folder: Path, label: str, mission: int) -> Path:
+    return folder / "shards" / _file_stem(label) / f"mission_{mission:05d}.json"
+
+
+def _trajectory_path(folder: Path, label: str, mission: int) -> Path:
+    return folder / "trajectories" / f"{_file_stem(label)}_mission{mission}.npz"
+
+
+def _check_rows(rows: Any, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
+    if not isinstance(rows, list) or len(rows) != budget + 1:
+        raise ValueError(f"expected {budget + 1} rows")
+    for step, row in enumerate(rows):
+        if not isinstance(row, dict) or tuple(row) != RESULT_COLUMNS:
+            raise ValueError(f"row {step} does not have the columns {RESULT_COLUMNS}")
+        if row["planner"] != label or row["mission"] != mission or row["step"] != step:
+            raise ValueError(f"row {step} belongs to another planner, mission or step")
+    return rows
+
+
+def _read_shard(path: Path, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
+    shard = json.loads(path.read_text(encoding="utf-8"))
+    if not isinstance(shard, dict) or shard.get("format") != _FORMAT:
+        raise ValueError("not a shard of this format")
+    if shard.get("label") != label or shard.get("mission") != mission:
+        raise ValueError("the shard belongs to another planner or mission")
+    return _check_rows(shard.get("rows"), label, mission, budget)
+
+
+def _write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any]) -> None:
+    trajectory = result["trajectory"]
+    shard = {
+        "format": _FORMAT,
+        "label": spec.effective_label,
+        "planner": spec.name,
+        "options": spec.options,
+        "mission": mission,
+        "rows": result["rows"],
+        "trajectory": None if trajectory is None else {
+            "positions": np.asarray(trajectory["positions"]).tolist(),
+            "footprints": np.asarray(trajectory["footprints"]).tolist(),
+        },
+    }
+    _write_json(_shard_path(folder, spec.effective_label, mission), shard)
+
+
+def _write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
+    arrays = {
+        "ground_truth": np.asarray(trajectory["ground_truth"], dtype=bool),
+        "final_prob": np.asarray(trajectory["final_prob"], dtype=np.float16),
+        "positions": np.asarray(trajectory["positions"], dtype=np.float64),
+        "footprints": np.asarray(trajectory["footprints"], dtype=np.int64),
+        "area_size": np.float64(trajectory["area_size"]),
+        "resolution": np.float64(trajectory["resolution"]),
+    }
+    _atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
+
+
+def _read_trajectory(path: Path) -> dict[str, Any]:
+    with np.load(path, allow_pickle=False) as data:
+        missing = {"ground_truth", "final_prob", "positions", "footprints", "area_size",
+                   "resolution"} - set(data.files)
+        if missing:
+            raise ValueError(f"missing arrays {sorted(missing)}")
+        return {
+            "ground_truth": data["ground_truth"].astype(bool),
+            "final_prob": data["final_prob"],
+            "positions": data["positions"],
+            "footprints": data["footprints"],
+            "area_size": float(data["area_size"]),
+            "resolution": float(data["resolution"]),
+        }
+
+
+def _format_cell(value: Any) -> str:
+    if isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, int | np.integer):
+        return str(int(value))
+    if isinstance(value, float | np.floating):
+        value = float(value)
+        if math.isnan(value):
+            return ""
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    return str(value)
+
+
+def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(RESULT_COLUMNS)
+    for row in rows:
+        writer.writerow([_format_cell(row[column]) for column in RESULT_COLUMNS])
+    data = text.getvalue().encode("utf-8")
+    _atomic_write(path, lambda handle: handle.write(data))
+
+
+def _parse_cell(column: str, text: str) -> Any:
+    if column in _INT_COLUMNS:
+        return int(text)
+    if column in _FLOAT_COLUMNS:
+        return math.nan if text == "" else float(text)
+    return text
+
+
+def _read_csv(path: Path) -> list[dict[str, Any]]:
+    try:
+        handle = open(path, encoding="utf-8", newline="")
+    except FileNotFoundError:
+        raise EvaluationError(f"{str(path)!r} is missing") from None
+    except OSError as err:
+        raise EvaluationError(f"cannot read {str(path)!r}: {err.strerror}") from None
+    rows = []
+    with handle:
+        reader = csv.reader(handle)
+        try:
+            header = next(reader, None)
+            if header is None or tuple(header) != RESULT_COLUMNS:
+                raise EvaluationError(f"{str(path)!r} is malformed: its header is {header}, "
+                                      f"expected {list(RESULT_COLUMNS)}")
+            for cells in reader:
+                if len(cells) != len(RESULT_COLUMNS):
+                    raise EvaluationError(f"{str(path)!r} is malformed: line {reader.line_num} "
+                                          f"has {len(cells)} cells, expected "
+                                          f"{len(RESULT_COLUMNS)}")
+                try:
+                    rows.append({c: _parse_cell(c, t) for c, t in zip(RESULT_COLUMNS, cells,
+                                                                      strict=True)})
+                except ValueError as err:
+                    raise EvaluationError(f"{str(path)!r} is malformed: line "
+                                          f"{reader.line_num}: {err}") from None
+        except (csv.Error, UnicodeDecodeError) as err:
+            raise EvaluationError(f"{str(path)!r} is malformed: {err}") from None
+    return rows
+
+
+# --------------------------------------------------------------------------------------------
+# Results
+
+
+@dataclass
+class EvaluationResult:
+    """The outcome of :func:`evaluate` (or of :func:`load_results`).
+
+    Attributes:
+        config: the configuration of every mission.
+        seed: the run seed.
+        rows: one dict per (planner, mission, step) with the keys :data:`RESULT_COLUMNS`,
+            ordered by planner (as given), mission, step.
+        labels: planner labels in order.
+        trajectories: ``(label, mission) -> dict`` of the recorded missions: ``ground_truth``
+            (H, W) bool, ``final_prob`` (H, W) float16, ``positions`` (B + 1, N, 3) float
+            metres, ``footprints`` (B + 1, N, 4) int, ``area_size`` and ``resolution`` floats.
+        out_dir: the results folder, or None for an in-memory evaluation.
+        namespace: the random-stream namespace of the missions.
+    """
+
+    config: EnvConfig
+    seed: int
+    rows: list[dict[str, Any]]
+    labels: list[str]
+    trajectories: dict[tuple[str, int], dict[str, Any]] = field(default_factory=dict)
+    out_dir: Path | None = None
+    namespace: str = "test"
+
+    @property
+    def missions(self) -> list[int]:
+        """Sorted indices of the missions in the rows."""
+        return sorted({int(row["mission"]) for row in self.rows})
+
+    def curves(self, metric: str) -> dict[str, np.ndarray]:
+        """Per planner label, a (missions, B + 1) float array of ``metric`` over the steps.
+
+        Rows are the planner's missions in increasing index; missing cells are NaN.
+
+        Args:
+            metric: one of :data:`METRICS` (``entropy``, ``f1``, ``rmse``, ``reward``,
+                ``plan_ms``).
+        """
+        if metric not in METRICS:
+            raise ValueError(f"unknown metric {metric!r}; choose one of {METRICS}")
+        steps = self.config.team.budget + 1
+        per_label: dict[str, dict[int, np.ndarray]] = {label: {} for label in self.labels}
+        for row in self.rows:
+            curves = per_label.setdefault(str(row["planner"]), {})
+            curve = curves.get(int(row["mission"]))
+            if curve is None:
+                curve = curves[int(row["mission"])] = np.full(steps, np.nan)
+            step = int(row["step"])
+            if 0 <= step < steps:
+                curve[step] = float(row[metric])
+        return {label: (np.stack([curves[k] for k in sorted(curves)]) if curves
+                        else np.zeros((0, steps)))
+                for label, curves in per_label.items()}
+
+
+def load_results(out_dir: str | os.PathLike[str]) -> EvaluationResult:
+    """Read an evaluation folder back: ``config.json``, ``results.csv`` and the trajectories.
+
+    Raises:
+        EvaluationError: the folder has no (or a malformed) ``config.json`` or
+            ``results.csv``; the message names the file.
+    """
+    folder = Path(out_dir)
+    stored = _read_identity(folder)
+    try:
+        config = config_from_dict(stored["config"])
+        seed = int(stored["seed"])
+        namespace = str(stored["namespace"])
+    except (TypeError, ValueError) as err:
+        raise EvaluationError(f"{str(folder / 'config.json')!r} is malformed: {err}") from None
+    rows = _read_csv(folder / "results.csv")
+    labels: list[str] = []
+    missions: dict[str, set[int]] = {}
+    for row in rows:
+        label = str(row["planner"])
+        if label not in missions:
+            labels.append(label)
+            missions[label] = set()
+        missions[label].add(int(row["mission"]))
+    trajectories: dict[tuple[str, int], dict[str, Any]] = {}
+    for label in labels:
+        for mission in sorted(missions[label]):
+            path = _trajectory_path(folder, label, mission)
+            if path.exists():
+                try:
+                    trajectories[(label, mission)] = _read_trajectory(path)
+                except (OSError, ValueError, EOFError) as err:
+                    warnings.warn(f"skipping unreadable trajectory {str(path)!r}: {err}",
+                                  stacklevel=2)
+    return EvaluationResult(config=config, seed=seed, rows=rows, labels=labels,
+                            trajectories=trajectories, out_dir=folder, namespace=namespace)
+
+
+# --------------------------------------------------------------------------------------------
+# The runner
+
+
+def _check_int(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], missions: int = 50,
+             seed: int = 0, workers: int = 1, out_dir: str | os.PathLike[str] | None = None,
+             progress: bool = True, namespace: str = "test",
+             record_missions: Sequence[int] = (0,)) -> EvaluationResult:
+    """Fly missions ``0 .. missions - 1`` of run ``seed`` with every planner.
+
+    Every input is checked before any work or file: planner names (an unknown one raises
+    listing the registered planners), labels, counts, and ``out_dir`` (a folder holding
+    another configuration raises :class:`EvaluationError` and stays untouched). With
+    ``workers == 1`` the planners are also built before anything is written.
+
+    Args:
+        config: the mission configuration.
+        planners: names (``"ig"``, ``"coma=ckpt.pt"``, see :meth:`PlannerSpec.parse`), specs,
+            or one comma-separated string.
+        missions: number of missions per planner (>= 1).
+        seed: run seed (>= 0).
+        workers: processes (>= 1); > 1 runs one task per (planner, mission) in a "spawn"
+            process pool, each worker single-threaded. Results do not depend on it.
+        out_dir: results folder (see the module docstring); missions already stored there
+            are not flown again. None keeps everything in memory.
+        progress: show a tqdm progress bar counting missions.
+        namespace: random-stream namespace; ``test`` terrains are disjoint from ``train`` and
+            ``validation``.
+        record_missions: mission indices whose trajectories are kept (and written as npz);
+            indices >= ``missions`` are ignored.
+
+    Returns:
+        the :class:`EvaluationResult`; its rows are ordered by planner, mission, step.
+
+    Raises:
+        ValueError: a bad input (the message names the value).
+        EvaluationError: ``out_dir`` holds results of another configuration or another
+            planner under one of the labels.
+    """
+    if not isinstance(config, EnvConfig):
+        raise ValueError(f"config must be an EnvConfig, got {type(config).__name__}")
+    missions = _check_int("missions", missions, 1)
+    workers = _check_int("workers", workers, 1)
+    seed = _check_int("seed", seed, 0)
+    if not isinstance(namespace, str) or not namespace:
+        raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
+    if isinstance(record_missions, int | np.integer):
+        record_missions = (int(record_missions),)
+    record = frozenset(_check_int("record_missions", k, 0) for k in record_missions)
+    record = frozenset(k for k in record if k < missions)
+    specs = _as_specs(planners)
+    for spec in specs:
+        planner_factory(spec.name)  # raises for an unknown name, listing the registered ones
+    labels = [spec.effective_label for spec in specs]
+    stems: dict[str, str] = {}
+    for label in labels:
+        if label in stems.values():
+            raise ValueError(f"planner label {label!r} is given twice; give one a label")
+        other = stems.get(_file_stem(label))
+        if other is not None:
+            raise ValueError(f"planner labels {other!r} and {label!r} map to the same file "
+                             f"name {_file_stem(label)!r}; rename one")
+        stems[_file_stem(label)] = label
+    folder = Path(out_dir) if out_dir is not None else None
+    identity = _identity(config, seed, namespace)
+    has_identity = _check_folder(folder, identity, specs) if folder is not None else False
+
+    spec_of = dict(zip(labels, specs, strict=True))
+    done: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    trajectories: dict[tuple[str, int], dict[str, Any]] = {}
+    if folder is not None and has_identity:
+        for label in labels:
+            for mission in range(missions):
+                path = _shard_path(folder, label, mission)
+                if not path.exists():
+                    continue
+                try:
+                    rows = _read_shard(path, label, mission, config.team.budget)
+                except (OSError, UnicodeDecodeError, ValueError, KeyError) as err:
+                    warnings.warn(f"shard {str(path)!r} is corrupt ({err}); flying mission "
+                                  f"{mission} of planner {label!r} again", stacklevel=2)
+                    continue
+                if mission in record:
+                    npz = _trajectory_path(folder, label, mission)
+                    try:
+                        trajectories[(label, mission)] = _read_trajectory(npz)
+                    except FileNotFoundError:
+                        continue  # stored without its trajectory: fly it again to record it
+                    except (OSError, ValueError, EOFError) as err:
+                        warnings.warn(f"trajectory {str(npz)!r} is unreadable ({err}); flying "
+                                      f"mission {mission} of planner {label!r} again",
+                                      stacklevel=2)
+                        continue
+                done[(label, mission)] = rows
+    tasks = [(label, mission) for mission in range(missions) for label in labels
+             if (label, mission) not in done]
+    n_workers = min(workers, len(tasks))
+
+    entries = {label: _Entry(spec_of[label]) for label in labels}
+    local_runner: _Runner | None = None
+    if n_workers <= 1 and tasks:
+        local_runner = _Runner(config, seed, namespace, entries, record)
+        for label in dict.fromkeys(label for label, _ in tasks):
+            local_runner.planner(label)  # a planner that cannot be built fails before writing
+    elif tasks:
+        for label in dict.fromkeys(label for label, _ in tasks):
+            entries[label].factory = _transferable_factory(spec_of[label])
+
+    if folder is not None:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not has_identity:
+            _write_json(folder / "config.json", identity)
+        for spec in specs:
+            path = folder / "shards" / _file_stem(spec.effective_label) / "planner.json"
+            if not path.exists():
+                _write_json(path, spec.to_dict())
+
+    def finish(label: str, mission: int, result: dict[str, Any]) -> None:
+        if folder is not None:
+            if result["trajectory"] is not None:
+                _write_trajectory(_trajectory_path(folder, label, mission), result["trajectory"])
+            _write_shard(folder, spec_of[label], mission, result)
+        done[(label, mission)] = result["rows"]
+        if result["trajectory"] is not None:
+            trajectories[(label, mission)] = result["trajectory"]
+
+    with tqdm(total=len(labels) * missions, initial=len(labels) * missions - len(tasks),
+              disable=not progress, desc="evaluate", unit="mission", dynamic_ncols=True) as bar:
+        if local_runner is not None:
+            for label, mission in tasks:
+                finish(*local_runner.run(label, mission))
+                bar.update(1)
+        elif tasks:
+            runner = _Runner(config, seed, namespace, entries, record)
+            _run_parallel(runner, tasks, n_workers, finish, bar)
+
+    rows = [row for label in labels for mission in range(missions)
+            for row in done[(label, mission)]]
+    if folder is not None:
+        _write_csv(folder / "results.csv", rows)
+    return EvaluationResult(config=config, seed=seed, rows=rows, labels=labels,
+                            trajectories={key: trajectories[key] for key in sorted(
+                                trajectories, key=lambda k: (labels.index(k[0]), k[1]))
+                                if key[1] in record},
+                            out_dir=folder, namespace=namespace)
+
+
+def _run_parallel(runner: _Runner, tasks: Sequence[tuple[str, int]], n_workers: int,
+                  finish: Callable[[str, int, dict[str, Any]], None], bar: tqdm) -> None:
+    """Fly ``tasks`` in a spawn process pool; ``finish`` stores each result as it arrives.
+
+    On a failed mission the pending tasks are cancelled, the running ones are awaited and
+    stored, and the first error is raised. On KeyboardInterrupt nothing more is stored.
+    """
+    context = multiprocessing.get_context("spawn")
+    executor = concurrent.futures.ProcessPoolExecutor(
+        max_workers=n_workers, mp_context=context, initializer=_init_worker,
+        initargs=(runner,))
+    futures: list[concurrent.futures.Future] = []
+    stored: set[concurrent.futures.Future] = set()
+    error: BaseException | None = None
+    try:
+        with _single_thread_environment():  # workers start during the submissions
+            futures = [executor.submit(_worker_task, label, mission)
+                       for label, mission in tasks]
+        for future in concurrent.futures.as_completed(futures):
+            if future.exception() is not None:
+                error = future.exception()
+                break
+            finish(*future.result())
+            stored.add(future)
+            bar.update(1)
+    except BaseException:
+        executor.shutdown(wait=False, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True, cancel_futures=True)
+    if error is not None:
+        if isinstance(error, concurrent.futures.process.BrokenProcessPool):
+            error.add_note("a worker process of the evaluation died: it could not start (e.g. "
+                           "it failed to import a planner) or was killed (e.g. out of memory)")
+        for future in futures:
+            if (future not in stored and future.done() and not future.cancelled()
+                    and future.exception() is None):
+                finish(*future.result())
+                bar.update(1)
+        raise error

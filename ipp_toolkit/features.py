@@ -1,0 +1,201 @@
+"""Actor and critic feature planes on the 11 x 11 planning grid (SPEC §4, §8).
+
+Every plane is G x G (one cell per waypoint). Map planes average the map cells of each
+waypoint's 5 m x 5 m block (entropy planes average W H per cell, not H of the mean). Each
+plane can be switched off in :class:`~ipp_toolkit.config.FeatureConfig` for ablations.
+
+Value ranges: the centred position plane lies in [-1, 1] (-1 marks out-of-area cells), every
+other plane in [0, 1].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import ACTOR_PLANES, FeatureConfig
+from .mission import MissionState
+from .team import N_ACTIONS
+
+__all__ = [
+    "actor_plane_names",
+    "state_plane_names",
+    "critic_plane_names",
+    "actor_observations",
+    "global_state",
+    "critic_observations",
+    "other_action_planes",
+]
+
+_STATE_ONLY = ("all_positions", "global_map", "global_entropy", "all_footprints")
+
+
+def actor_plane_names(features: FeatureConfig) -> list[str]:
+    """Names of the actor's planes in channel order."""
+    return [name for name in ACTOR_PLANES if getattr(features, name)]
+
+
+def state_plane_names(features: FeatureConfig) -> list[str]:
+    """Names of the planes of ``state()``: the budget plus the critic's global planes."""
+    names = ["budget"] if features.budget else []
+    return names + [name for name in _STATE_ONLY if getattr(features, name)]
+
+
+def critic_plane_names(features: FeatureConfig) -> list[str]:
+    """Names of the critic's planes: the actor's, the global ones, then 6 action planes."""
+    names = actor_plane_names(features)
+    names += [name for name in _STATE_ONLY if getattr(features, name)]
+    if features.other_actions:
+        names += [f"other_actions_{a}" for a in range(N_ACTIONS)]
+    return names
+
+
+def _altitude_code(state: MissionState) -> np.ndarray:
+    """(N,) altitude of each agent as (iz + 1) / Z: 1/3, 2/3, 1 for three levels."""
+    return (state.positions[:, 2] + 1) / state.geometry.n_altitudes
+
+
+def _position_planes(state: MissionState, centred: bool) -> np.ndarray:
+    """(N, G, G) plane (a): the agent and the teammates it hears, by altitude code."""
+    g = state.geometry.grid_points
+    n = state.n_agents
+    codes = _altitude_code(state)
+    x, y = state.positions[:, 0], state.positions[:, 1]
+    planes = np.zeros((n, g, g))
+    if centred:
+        c = g // 2
+        # Window cell (v, u) of agent k shows grid cell (y_k + v - c, x_k + u - c).
+        offsets = np.arange(g) - c
+        wy = y[:, None] + offsets[None, :]  # (N, G)
+        wx = x[:, None] + offsets[None, :]
+        outside = ((wy < 0) | (wy >= g))[:, :, None] | ((wx < 0) | (wx >= g))[:, None, :]
+        planes[outside] = -1.0
+        k_idx, i_idx = np.nonzero(state.heard)  # agent k hears i (including itself)
+        v = y[i_idx] - y[k_idx] + c
+        u = x[i_idx] - x[k_idx] + c
+        inside = (v >= 0) & (v < g) & (u >= 0) & (u < g)
+        planes[k_idx[inside], v[inside], u[inside]] = codes[i_idx[inside]]
+    else:
+        k_idx, i_idx = np.nonzero(state.heard)
+        planes[k_idx, y[i_idx], x[i_idx]] = codes[i_idx]
+    return planes
+
+
+def _footprint_cover(state: MissionState, who: np.ndarray) -> np.ndarray:
+    """(K, G, G) coverage of the blocks by the latest footprints selected by ``who`` (K, N).
+
+    Sum over the selected footprints, clipped at 1 (exact where footprints do not overlap).
+    """
+    x, y, z = state.positions[:, 0], state.positions[:, 1], state.positions[:, 2]
+    cover = state.geometry.coverage[z, y, x]  # (N, G, G)
+    return np.minimum(np.tensordot(who.astype(np.float32), cover, axes=1), 1.0)
+
+
+def actor_observations(state: MissionState, features: FeatureConfig) -> np.ndarray:
+    """Observations of all agents.
+
+    Returns:
+        (N, C_actor, G, G) float32, channels in :func:`actor_plane_names` order.
+    """
+    n = state.n_agents
+    g = state.geometry.grid_points
+    maps = state.maps
+    planes: list[np.ndarray] = []
+    if features.budget:
+        planes.append(np.full((n, g, g), (state.budget - state.step) / state.budget))
+    if features.agent_id:
+        ids = (np.arange(n) + 1) / features.agent_id_scale
+        planes.append(np.broadcast_to(ids[:, None, None], (n, g, g)))
+    if features.position:
+        planes.append(_position_planes(state, features.centred))
+    if features.local_map:
+        planes.append(maps.prob_blocks[:n] / maps.blocks.block_area)
+    if features.local_entropy:
+        planes.append(maps.wentropy_blocks[:n] / maps.blocks.block_area)
+    if features.measurement_entropy:
+        planes.append(state.measurement_planes)
+    if features.footprints:
+        planes.append(_footprint_cover(state, state.heard))
+    return np.stack(planes, axis=1).astype(np.float32)
+
+
+def _global_planes(state: MissionState, features: FeatureConfig) -> list[np.ndarray]:
+    g = state.geometry.grid_points
+    planes: list[np.ndarray] = []
+    if features.all_positions:
+        plane = np.zeros((g, g))
+        plane[state.positions[:, 1], state.positions[:, 0]] = _altitude_code(state)
+        planes.append(plane)
+    if features.global_map:
+        planes.append(state.maps.prob_plane(state.global_index))
+    if features.global_entropy:
+        planes.append(state.maps.wentropy_plane(state.global_index))
+    if features.all_footprints:
+        planes.append(_footprint_cover(state, np.ones((1, state.n_agents), dtype=bool))[0])
+    return planes
+
+
+def global_state(state: MissionState, features: FeatureConfig) -> np.ndarray:
+    """The centralised critic's global input (``env.state()``).
+
+    Returns:
+        (C_state, G, G) float32, channels in :func:`state_plane_names` order.
+    """
+    g = state.geometry.grid_points
+    planes = _global_planes(state, features)
+    if features.budget:
+        planes.insert(0, np.full((g, g), (state.budget - state.step) / state.budget))
+    if not planes:
+        return np.zeros((0, g, g), dtype=np.float32)
+    return np.stack(planes).astype(np.float32)
+
+
+def other_action_planes(positions: np.ndarray, joint_action: np.ndarray,
+                        grid_points: int) -> np.ndarray:
+    """Plane (j): for each agent, six planes marking the cells of the *other* agents.
+
+    Args:
+        positions: (N, 3) int waypoint indices at which the joint action was chosen.
+        joint_action: (N,) int actions.
+        grid_points: G.
+
+    Returns:
+        (N, 6, G, G) float32: ``out[i, a, y, x] = 1`` iff another agent j at (x, y) chose a.
+    """
+    positions = np.asarray(positions)
+    joint_action = np.asarray(joint_action, dtype=np.int64)
+    n = len(positions)
+    one_agent = np.zeros((n, N_ACTIONS, grid_points, grid_points), dtype=np.float32)
+    one_agent[np.arange(n), joint_action, positions[:, 1], positions[:, 0]] = 1.0
+    everyone = one_agent.sum(axis=0, keepdims=True)
+    return everyone - one_agent
+
+
+def critic_observations(state: MissionState, features: FeatureConfig,
+                        joint_action: np.ndarray | None = None,
+                        actor_obs: np.ndarray | None = None) -> np.ndarray:
+    """Per-agent critic input: the actor's planes, the global planes and plane (j).
+
+    Args:
+        state: the mission at the time the joint action is chosen.
+        features: which planes.
+        joint_action: (N,) int actions of all agents; required when ``other_actions`` is on.
+        actor_obs: (N, C_actor, G, G) actor observations of this state, if already built.
+
+    Returns:
+        (N, C_critic, G, G) float32, channels in :func:`critic_plane_names` order.
+    """
+    n = state.n_agents
+    g = state.geometry.grid_points
+    if actor_obs is None:
+        actor_obs = actor_observations(state, features)
+    parts = [actor_obs]
+    shared = _global_planes(state, features)
+    if shared:
+        parts.append(np.broadcast_to(np.stack(shared).astype(np.float32),
+                                     (n, len(shared), g, g)))
+    if features.other_actions:
+        if joint_action is None:
+            raise ValueError("critic_observations needs the joint action when the "
+                             "other_actions planes are on")
+        parts.append(other_action_planes(state.positions, joint_action, g))
+    return np.concatenate(parts, axis=1)

@@ -1,0 +1,438 @@
+"""The mission core: explicit state plus ``reset_mission`` and ``step_mission`` (SPEC §2-§3, §8).
+
+Plain functions over a :class:`MissionState` (Gymnasium's functional-env style); the
+PettingZoo shell in :mod:`ipp_toolkit.env` only holds a state and calls them. Maps are updated
+in place and only inside the footprints a step touched.
+
+Order inside ``reset_mission``: place UAVs, all measure, exchange at the start positions
+(step s = 0). Inside ``step_mission``: check masks -> same-target rule -> move -> all measure
+-> exchange at the new positions (latest measurement only, no relaying) -> fuse local and
+global maps -> reward -> metrics.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import START_POSITIONS, EnvConfig
+from .mapping import BeliefMaps, BlockGrid, RegionChange
+from .seeding import MissionStreams, mission_streams
+from .sensor import Camera
+from .team import (
+    ACTION_NAMES,
+    N_ACTIONS,
+    action_masks,
+    communication_matrix,
+    positions_in_metres,
+    resolve_moves,
+)
+from .terrain import generate_terrain
+
+__all__ = [
+    "MissionGeometry",
+    "MissionState",
+    "Metrics",
+    "InvalidActionError",
+    "reset_mission",
+    "step_mission",
+    "compute_metrics",
+    "agent_label",
+]
+
+
+class InvalidActionError(ValueError):
+    """A masked or out-of-range action was passed to ``step``."""
+
+
+def agent_label(index: int) -> str:
+    """Name of agent ``index`` in the multi-agent API (``uav_0``, ``uav_1``, ...)."""
+    return f"uav_{index}"
+
+
+class MissionGeometry:
+    """Everything about a world that does not change between missions: camera and blocks.
+
+    Build it once per configuration and share it across missions (it is read-only).
+    """
+
+    def __init__(self, config: EnvConfig):
+        world = config.world
+        self.config = config
+        self.camera = Camera(world, config.sensor)
+        self.blocks = BlockGrid(world.map_cells, world.grid_points, world.resolution,
+                                world.grid_spacing)
+        self.grid_points = world.grid_points
+        self.n_altitudes = len(world.altitudes)
+        self.start_altitude_index = self.camera.altitude_index(config.team.start_altitude)
+        # Footprint coverage of every planning block, per waypoint: (Z, G, G, G, G).
+        g = self.grid_points
+        cover = np.empty((self.n_altitudes, g, g, g, g), dtype=np.float32)
+        for iz in range(self.n_altitudes):
+            for iy in range(g):
+                for ix in range(g):
+                    cover[iz, iy, ix] = self.blocks.coverage(tuple(self.camera.rects[iz, iy, ix]))
+        self.coverage = cover
+
+    def positions_m(self, positions: np.ndarray) -> np.ndarray:
+        """(N, 3) metres of (N, 3) waypoint indices."""
+        world = self.config.world
+        return positions_in_metres(positions, world.grid_spacing, world.altitudes)
+
+
+@dataclass
+class Metrics:
+    """Evaluation metrics of the global map at one step (SPEC §3).
+
+    Attributes:
+        entropy: mean entropy in bits over ground-truth interesting cells (1.0 at the prior).
+        f1: F1 of the interesting class over all cells, prediction p > 0.5.
+        rmse: root mean squared error of p over ground-truth interesting cells.
+    """
+
+    entropy: float
+    f1: float
+    rmse: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"entropy": self.entropy, "f1": self.f1, "rmse": self.rmse}
+
+
+@dataclass
+class _GlobalStats:
+    """Running sums over the global map, updated from the changed regions only."""
+
+    n_interesting: int
+    entropy_interesting: float  # sum of H(p) over ground-truth interesting cells
+    squared_error_interesting: float  # sum of (1 - p)^2 over ground-truth interesting cells
+    true_positive: int
+    predicted_positive: int
+    weighted_entropy: float  # sum of W(p) H(p) over all cells, the reward's H
+
+
+@dataclass
+class MissionState:
+    """The full state of one mission; arrays are owned and updated in place.
+
+    Attributes:
+        config: the mission's configuration.
+        geometry: the shared world geometry.
+        ground_truth: (H, W) bool, 1 = interesting.
+        positions: (N, 3) int waypoint indices (ix, iy, iz).
+        step: steps taken so far (0 after the start measurements).
+        maps: N local maps (index k) and the global map (index N).
+        heard: (N, N) bool, ``heard[k, i]``: agent k received agent i's latest measurement.
+        footprints: (N, 4) int, latest footprint rectangle of each agent.
+        measurement_planes: (N, G, G) block-mean weighted entropy of each latest reading.
+        last_actions: (N,) int, actions of the last step (-1 before the first step).
+        blocked: (N,) bool, held back by the same-target rule at the last step.
+        reward: team reward of the last step (0 after reset).
+        history: metrics after every step, s = 0..step.
+    """
+
+    config: EnvConfig
+    geometry: MissionGeometry
+    streams: MissionStreams
+    ground_truth: np.ndarray
+    positions: np.ndarray
+    maps: BeliefMaps
+    stats: _GlobalStats
+    step: int = 0
+    heard: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    footprints: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
+    measurement_planes: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    last_actions: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    blocked: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    reward: float = 0.0
+    history: list[Metrics] = field(default_factory=list)
+    _drop_rng: np.random.Generator | None = None
+
+    @property
+    def n_agents(self) -> int:
+        return len(self.positions)
+
+    @property
+    def budget(self) -> int:
+        return self.config.team.budget
+
+    @property
+    def done(self) -> bool:
+        """True once the budget of steps is spent."""
+        return self.step >= self.budget
+
+    @property
+    def global_index(self) -> int:
+        """Index of the global map in :attr:`maps`."""
+        return self.n_agents
+
+    def masks(self) -> np.ndarray:
+        """(N, 6) int8 valid actions at the current positions."""
+        return action_masks(self.positions, self.geometry.grid_points, self.geometry.n_altitudes)
+
+    def positions_m(self) -> np.ndarray:
+        """(N, 3) float current positions in metres."""
+        return self.geometry.positions_m(self.positions)
+
+    def metrics(self) -> Metrics:
+        """Metrics of the global map now (from the running sums)."""
+        return _metrics_from_stats(self.stats)
+
+
+def _metrics_from_stats(stats: _GlobalStats) -> Metrics:
+    n = stats.n_interesting
+    denominator = n + stats.predicted_positive
+    return Metrics(
+        entropy=stats.entropy_interesting / n,
+        f1=2.0 * stats.true_positive / denominator if denominator else 0.0,
+        rmse=math.sqrt(max(stats.squared_error_interesting, 0.0) / n),
+    )
+
+
+def compute_metrics(ground_truth: np.ndarray, prob: np.ndarray, entropy: np.ndarray) -> Metrics:
+    """Metrics of a full map from scratch (the reference the running sums must match).
+
+    Args:
+        ground_truth: (H, W) bool.
+        prob: (H, W) probabilities of the map.
+        entropy: (H, W) per-cell entropy in bits of the map.
+    """
+    truth = np.asarray(ground_truth, dtype=bool)
+    n = int(np.count_nonzero(truth))
+    if n == 0:
+        raise ValueError("the ground truth has no interesting cell: entropy and RMSE over "
+                         "interesting cells are undefined")
+    predicted = prob > 0.5
+    tp = int(np.count_nonzero(truth & predicted))
+    denominator = n + int(np.count_nonzero(predicted))
+    return Metrics(
+        entropy=float(entropy[truth].sum(dtype=np.float64) / n),
+        f1=2.0 * tp / denominator if denominator else 0.0,
+        rmse=float(np.sqrt(np.sum((1.0 - prob[truth].astype(np.float64)) ** 2) / n)),
+    )
+
+
+def _initial_stats(ground_truth: np.ndarray, maps: BeliefMaps, index: int) -> _GlobalStats:
+    prob, entropy = maps.prob[index], maps.entropy[index]
+    truth = ground_truth
+    predicted = prob > 0.5
+    return _GlobalStats(
+        n_interesting=int(np.count_nonzero(truth)),
+        entropy_interesting=float(entropy[truth].sum(dtype=np.float64)),
+        squared_error_interesting=float(np.sum((1.0 - prob[truth].astype(np.float64)) ** 2)),
+        true_positive=int(np.count_nonzero(truth & predicted)),
+        predicted_positive=int(np.count_nonzero(predicted)),
+        weighted_entropy=float(np.sum(maps.wentropy[index], dtype=np.float64)),
+    )
+
+
+def _start_positions(config: EnvConfig, geometry: MissionGeometry,
+                     streams: MissionStreams) -> np.ndarray:
+    team, world = config.team, config.world
+    n = team.n_agents
+    positions = np.empty((n, 3), dtype=np.int64)
+    positions[:, 2] = geometry.start_altitude_index
+    if team.start == "fixed":
+        xy = np.asarray(START_POSITIONS[n], dtype=np.float64) / world.grid_spacing
+        positions[:, :2] = np.rint(xy).astype(np.int64)
+    else:
+        g = geometry.grid_points
+        cells = streams.generator("starts").choice(g * g, size=n, replace=False)
+        positions[:, 0] = cells % g
+        positions[:, 1] = cells // g
+    return positions
+
+
+def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str = "train",
+                  geometry: MissionGeometry | None = None,
+                  ground_truth: np.ndarray | None = None,
+                  raster: np.ndarray | None = None) -> MissionState:
+    """Start mission ``mission`` of run ``seed``: terrain, starts, start measurements.
+
+    Args:
+        config: the mission configuration.
+        seed: run seed; with ``namespace`` and ``mission`` it fixes every random stream.
+        mission: index of the mission within the run.
+        namespace: ``train``, ``validation`` or ``test`` (disjoint terrains).
+        geometry: a prebuilt geometry for ``config`` (built when omitted).
+        ground_truth: (H, W) bool terrain to use instead of the generated one.
+        raster: (h, w) array for ``terrain.kind = "raster"`` instead of the file.
+
+    Returns:
+        the state at s = 0, after every UAV measured at its start and the exchange.
+    """
+    geometry = geometry if geometry is not None else MissionGeometry(config)
+    if geometry.config != config:
+        raise ValueError("geometry was built for another configuration")
+    streams = mission_streams(namespace, seed, mission)
+    size = config.world.map_cells
+    if ground_truth is None:
+        truth = generate_terrain(config.terrain, config.world, streams.generator("terrain"),
+                                 raster=raster)
+    else:
+        truth = np.asarray(ground_truth)
+        if truth.shape != (size, size):
+            raise ValueError(f"ground_truth has shape {truth.shape}, expected {(size, size)}")
+        truth = truth.astype(bool)
+    if not truth.any():
+        raise ValueError("the ground truth has no interesting cell")
+    n = config.team.n_agents
+    maps = BeliefMaps(n + 1, geometry.blocks, config.world.prior,
+                      config.reward.weight_interesting, config.reward.weight_uninteresting)
+    state = MissionState(
+        config=config,
+        geometry=geometry,
+        streams=streams,
+        ground_truth=truth,
+        positions=_start_positions(config, geometry, streams),
+        maps=maps,
+        stats=_initial_stats(truth, maps, n),
+        last_actions=np.full(n, -1, dtype=np.int64),
+        blocked=np.zeros(n, dtype=bool),
+        measurement_planes=np.zeros((n,) + geometry.blocks.block_area.shape),
+        _drop_rng=streams.generator("drops"),
+    )
+    _measure_exchange_fuse(state)
+    state.history.append(state.metrics())
+    return state
+
+
+def _check_actions(state: MissionState, actions: np.ndarray) -> np.ndarray:
+    """Validate a joint action; returns (N,) bool, the agents that try to move."""
+    masks = state.masks()
+    n = state.n_agents
+    if actions.shape != (n,):
+        raise InvalidActionError(f"expected one action per agent, shape ({n},), got shape "
+                                 f"{actions.shape}")
+    moving = np.ones(n, dtype=bool)
+    for k, action in enumerate(actions.tolist()):
+        if not 0 <= action < N_ACTIONS:
+            raise InvalidActionError(f"agent {agent_label(k)!r}: action {action!r} is out of "
+                                     f"range; valid indices are 0..{N_ACTIONS - 1} "
+                                     f"{ACTION_NAMES}")
+        if not masks[k, action]:
+            if state.config.team.invalid_action == "hold":
+                moving[k] = False
+                continue
+            x, y, z = state.positions_m()[k]
+            raise InvalidActionError(
+                f"agent {agent_label(k)!r}: action {action} ({ACTION_NAMES[action]}) is masked "
+                f"at position (x={x:g}, y={y:g}, z={z:g}); valid actions: "
+                f"{[ACTION_NAMES[a] for a in np.flatnonzero(masks[k])]}")
+    return moving
+
+
+def step_mission(state: MissionState, actions: np.ndarray | list[int]) -> float:
+    """Advance the mission by one joint action, in place.
+
+    Args:
+        state: the mission; must not be done.
+        actions: (N,) int joint action, indices into ``ACTION_NAMES``.
+
+    Returns:
+        the team reward of this step (also stored in ``state.reward``).
+
+    Raises:
+        InvalidActionError: an action is out of range, or masked while
+            ``invalid_action="raise"``; the state is left unchanged.
+    """
+    if state.done:
+        raise RuntimeError(f"the mission is over: all {state.budget} steps are spent; reset it")
+    try:
+        actions = np.asarray(actions)
+        if actions.dtype.kind not in "iu":
+            if actions.dtype.kind == "f" and np.all(np.isfinite(actions)) \
+                    and np.all(actions == np.round(actions)):
+                actions = actions.astype(np.int64)
+            else:
+                raise TypeError
+    except (TypeError, ValueError):
+        raise InvalidActionError(f"actions must be integers, got {actions!r}") from None
+    moving = _check_actions(state, actions.astype(np.int64))
+    state.positions, state.blocked = resolve_moves(state.positions, actions, moving)
+    state.last_actions = actions.astype(np.int64)
+    state.step += 1
+    state.reward = _measure_exchange_fuse(state)
+    state.history.append(state.metrics())
+    return state.reward
+
+
+def _measure_exchange_fuse(state: MissionState) -> float:
+    """All agents measure, exchange within range, fuse; returns the step's reward."""
+    geometry, camera, blocks = state.geometry, state.geometry.camera, state.geometry.blocks
+    n = state.n_agents
+    team = state.config.team
+    rects, deltas = [], []
+    for k in range(n):
+        ix, iy, iz = (int(v) for v in state.positions[k])
+        rect = camera.footprint((ix, iy, iz))
+        reading = camera.read(state.ground_truth, rect, iz, state.streams.sensor(state.step, k))
+        rects.append(rect)
+        deltas.append(camera.reading_logodds(reading, iz))
+        # (d): W(z) H(z) per cell; z is p(h) or 1 - p(h), so H(z) is one number per altitude.
+        h = float(_entropy_of_accuracy(camera.accuracy[iz]))
+        weights = np.where(reading, state.maps.weight_interesting * h,
+                           state.maps.weight_uninteresting * h)
+        plane = np.zeros(blocks.block_area.shape)
+        blocks.add_block_sums(plane, weights, rect)
+        state.measurement_planes[k] = plane / blocks.block_area
+    state.footprints = np.asarray(rects, dtype=np.int64).reshape(n, 4)
+    state.heard = communication_matrix(geometry.positions_m(state.positions), team.comm_range,
+                                       team.message_drop, state._drop_rng)
+    maps = state.maps
+    for k in range(n):
+        senders = np.flatnonzero(state.heard[k])
+        for i in senders:
+            maps.add_evidence(k, rects[i], deltas[i])
+        for i in senders:
+            maps.refresh(k, rects[i])
+    g = state.global_index
+    for i in range(n):
+        maps.add_evidence(g, rects[i], deltas[i])
+    numerator = 0.0
+    denominator = state.stats.weighted_entropy
+    for i in range(n):
+        change = maps.refresh(g, rects[i])
+        gained, reweighted = _update_global_stats(state, change)
+        numerator += gained
+        denominator += reweighted
+    reward_cfg = state.config.reward
+    if denominator <= 1e-9:
+        return float(reward_cfg.beta)
+    return float(reward_cfg.alpha * numerator / denominator + reward_cfg.beta)
+
+
+def _entropy_of_accuracy(accuracy: float) -> float:
+    p = min(max(accuracy, 1e-4), 1 - 1e-4)
+    return -(p * math.log2(p) + (1 - p) * math.log2(1 - p))
+
+
+def _update_global_stats(state: MissionState, change: RegionChange) -> tuple[float, float]:
+    """Fold one refreshed global region into the running sums.
+
+    Returns the region's share of the reward's numerator, sum W'(H - H'), and of the
+    correction of its denominator, sum (W' - W) H, with W' the posterior weights.
+    """
+    r0, r1, c0, c1 = change.rect
+    truth = state.ground_truth[r0:r1, c0:c1]
+    stats = state.stats
+    old_p, new_p = change.old_prob, change.new_prob
+    old_h, new_h = change.old_entropy, change.new_entropy
+    stats.entropy_interesting += float(np.sum(new_h - old_h, where=truth, dtype=np.float64))
+    # (1 - p')^2 - (1 - p)^2 = (p - p') (2 - p - p')
+    squared_error_change = (old_p - new_p) * (2.0 - old_p - new_p)
+    stats.squared_error_interesting += float(np.sum(squared_error_change, where=truth,
+                                                    dtype=np.float64))
+    old_pred, new_pred = old_p > 0.5, new_p > 0.5
+    stats.true_positive += int(np.count_nonzero(new_pred & truth)
+                               - np.count_nonzero(old_pred & truth))
+    stats.predicted_positive += int(np.count_nonzero(new_pred) - np.count_nonzero(old_pred))
+    # With W' the posterior weights: gained = sum W'(H - H'), reweighted = sum (W' - W) H.
+    reweighted_old = float(np.sum(change.new_weights * old_h, dtype=np.float64))
+    old_went = float(np.sum(change.old_wentropy, dtype=np.float64))
+    new_went = float(np.sum(change.new_wentropy, dtype=np.float64))
+    gained = reweighted_old - new_went
+    reweighted = reweighted_old - old_went
+    stats.weighted_entropy += new_went - old_went
+    return gained, reweighted

@@ -1,0 +1,200 @@
+"""The planner interface, the per-agent read-only view, and the registry of planners by name.
+
+A planner decides a joint action from what each UAV knows (SPEC §8): its own local map at full
+resolution, its own pose, the teammates it hears within range and their latest footprints,
+and its action mask; never the global map or the ground truth. The views it receives are
+read-only numpy views into the mission, so a planner cannot change the mission by accident.
+
+Register a planner with the decorator::
+
+    from ipp_toolkit.planners import Planner, register_planner
+
+    @register_planner("stay-low")
+    class StayLow(Planner):
+        def act(self, views):
+            ...
+
+or, from another package, with an entry point in the group ``ipp_toolkit.planners``
+(``name = module:factory``); :func:`make_planner` finds both.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import metadata
+from typing import Any
+
+import numpy as np
+
+from .config import EnvConfig
+from .features import actor_observations
+from .mission import MissionState
+
+__all__ = [
+    "AgentView",
+    "Planner",
+    "PlannerFactory",
+    "agent_views",
+    "register_planner",
+    "make_planner",
+    "available_planners",
+    "planner_factory",
+    "ENTRY_POINT_GROUP",
+]
+
+ENTRY_POINT_GROUP = "ipp_toolkit.planners"
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    view = array.view()
+    view.flags.writeable = False
+    return view
+
+
+@dataclass(frozen=True)
+class AgentView:
+    """What one UAV knows at a decision point. Every array is read-only.
+
+    Attributes:
+        index: the agent's index k (``uav_k``).
+        step: steps taken so far; ``budget - step`` steps are left.
+        budget: the mission's budget B.
+        position: (3,) int waypoint indices (ix, iy, iz).
+        local_logodds: (H, W) float32 log-odds of the agent's local map.
+        local_prob: (H, W) float32 probabilities of the local map.
+        local_entropy: (H, W) float32 per-cell entropy (bits) of the local map.
+        mask: (6,) int8 valid actions.
+        teammates: (K,) int indices of the teammates it heard at the last exchange.
+        teammate_positions: (K, 3) int their waypoint indices.
+        teammate_footprints: (K, 4) int their latest footprint rectangles.
+        footprint: (4,) int the agent's own latest footprint rectangle.
+        observation: (C, G, G) float32 the actor observation planes (for learned planners).
+    """
+
+    index: int
+    step: int
+    budget: int
+    position: np.ndarray
+    local_logodds: np.ndarray
+    local_prob: np.ndarray
+    local_entropy: np.ndarray
+    mask: np.ndarray
+    teammates: np.ndarray
+    teammate_positions: np.ndarray
+    teammate_footprints: np.ndarray
+    footprint: np.ndarray
+    observation: np.ndarray
+
+
+def agent_views(state: MissionState, with_observations: bool = True) -> list[AgentView]:
+    """One read-only :class:`AgentView` per agent of a mission.
+
+    Args:
+        state: the mission at a decision point.
+        with_observations: build the (C, G, G) actor planes too (skip for planners that
+            do not read them: an empty (0, G, G) array is given instead).
+    """
+    n = state.n_agents
+    masks = state.masks()
+    g = state.geometry.grid_points
+    planes = (actor_observations(state, state.config.features) if with_observations
+              else np.zeros((n, 0, g, g), dtype=np.float32))
+    views = []
+    for k in range(n):
+        heard = np.flatnonzero(state.heard[k])
+        mates = heard[heard != k]
+        views.append(AgentView(
+            index=k,
+            step=state.step,
+            budget=state.budget,
+            position=_read_only(state.positions[k].copy()),
+            local_logodds=_read_only(state.maps.logodds[k]),
+            local_prob=_read_only(state.maps.prob[k]),
+            local_entropy=_read_only(state.maps.entropy[k]),
+            mask=_read_only(masks[k]),
+            teammates=_read_only(mates),
+            teammate_positions=_read_only(state.positions[mates].copy()),
+            teammate_footprints=_read_only(state.footprints[mates].copy()),
+            footprint=_read_only(state.footprints[k].copy()),
+            observation=_read_only(planes[k]),
+        ))
+    return views
+
+
+class Planner(abc.ABC):
+    """A (possibly learned) policy for the whole team.
+
+    Lifecycle: ``reset(config, seed)`` once per mission, then ``act(views)`` once per step.
+    Set ``needs_observations = False`` on planners that never read ``AgentView.observation``
+    to skip building the feature planes.
+    """
+
+    name: str = "planner"
+    needs_observations: bool = True
+
+    def reset(self, config: EnvConfig, seed: int) -> None:  # noqa: B027 - optional hook
+        """Prepare for a new mission of ``config``; ``seed`` seeds any randomness."""
+
+    @abc.abstractmethod
+    def act(self, views: list[AgentView]) -> np.ndarray:
+        """Choose a joint action.
+
+        Args:
+            views: one view per agent, in agent order.
+
+        Returns:
+            (N,) int actions; each must be valid under its view's mask.
+        """
+
+
+PlannerFactory = Callable[..., Planner]
+_REGISTRY: dict[str, PlannerFactory] = {}
+
+
+def register_planner(name: str) -> Callable[[PlannerFactory], PlannerFactory]:
+    """Class/function decorator registering a planner factory under ``name``."""
+    if not isinstance(name, str) or not name or any(c in name for c in " ,="):
+        raise ValueError(f"invalid planner name {name!r}: use a non-empty word without "
+                         "spaces, commas or '='")
+
+    def decorator(factory: PlannerFactory) -> PlannerFactory:
+        existing = _REGISTRY.get(name)
+        if existing is not None and existing is not factory:
+            raise ValueError(f"planner name {name!r} is already registered by "
+                             f"{existing.__module__}.{existing.__qualname__}")
+        _REGISTRY[name] = factory
+        return factory
+
+    return decorator
+
+
+def _entry_points() -> dict[str, metadata.EntryPoint]:
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available_planners() -> list[str]:
+    """Names of every planner registered by decorator or entry point, sorted."""
+    return sorted(set(_REGISTRY) | set(_entry_points()))
+
+
+def planner_factory(name: str) -> PlannerFactory:
+    """The factory registered under ``name`` (loading its entry point if needed)."""
+    if name not in _REGISTRY:
+        entry = _entry_points().get(name)
+        if entry is None:
+            raise ValueError(f"unknown planner {name!r}; registered planners: "
+                             f"{', '.join(available_planners()) or 'none'}")
+        factory = entry.load()
+        _REGISTRY.setdefault(name, factory)
+    return _REGISTRY[name]
+
+
+def make_planner(name: str, **kwargs: Any) -> Planner:
+    """Build the planner registered under ``name`` with keyword options."""
+    planner = planner_factory(name)(**kwargs)
+    if not isinstance(planner, Planner):
+        raise TypeError(f"planner factory {name!r} returned {type(planner).__name__}, "
+                        "not a Planner")
+    return planner

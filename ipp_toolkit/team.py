@@ -1,0 +1,128 @@
+"""Actions, action masks, the same-target rule and the communication graph (SPEC §2, §8).
+
+Positions are integer waypoint indices ``(ix, iy, iz)``: x and y index the planning grid,
+iz the flight level. Masks are the one owner of "which action is valid" in the toolkit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "ACTION_NAMES",
+    "ACTION_DELTAS",
+    "N_ACTIONS",
+    "action_masks",
+    "resolve_moves",
+    "communication_matrix",
+    "positions_in_metres",
+]
+
+ACTION_NAMES = ("up", "north", "east", "south", "west", "down")
+"""Action indices 0..5 (SPEC §8): north is +y, east is +x."""
+
+ACTION_DELTAS = np.array(
+    [[0, 0, 1], [0, 1, 0], [1, 0, 0], [0, -1, 0], [-1, 0, 0], [0, 0, -1]], dtype=np.int64
+)
+"""(6, 3) change of (ix, iy, iz) per action."""
+
+N_ACTIONS = len(ACTION_NAMES)
+
+
+def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int) -> np.ndarray:
+    """Valid actions of every agent.
+
+    An action is invalid if it leaves the area or the altitude range, or moves into a 2-D
+    cell currently held by another agent (up and down keep the agent's own cell).
+
+    Args:
+        positions: (N, 3) int waypoint indices (ix, iy, iz).
+        grid_points: waypoints per side G.
+        n_altitudes: number of flight levels Z.
+
+    Returns:
+        (N, 6) int8 mask, 1 = valid.
+    """
+    positions = np.asarray(positions, dtype=np.int64)
+    targets = positions[:, None, :] + ACTION_DELTAS[None, :, :]  # (N, 6, 3)
+    inside = np.all((targets[..., :2] >= 0) & (targets[..., :2] < grid_points), axis=-1)
+    inside &= (targets[..., 2] >= 0) & (targets[..., 2] < n_altitudes)
+    # owner[iy, ix] = index of the agent holding that 2-D cell, -1 if free.
+    owner = np.full((grid_points, grid_points), -1, dtype=np.int64)
+    owner[positions[:, 1], positions[:, 0]] = np.arange(len(positions))
+    tx = np.clip(targets[..., 0], 0, grid_points - 1)
+    ty = np.clip(targets[..., 1], 0, grid_points - 1)
+    holder = owner[ty, tx]
+    free = (holder < 0) | (holder == np.arange(len(positions))[:, None])
+    return (inside & free).astype(np.int8)
+
+
+def resolve_moves(positions: np.ndarray, actions: np.ndarray,
+                  moving: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Apply a joint action under the same-target rule.
+
+    When several agents choose the same 2-D target cell, the lowest index moves and the
+    others hold their position (they still measure). Masks already forbid entering a cell
+    held by another agent, so afterwards no two agents share a 2-D cell.
+
+    Args:
+        positions: (N, 3) int current waypoint indices.
+        actions: (N,) int action indices, assumed valid.
+        moving: (N,) bool, agents that try to move (False = hold, e.g. an invalid action
+            under ``invalid_action="hold"``); all True when omitted.
+
+    Returns:
+        new positions (N, 3) int and ``blocked`` (N,) bool: held back by the same-target rule.
+    """
+    positions = np.asarray(positions, dtype=np.int64)
+    actions = np.asarray(actions, dtype=np.int64)
+    n = len(positions)
+    moving = np.ones(n, dtype=bool) if moving is None else np.asarray(moving, dtype=bool)
+    targets = np.where(moving[:, None], positions + ACTION_DELTAS[actions], positions)
+    cell_ids = targets[:, 1] * (1 << 20) + targets[:, 0]
+    # np.unique returns the first occurrence in index order, i.e. the lowest agent index.
+    _, first = np.unique(cell_ids, return_index=True)
+    winner = np.zeros(n, dtype=bool)
+    winner[first] = True
+    blocked = moving & ~winner
+    new_positions = np.where(blocked[:, None], positions, targets)
+    return new_positions, blocked
+
+
+def positions_in_metres(positions: np.ndarray, spacing: float,
+                        altitudes: tuple[float, ...] | np.ndarray) -> np.ndarray:
+    """(N, 3) float (x, y, z) metres of (N, 3) int waypoint indices."""
+    positions = np.asarray(positions, dtype=np.int64)
+    xyz = np.empty(positions.shape, dtype=np.float64)
+    xyz[:, :2] = positions[:, :2] * spacing
+    xyz[:, 2] = np.asarray(altitudes, dtype=np.float64)[positions[:, 2]]
+    return xyz
+
+
+def communication_matrix(positions_m: np.ndarray, comm_range: float,
+                         message_drop: float = 0.0,
+                         rng: np.random.Generator | None = None) -> np.ndarray:
+    """Who hears whom after a step.
+
+    Agent k receives agent i's latest measurement iff ||p_i - p_k||_2 <= D (3-D distance)
+    and the message is not dropped. Every agent always "hears" itself.
+
+    Args:
+        positions_m: (N, 3) float positions in metres.
+        comm_range: D in metres; 0 = none, inf = everyone.
+        message_drop: probability that one (sender, receiver) message is lost.
+        rng: stream for message drops; required when ``message_drop > 0``.
+
+    Returns:
+        (N, N) bool, ``heard[k, i]`` = agent k holds agent i's latest measurement.
+    """
+    positions_m = np.asarray(positions_m, dtype=np.float64)
+    n = len(positions_m)
+    distances = np.linalg.norm(positions_m[:, None, :] - positions_m[None, :, :], axis=-1)
+    heard = distances <= comm_range + 1e-9
+    if message_drop > 0:
+        if rng is None:
+            raise ValueError("communication_matrix needs an rng when message_drop > 0")
+        heard &= rng.random((n, n)) >= message_drop
+    np.fill_diagonal(heard, True)
+    return heard

@@ -1,0 +1,237 @@
+"""Console scripts of the toolkit.
+
+``ipp-simulate``: fly one mission of the shared simulator with random valid actions, print
+the metrics after every step and write the per-step metrics (CSV) and the final frame (PNG).
+
+``ipp-compare``: evaluate planners on the test missions of one configuration, print the
+Markdown table (Table I style) and the planning time per step, and write the tables, the
+figures and the raw results (see :func:`compare_main`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ipp_toolkit.config import EnvConfig, load_config
+from ipp_toolkit.env import IPPEnv
+
+
+def _comm_range(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--comm must be metres or 'inf', got {text!r}") from None
+    if math.isnan(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"--comm must be >= 0, got {text!r}")
+    return value
+
+
+def _simulate_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ipp-simulate",
+        description="Fly one mission with random valid actions and report its metrics.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("--config", type=Path, help="YAML config (defaults: the paper's)")
+    parser.add_argument("--agents", type=int, help="team size (overrides the config)")
+    parser.add_argument("--comm", type=_comm_range,
+                        help="communication range in metres or 'inf' (overrides the config)")
+    parser.add_argument("--resolution", type=float, help="map resolution r_M in metres")
+    parser.add_argument("--seed", type=int, default=0, metavar="SEED", help="run seed")
+    parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
+    parser.add_argument("--out", type=Path, default=Path("results/simulate"),
+                        help="folder for metrics.csv and final.png")
+    return parser
+
+
+def simulate_main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ipp-simulate``; returns the exit code (2 for bad input)."""
+    parser = _simulate_parser()
+    args = parser.parse_args(argv)
+    try:
+        config = load_config(args.config) if args.config else EnvConfig()
+        team: dict = {}
+        if args.agents is not None:
+            team["n_agents"] = args.agents
+            if args.agents not in (2, 4, 8):
+                team["start"] = "random"
+        if args.comm is not None:
+            team["comm_range"] = args.comm
+        if team:
+            config = config.replace(team=team)
+        if args.resolution is not None:
+            config = config.replace(world={"resolution": args.resolution})
+        env = IPPEnv(config, render_mode="rgb_array", namespace="test")
+        observations, infos = env.reset(seed=args.seed, options={"mission": args.mission})
+    except ValueError as err:
+        print(f"ipp-simulate: error: {err}", file=sys.stderr)
+        return 2
+    rng = np.random.default_rng(args.seed)
+    rows = [{"step": 0, "reward": "", **infos[env.possible_agents[0]]["metrics"]}]
+    print(f"{config.team.n_agents} UAVs, D = {config.team.comm_range:g} m, "
+          f"{config.world.map_cells}^2 map, budget {config.team.budget} steps")
+    print(f"{'step':>4} {'reward':>8} {'entropy':>8} {'f1':>6} {'rmse':>6}")
+    print(f"{0:>4} {'':>8} {rows[0]['entropy']:8.3f} {rows[0]['f1']:6.3f} {rows[0]['rmse']:6.3f}")
+    while env.agents:
+        actions = {agent: int(rng.choice(np.flatnonzero(observations[agent]["action_mask"])))
+                   for agent in env.agents}
+        observations, rewards, _, _, infos = env.step(actions)
+        metrics = infos[env.possible_agents[0]]["metrics"]
+        reward = rewards[env.possible_agents[0]]
+        rows.append({"step": env.mission.step, "reward": reward, **metrics})
+        print(f"{env.mission.step:>4} {reward:8.3f} {metrics['entropy']:8.3f} "
+              f"{metrics['f1']:6.3f} {metrics['rmse']:6.3f}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    from ipp_toolkit.rendering import save_png
+
+    save_png(env.render(), args.out / "final.png")
+    tmp = args.out / "metrics.csv.tmp"
+    with open(tmp, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=["step", "reward", "entropy", "f1", "rmse"])
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(tmp, args.out / "metrics.csv")
+    print(f"wrote {args.out / 'metrics.csv'} and {args.out / 'final.png'}")
+    return 0
+
+
+def _positive_int(flag: str) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+        return value
+
+    parse.__name__ = flag
+    return parse
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+DEFAULT_COMPARE_OUT = "results/compare-a{agents}-d{comm}"
+
+
+def _compare_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ipp-compare",
+        description="Evaluate planners on the same test missions of one configuration; print "
+                    "the table (mean ± std of entropy and F1 at 33/67/100 % of the budget, "
+                    "best in bold) and the planning time per step; write summary.md/.csv/.tex, "
+                    "curves.png/.pdf, trajectories/<planner>_mission0.png/.pdf and the raw "
+                    "results (results.csv, config.json, shards/) to --out.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("--agents", type=_positive_int("agents"), default=4, metavar="N",
+                        help="team size N (teams without fixed starts start at random cells)")
+    parser.add_argument("--comm", type=_comm_range, default="25", metavar="METRES|inf",
+                        help="communication range D in metres, or 'inf'")
+    parser.add_argument("--planners", default="all", metavar="LIST",
+                        help="comma-separated planners: registered names (ig, coverage, "
+                             "random, ...) or NAME=CHECKPOINT items (coma=PATH); 'all' = every "
+                             "registered planner that can be built (learned ones only when "
+                             "their checkpoint exists)")
+    parser.add_argument("--trials", type=_positive_int("trials"), default=50, metavar="N",
+                        help="number of test missions (the same missions for every planner)")
+    parser.add_argument("--seed", type=int, default=0, metavar="SEED",
+                        help="run seed of the test missions")
+    parser.add_argument("--terrain", default="split", metavar="KIND|FILE",
+                        help="terrain kind (split, split-axis, blobs) or a raster FILE "
+                             "(.npy/.png/.tif; needs --threshold)")
+    parser.add_argument("--threshold", type=_finite_float, default=None, metavar="T",
+                        help="raster threshold: cells whose mean value is >= T are interesting "
+                             "(required with a terrain FILE)")
+    parser.add_argument("--workers", type=_positive_int("workers"),
+                        default=min(2, os.cpu_count() or 1),
+                        metavar="N", help="parallel evaluation processes; min(2, CPU count)")
+    parser.add_argument("--out", default=DEFAULT_COMPARE_OUT, metavar="DIR",
+                        help="output folder; rerunning into it resumes the same configuration "
+                             "and refuses another one")
+    parser.add_argument("--config", type=Path, default=None, metavar="YAML",
+                        help="base YAML config (None: the paper's); the flags above and below "
+                             "override it")
+    parser.add_argument("--resolution", type=_positive_float, default=None,
+                        metavar="METRES",
+                        help="map resolution r_M in metres (None: the config's, 0.1)")
+    parser.add_argument("--budget", type=_positive_int("budget"), default=None, metavar="STEPS",
+                        help="number of steps B (None: the config's, 15)")
+    parser.add_argument("--area-size", type=_positive_float, default=None, metavar="METRES",
+                        help="side of the square area in metres (None: the config's, 50)")
+    parser.add_argument("--no-progress", action="store_true", default=False,
+                        help="hide the progress bar")
+    return parser
+
+
+def compare_main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ipp-compare``; returns the exit code (0 ok, 2 for bad input).
+
+    Bad input (unknown planner, agents or trials < 1, unreadable terrain file, missing
+    threshold, an --out folder holding results of another configuration, ...) prints
+    ``ipp-compare: error: ...`` on stderr, returns 2 and writes nothing.
+    """
+    parser = _compare_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:  # --help (0) or an argparse error (2, already printed)
+        return exit_.code if isinstance(exit_.code, int) else 2
+    from .compare import compare
+
+    out = args.out
+    if out == DEFAULT_COMPARE_OUT:
+        out = out.format(agents=args.agents,
+                         comm="inf" if math.isinf(args.comm) else f"{args.comm:g}")
+    out_dir = Path(out)
+
+    def error(message: object) -> int:
+        print(f"ipp-compare: error: {message}", file=sys.stderr)
+        return 2
+
+    try:
+        comparison = compare(
+            agents=args.agents, comm=args.comm, planners=args.planners, trials=args.trials,
+            seed=args.seed, terrain=args.terrain, threshold=args.threshold,
+            workers=args.workers, out=out_dir, config=args.config, resolution=args.resolution,
+            budget=args.budget, area_size=args.area_size, progress=not args.no_progress)
+    except (ValueError, OSError) as err:
+        return error(err)
+    print(comparison.table)
+    print("Planning time per step:")
+    width = max(len(label) for label in comparison.summary.planners)
+    for label, ms in comparison.plan_ms.items():
+        print(f"  {label:<{width}}  {ms:10.3f} ms" if math.isfinite(ms)
+              else f"  {label:<{width}}  {'-':>10}")
+    print(f"\nwrote {out_dir}: summary.md, summary.csv, summary.tex, curves.png, curves.pdf, "
+          f"trajectories/*.png/.pdf, results.csv")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(simulate_main())

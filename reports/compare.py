@@ -1,0 +1,346 @@
+"""Compare planners on one configuration in three lines (the Python face of ``ipp-compare``).
+
+Example (a notebook)::
+
+    from reports import compare
+    comparison = compare(agents=4, comm=25.0, planners="ig,coverage,random", trials=20)
+    comparison            # renders the Markdown table; comparison.plot("figs") draws
+
+:func:`compare` builds the :class:`~ipp_toolkit.config.EnvConfig` (:func:`build_config`),
+checks and builds every planner (:func:`resolve_planners`) before anything is written, runs
+:func:`ipp_toolkit.evaluation.evaluate` and summarises the rows; with ``out`` it also writes
+the tables and figures next to the raw results.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ipp_toolkit.config import START_POSITIONS, TERRAIN_KINDS, EnvConfig, WorldConfig, load_config
+from ipp_toolkit.planners import available_planners, make_planner
+
+from .plots import plot_curves, plot_trajectories
+from .tables import Summary, summarise, to_markdown, write_tables
+
+if TYPE_CHECKING:
+    from ipp_toolkit.evaluation import EvaluationResult, PlannerSpec
+
+__all__ = [
+    "Comparison",
+    "compare",
+    "build_config",
+    "resolve_planners",
+    "default_planners",
+    "safe_name",
+]
+
+TERRAIN_NAMES = tuple(kind for kind in TERRAIN_KINDS if kind != "raster")
+"""Terrain kinds selectable by name; a raster is selected by giving its file."""
+
+
+def safe_name(label: str) -> str:
+    """``label`` reduced to a file-name-safe word (letters, digits, ``.``, ``_``, ``-``)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("._") or "planner"
+
+
+def _format_comm(value: float) -> str:
+    return "inf" if math.isinf(value) else f"{value:g} m"
+
+
+@dataclass
+class Comparison:
+    """The outcome of :func:`compare`.
+
+    Attributes:
+        result: the raw ``EvaluationResult`` (tidy rows, curves, recorded trajectories).
+        summary: the :class:`~reports.tables.Summary` of the rows.
+    """
+
+    result: EvaluationResult
+    summary: Summary
+
+    @property
+    def table(self) -> str:
+        """The Markdown table (caption line, then the table)."""
+        return to_markdown(self.summary)
+
+    @property
+    def plan_ms(self) -> dict[str, float]:
+        """Mean planning time per step in milliseconds, per planner."""
+        return dict(self.summary.plan_ms)
+
+    def _repr_markdown_(self) -> str:
+        return self.table
+
+    def plot(self, out_dir: str | os.PathLike[str]) -> list[Path]:
+        """Draw ``curves.png/.pdf`` and one trajectory figure per recorded mission.
+
+        Trajectory figures go to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``.
+
+        Returns:
+            every written path.
+        """
+        out = Path(out_dir)
+        paths = plot_curves(self.result.rows, out)
+        final = self._final_metrics()
+        config = self.result.config
+        for (label, mission), trajectory in sorted(self.result.trajectories.items(),
+                                                   key=lambda item: (str(item[0][0]),
+                                                                     int(item[0][1]))):
+            title = (f"{label}, mission {mission}: {config.team.n_agents} UAVs, "
+                     f"D = {_format_comm(config.team.comm_range)}")
+            metrics = final.get((str(label), int(mission)))
+            if metrics is not None:
+                title += f"; final entropy {metrics[0]:.3f}, F1 {metrics[1]:.3f}"
+            stem = out / "trajectories" / f"{safe_name(str(label))}_mission{int(mission)}"
+            paths += plot_trajectories(trajectory, stem, title)
+        return paths
+
+    def write(self, out_dir: str | os.PathLike[str]) -> list[Path]:
+        """Write ``summary.md/.csv/.tex`` and every figure of :meth:`plot` into ``out_dir``."""
+        return list(write_tables(self.summary, out_dir).values()) + self.plot(out_dir)
+
+    def _final_metrics(self) -> dict[tuple[str, int], tuple[float, float]]:
+        budget = self.summary.budget
+        return {(str(r["planner"]), int(r["mission"])): (float(r["entropy"]), float(r["f1"]))
+                for r in self.result.rows if int(r["step"]) == budget}
+
+
+def _fixed_starts_fit(world: WorldConfig, agents: int) -> bool:
+    starts = START_POSITIONS.get(agents)
+    if starts is None:
+        return False
+    return all(max(x, y) <= world.area_size and not x % world.grid_spacing
+               and not y % world.grid_spacing for x, y in starts)
+
+
+def _terrain_section(terrain: str | os.PathLike[str] | None, threshold: float | None,
+                     base: EnvConfig) -> dict[str, Any]:
+    section: dict[str, Any] = {}
+    if threshold is not None:
+        if not math.isfinite(float(threshold)):
+            raise ValueError(f"threshold must be a finite number, got {threshold!r}")
+        section["threshold"] = float(threshold)
+    if terrain is None:
+        return section
+    name = os.fspath(terrain)
+    if name in TERRAIN_NAMES:
+        return {**section, "kind": name, "raster": None}
+    if name == "raster":
+        if base.terrain.raster is None:
+            raise ValueError("terrain 'raster' needs a raster file: give the FILE as terrain "
+                             "(or a config with terrain.raster)")
+        name = base.terrain.raster
+    path = Path(name)
+    if not path.exists():
+        raise ValueError(f"cannot read terrain file {name!r}: no such file (terrain is one of "
+                         f"{', '.join(TERRAIN_NAMES)} or a raster FILE)")
+    if not path.is_file():
+        raise ValueError(f"cannot read terrain file {name!r}: not a file")
+    from ipp_toolkit.terrain import load_raster, prepare_raster
+
+    try:
+        prepare_raster(load_raster(path), base.terrain.nan_policy, repr(name))
+    except OSError as err:
+        raise ValueError(f"cannot read terrain file {name!r}: {err.strerror}") from err
+    if threshold is None and base.terrain.threshold is None:
+        raise ValueError(f"a terrain file needs a threshold (--threshold T): raster cells >= T "
+                         f"are interesting; none given for {name!r}")
+    return {**section, "kind": "raster", "raster": str(path.resolve())}
+
+
+def build_config(agents: int | None = 4, comm: float | None = 25.0,
+                 terrain: str | os.PathLike[str] | None = "split",
+                 threshold: float | None = None,
+                 config: EnvConfig | str | os.PathLike[str] | None = None,
+                 resolution: float | None = None, budget: int | None = None,
+                 area_size: float | None = None) -> EnvConfig:
+    """The configuration of a comparison: a base config with the given overrides.
+
+    Args:
+        agents: team size N (None keeps the base config's). Teams without documented fixed
+            starts for the world get ``team.start = "random"``; more than
+            ``features.agent_id_scale`` agents raise that scale to N.
+        comm: communication range D in metres, ``math.inf`` for full (None keeps the base's).
+        terrain: ``split``, ``split-axis`` or ``blobs``, a raster FILE (kind ``raster``; needs a
+            threshold), ``raster`` (the base config's file) or None (the base's terrain).
+        threshold: raster threshold (cells whose mean value is >= it are interesting).
+        config: the base: an :class:`EnvConfig`, a YAML path or None (the paper's defaults).
+        resolution: map resolution r_M in metres.
+        budget: number of steps B.
+        area_size: side of the area in metres.
+
+    Raises:
+        ValueError: a bad value (the message names it), an unreadable terrain file, a terrain
+            file without threshold, or an invalid resulting configuration.
+    """
+    if config is None:
+        base = EnvConfig()
+    elif isinstance(config, EnvConfig):
+        base = config
+    else:
+        base = load_config(config)
+    if agents is not None and (isinstance(agents, bool) or int(agents) != agents or agents < 1):
+        raise ValueError(f"agents must be an integer >= 1, got {agents!r}")
+    if comm is not None and (math.isnan(float(comm)) or float(comm) < 0):
+        raise ValueError(f"comm must be >= 0 metres or inf, got {comm!r}")
+    world: dict[str, Any] = {}
+    if area_size is not None:
+        world["area_size"] = float(area_size)
+    if resolution is not None:
+        world["resolution"] = float(resolution)
+    new_world = WorldConfig(**{**dataclasses.asdict(base.world), **world}) if world \
+        else base.world
+    team: dict[str, Any] = {}
+    n_agents = base.team.n_agents if agents is None else int(agents)
+    if agents is not None:
+        team["n_agents"] = n_agents
+    if comm is not None:
+        team["comm_range"] = float(comm)
+    if budget is not None:
+        team["budget"] = budget
+    if base.team.start == "fixed" and not _fixed_starts_fit(new_world, n_agents):
+        team["start"] = "random"
+    sections: dict[str, Any] = {"team": team}
+    if world:
+        sections["world"] = world
+    if base.features.agent_id and n_agents > base.features.agent_id_scale:
+        sections["features"] = {"agent_id_scale": n_agents}
+    terrain_section = _terrain_section(terrain, threshold, base)
+    if terrain_section:
+        sections["terrain"] = terrain_section
+    return base.replace(**sections)
+
+
+def default_planners(note: Callable[[str], None] | None = None) -> list[str]:
+    """Every registered planner that can be built with its default options.
+
+    A planner whose construction fails with ``FileNotFoundError`` or ``ValueError`` (a learned
+    planner without a checkpoint), or whose entry point cannot be imported, is skipped and
+    ``note`` is called with the reason (default: printed to stderr).
+    """
+    if note is None:
+        def note(text: str) -> None:
+            print(text, file=sys.stderr)
+    names = []
+    for name in available_planners():
+        try:
+            make_planner(name)
+        except (FileNotFoundError, ValueError) as err:
+            note(f"note: skipping planner {name!r} (not available with default options: {err})")
+            continue
+        except ImportError as err:
+            note(f"note: skipping planner {name!r} (its module cannot be imported: {err})")
+            continue
+        names.append(name)
+    return names
+
+
+def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
+                     note: Callable[[str], None] | None = None) -> list[PlannerSpec]:
+    """Parse, check and test-build the planners of a comparison.
+
+    Args:
+        planners: None or ``"all"`` (:func:`default_planners`), a comma-separated string
+            (``"ig,coverage,coma=runs/x/ckpt.pt"``) or a sequence of names / specs.
+        note: receives the notes about skipped planners.
+
+    Returns:
+        one ``PlannerSpec`` per planner, in the given order.
+
+    Raises:
+        ValueError: an unknown planner (the message lists the registered ones), a planner
+            that cannot be built with its options (e.g. a missing checkpoint), a duplicate
+            label or an empty list.
+    """
+    from ipp_toolkit.evaluation import PlannerSpec
+
+    if planners is None or (isinstance(planners, str) and planners.strip() == "all"):
+        items: list[str | PlannerSpec] = list(default_planners(note))
+        if not items:
+            raise ValueError("no planner is available: registered planners: "
+                             f"{', '.join(available_planners()) or 'none'}")
+    elif isinstance(planners, str):
+        items = [item.strip() for item in planners.split(",") if item.strip()]
+    else:
+        items = [item.strip() if isinstance(item, str) else item for item in planners]
+    if not items:
+        raise ValueError("no planner given")
+    registered = available_planners()
+    specs: list[PlannerSpec] = []
+    labels: set[str] = set()
+    for item in items:
+        spec = item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item)
+        if spec.name not in registered:
+            raise ValueError(f"unknown planner {spec.name!r}; registered planners: "
+                             f"{', '.join(registered) or 'none'}")
+        label = spec.label or spec.name
+        if label in labels:
+            raise ValueError(f"planner {label!r} is given twice")
+        labels.add(label)
+        try:
+            make_planner(spec.name, **dict(spec.options))
+        except (OSError, ValueError, TypeError, ImportError) as err:
+            raise ValueError(f"planner {label!r} cannot be built: {err}") from err
+        specs.append(spec)
+    return specs
+
+
+def compare(agents: int | None = 4, comm: float | None = 25.0,
+            planners: str | Sequence[str | PlannerSpec] | None = None, trials: int = 50,
+            seed: int = 0, terrain: str | os.PathLike[str] | None = "split",
+            threshold: float | None = None, workers: int = 1,
+            out: str | os.PathLike[str] | None = None,
+            config: EnvConfig | str | os.PathLike[str] | None = None,
+            resolution: float | None = None, budget: int | None = None,
+            progress: bool = True, area_size: float | None = None,
+            note: Callable[[str], None] | None = None) -> Comparison:
+    """Evaluate planners on the test missions of one configuration and summarise them.
+
+    Args:
+        agents, comm, terrain, threshold, config, resolution, budget, area_size: the
+            configuration, see :func:`build_config`.
+        planners: see :func:`resolve_planners`; None: every available registered planner.
+        trials: number of test missions (>= 1).
+        seed: run seed of the missions.
+        workers: parallel evaluation processes (>= 1).
+        out: folder for the raw results (``config.json``, ``results.csv``, ``shards/``,
+            ``trajectories/*.npz``), the tables and the figures; None keeps everything in
+            memory.
+        progress: show a progress bar.
+        note: receives notes about skipped default planners (default: stderr).
+
+    Returns:
+        the :class:`Comparison`; its ``table`` is the Markdown table.
+
+    Raises:
+        ValueError: bad input, checked before anything is written;
+            ``ipp_toolkit.evaluation.EvaluationError`` (a ValueError) when ``out`` holds
+            results of another configuration.
+    """
+    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
+        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
+    if isinstance(workers, bool) or int(workers) != workers or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    env_config = build_config(agents=agents, comm=comm, terrain=terrain, threshold=threshold,
+                              config=config, resolution=resolution, budget=budget,
+                              area_size=area_size)
+    specs = resolve_planners(planners, note)
+    from ipp_toolkit.evaluation import evaluate
+
+    result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
+                      workers=int(workers), out_dir=out, progress=progress, namespace="test",
+                      record_missions=(0,))
+    comparison = Comparison(result=result, summary=summarise(result.rows))
+    if out is not None:
+        comparison.write(out)
+    return comparison
+

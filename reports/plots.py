@@ -1,0 +1,234 @@
+"""Figures of an evaluation: metric curves per planner and the paths of single missions.
+
+Everything is drawn on :class:`matplotlib.figure.Figure` objects with an Agg canvas, never
+through pyplot, so nothing leaks into pyplot's global state (no open figures, no backend
+switch). Every file is written atomically: saved under a temporary name in the target folder,
+then renamed.
+
+Maps are indexed ``[y, x]`` with row 0 at y = 0 and drawn with ``origin="lower"`` and
+``extent=[0, area, 0, area]``, so pixels and paths share metric axes with y pointing up.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import ListedColormap
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, Rectangle
+
+from .tables import METRIC_NAMES, atomic_write
+
+__all__ = ["plot_curves", "plot_trajectories", "curves_from_rows", "save_figure", "FORMATS"]
+
+FORMATS = ("png", "pdf")
+"""File formats written for every figure."""
+
+_TERRAIN_CMAP = ListedColormap(["#d9dde3", "#b5532f"], name="terrain2")
+
+
+def _colour(index: int, cmap: str = "tab10") -> tuple[float, float, float, float]:
+    colours = colormaps[cmap]
+    return colours(index % colours.N)
+
+
+def save_figure(figure: Figure, stem: str | os.PathLike[str],
+                formats: Sequence[str] = FORMATS, dpi: int = 150) -> list[Path]:
+    """Save ``figure`` as ``stem.<format>`` for every format, each file atomically.
+
+    Returns:
+        the written paths, in the order of ``formats``.
+    """
+    paths = []
+    for fmt in formats:
+        target = Path(f"{os.fspath(stem)}.{fmt}")
+        paths.append(atomic_write(target, lambda tmp, fmt=fmt: figure.savefig(
+            tmp, format=fmt, dpi=dpi, bbox_inches="tight")))
+    return paths
+
+
+def _new_figure(width: float, height: float) -> Figure:
+    figure = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def _rows_of(result_or_rows: Any) -> list[Mapping[str, Any]]:
+    return list(getattr(result_or_rows, "rows", result_or_rows))
+
+
+def _value(value: Any) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def curves_from_rows(rows: Iterable[Mapping[str, Any]],
+                     metric: str) -> dict[str, np.ndarray]:
+    """Per planner, a (missions, B + 1) array of ``metric`` over steps (NaN where missing).
+
+    Planners keep the order of their first row; missions are sorted by index.
+    """
+    table = list(rows)
+    if not table:
+        return {}
+    budget = max(int(r["step"]) for r in table)
+    planners: dict[str, dict[int, np.ndarray]] = {}
+    for row in table:
+        per_mission = planners.setdefault(str(row["planner"]), {})
+        curve = per_mission.get(int(row["mission"]))
+        if curve is None:
+            curve = per_mission[int(row["mission"])] = np.full(budget + 1, np.nan)
+        curve[int(row["step"])] = _value(row.get(metric))
+    return {p: np.stack([m[k] for k in sorted(m)]) for p, m in planners.items()}
+
+
+def _mean_std(curves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    finite = np.isfinite(curves)
+    counts = finite.sum(axis=0)
+    filled = np.where(finite, curves, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = filled.sum(axis=0) / counts
+        squares = np.where(finite, (curves - mean) ** 2, 0.0).sum(axis=0)
+        std = np.where(counts > 1, np.sqrt(squares / np.maximum(counts - 1, 1)), 0.0)
+    mean = np.where(counts > 0, mean, np.nan)
+    return mean, np.where(counts > 0, std, np.nan)
+
+
+def _describe(rows: Sequence[Mapping[str, Any]]) -> str:
+    agents = sorted({int(float(r["agents"])) for r in rows if r.get("agents") not in (None, "")})
+    comm = sorted({_value(r["comm"]) for r in rows if r.get("comm") not in (None, "")})
+    missions = len({int(r["mission"]) for r in rows})
+    parts = []
+    if agents:
+        parts.append("/".join(str(a) for a in agents) + " UAVs")
+    if comm:
+        parts.append("D = " + "/".join("inf" if math.isinf(c) else f"{c:g} m" for c in comm))
+    parts.append(f"{missions} mission{'s' if missions != 1 else ''}")
+    return ", ".join(parts)
+
+
+def plot_curves(result_or_rows: Any, out_dir: str | os.PathLike[str],
+                metrics: Sequence[str] = ("entropy", "f1"),
+                stem: str = "curves") -> list[Path]:
+    """Plot each metric against the step, one line (mean) and band (± std) per planner.
+
+    Args:
+        result_or_rows: an ``EvaluationResult`` or its tidy rows.
+        out_dir: folder for ``curves.png`` and ``curves.pdf`` (created if needed).
+        metrics: one panel per metric, side by side.
+        stem: file name without extension.
+
+    Returns:
+        the written paths.
+    """
+    rows = _rows_of(result_or_rows)
+    if not rows:
+        raise ValueError("no rows to plot")
+    figure = _new_figure(5.0 * len(metrics), 4.0)
+    axes = figure.subplots(1, len(metrics), squeeze=False)[0]
+    for ax, metric in zip(axes, metrics, strict=True):
+        for index, (planner, curves) in enumerate(curves_from_rows(rows, metric).items()):
+            mean, std = _mean_std(curves)
+            steps = np.arange(len(mean))
+            colour = _colour(index)
+            ax.plot(steps, mean, color=colour, marker="o", markersize=3, label=planner)
+            ax.fill_between(steps, mean - std, mean + std, color=colour, alpha=0.2,
+                            linewidth=0)
+        ax.set_xlabel("step s")
+        ax.set_ylabel(METRIC_NAMES.get(metric, metric) + (" (bits)" if metric == "entropy"
+                                                         else ""))
+        ax.set_title(METRIC_NAMES.get(metric, metric))
+        ax.grid(alpha=0.3)
+        ax.xaxis.get_major_locator().set_params(integer=True)
+    axes[0].legend(title="planner")
+    figure.suptitle(f"Mean ± std per step: {_describe(rows)}")
+    return save_figure(figure, Path(out_dir) / stem)
+
+
+def _paths(ax: Any, positions: np.ndarray, footprints: np.ndarray | None,
+           resolution: float | None, min_altitude: float) -> None:
+    for k in range(positions.shape[1]):
+        colour = _colour(k)
+        x, y, z = positions[:, k, 0], positions[:, k, 1], positions[:, k, 2]
+        ax.plot(x, y, "-", color=colour, linewidth=1.5, alpha=0.9, zorder=3, clip_on=False)
+        ax.scatter(x, y, s=12.0 * (z / min_altitude) ** 2, color=colour, edgecolors="black",
+                   linewidths=0.5, alpha=0.85, zorder=4, clip_on=False)
+        ax.scatter(x[:1], y[:1], s=160, marker="*", color=colour, edgecolors="black",
+                   linewidths=0.8, zorder=5, clip_on=False)
+        if footprints is not None and resolution:
+            r0, r1, c0, c1 = (float(v) * resolution for v in footprints[-1, k])
+            ax.add_patch(Rectangle((c0, r0), c1 - c0, r1 - r0, fill=False, edgecolor=colour,
+                                   linestyle="--", linewidth=1.0, zorder=3))
+
+
+def plot_trajectories(trajectory: Mapping[str, Any], out_path_stem: str | os.PathLike[str],
+                      title: str = "") -> list[Path]:
+    """Plot one mission of one planner: terrain and final global map with every UAV's path.
+
+    Args:
+        trajectory: a recorded mission (the ``trajectories/<label>_mission<k>.npz`` content):
+            ``ground_truth`` (H, W) bool, ``final_prob`` (H, W), ``positions`` (B + 1, N, 3)
+            metres, optional ``footprints`` (B + 1, N, 4) half-open map-cell rectangles
+            (row0, row1, col0, col1), ``area_size`` and ``resolution`` in metres.
+        out_path_stem: output path without extension; ``.png`` and ``.pdf`` are written.
+        title: figure title.
+
+    Returns:
+        the written paths. Paths are lines in the UAV's colour with one marker per step
+        (marker area grows with altitude); a star marks the start; the dashed rectangles on
+        the right are the last footprints.
+    """
+    truth = np.asarray(trajectory["ground_truth"]).astype(bool)
+    prob = np.asarray(trajectory["final_prob"], dtype=np.float32)
+    positions = np.asarray(trajectory["positions"], dtype=np.float64)
+    if positions.ndim != 3 or positions.shape[2] != 3:
+        raise ValueError(f"positions must be (steps, agents, 3), got {positions.shape}")
+    area = float(np.asarray(trajectory.get("area_size", truth.shape[1])))
+    resolution = trajectory.get("resolution")
+    resolution = float(np.asarray(resolution)) if resolution is not None else area / truth.shape[1]
+    footprints = trajectory.get("footprints")
+    footprints = np.asarray(footprints) if footprints is not None else None
+    altitudes = np.unique(positions[:, :, 2])
+    min_altitude = float(altitudes.min()) if altitudes.size and altitudes.min() > 0 else 1.0
+    extent = (0.0, area, 0.0, area)
+
+    figure = _new_figure(11.0, 5.2)
+    left, right = figure.subplots(1, 2)
+    left.imshow(truth.astype(np.uint8), origin="lower", extent=extent, cmap=_TERRAIN_CMAP,
+                vmin=0, vmax=1, interpolation="nearest")
+    left.set_title("ground truth and paths")
+    image = right.imshow(prob, origin="lower", extent=extent, cmap="RdBu_r", vmin=0.0, vmax=1.0,
+                         interpolation="nearest")
+    right.set_title("final global map and paths")
+    figure.colorbar(image, ax=right, label="P(interesting)", shrink=0.85)
+    _paths(left, positions, None, None, min_altitude)
+    _paths(right, positions, footprints, resolution, min_altitude)
+    for ax in (left, right):
+        ax.set_xlim(0.0, area)
+        ax.set_ylim(0.0, area)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+    handles: list[Any] = [Patch(facecolor=_TERRAIN_CMAP(1), label="interesting"),
+                          Patch(facecolor=_TERRAIN_CMAP(0), label="not interesting")]
+    handles += [Line2D([], [], color=_colour(k), marker="o", markeredgecolor="black",
+                      label=f"UAV {k}") for k in range(positions.shape[1])]
+    handles.append(Line2D([], [], linestyle="", marker="*", markersize=12, color="grey",
+                          markeredgecolor="black", label="start"))
+    handles += [Line2D([], [], linestyle="", marker="o", color="grey", markeredgecolor="black",
+                       markersize=math.sqrt(12.0) * z / min_altitude, label=f"{z:g} m")
+                for z in altitudes]
+    figure.legend(handles=handles, loc="outside right center", fontsize="small")
+    if title:
+        figure.suptitle(title)
+    return save_figure(figure, out_path_stem)

@@ -1,0 +1,180 @@
+"""Tests of the ``ipp-compare`` console script (``reports.cli.compare_main``)."""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ipp_toolkit.planners import available_planners
+from reports import compare as compare_function
+from reports.cli import compare_main
+
+FLAGS = ("--agents", "--comm", "--planners", "--trials", "--seed", "--terrain", "--threshold",
+         "--workers", "--out", "--config", "--resolution", "--budget", "--area-size",
+         "--no-progress")
+TINY = ["--agents", "2", "--trials", "2", "--resolution", "0.5", "--budget", "3",
+        "--planners", "random,coverage", "--workers", "1", "--no-progress"]
+
+
+def _have(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
+needs_evaluation = pytest.mark.skipif(not _have("ipp_toolkit.evaluation"),
+                                      reason="ipp_toolkit.evaluation is not written yet")
+needs_baselines = pytest.mark.skipif(
+    not (_have("baselines.random_planner") and _have("baselines.coverage")),
+    reason="the baseline planners random and coverage are not written yet")
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """Content hash of every file under ``folder``."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_help_lists_every_flag_with_its_default(capsys):
+    assert compare_main(["--help"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("usage: ipp-compare")
+    for flag in FLAGS:
+        assert flag in text, flag
+    for default in ("(default: 4)", "(default: 25)", "(default: all)", "(default: 50)",
+                    "(default: 0)", "(default: split)", "(default: None)",
+                    "(default: results/compare-a{agents}-d{comm})", "(default: False)"):
+        assert default in " ".join(text.split()), default
+
+
+def _fails(capsys, argv: list[str], message: str) -> str:
+    assert compare_main(argv) == 2
+    err = capsys.readouterr().err
+    assert "ipp-compare: error: " in err and message in err, err
+    return err
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--agents", "0"], "argument --agents: must be an integer >= 1, got '0'"),
+    (["--agents", "two"], "argument --agents: must be an integer >= 1, got 'two'"),
+    (["--trials", "0"], "argument --trials: must be an integer >= 1, got '0'"),
+    (["--comm", "-3"], "--comm must be >= 0"),
+    (["--workers", "0"], "argument --workers"),
+    (["--resolution", "0"], "argument --resolution: must be a positive number"),
+    (["--bogus"], "unrecognized arguments: --bogus"),
+])
+def test_bad_flags_exit_2(capsys, tmp_path, argv, message):
+    out = tmp_path / "out"
+    _fails(capsys, argv + ["--out", str(out)], message)
+    assert not out.exists()
+
+
+def test_bad_terrain_exits_2_and_writes_nothing(capsys, tmp_path):
+    out = tmp_path / "out"
+    _fails(capsys, ["--terrain", str(tmp_path / "missing.tif"), "--threshold", "0.5",
+                    "--out", str(out)], "cannot read terrain file")
+    _fails(capsys, ["--terrain", "splt", "--out", str(out)],
+           "terrain is one of split, split-axis, blobs or a raster FILE")
+    raster = tmp_path / "field.npy"
+    np.save(raster, np.zeros((10, 10)))
+    _fails(capsys, ["--terrain", str(raster), "--out", str(out)], "needs a threshold")
+    garbage = tmp_path / "garbage.tif"
+    garbage.write_bytes(b"not a tiff")
+    _fails(capsys, ["--terrain", str(garbage), "--threshold", "1", "--out", str(out)],
+           "cannot read raster file")
+    unreadable = tmp_path / "folder.tif"
+    unreadable.mkdir()
+    _fails(capsys, ["--terrain", str(unreadable), "--threshold", "1", "--out", str(out)],
+           "not a file")
+    _fails(capsys, ["--config", str(tmp_path / "nope.yaml"), "--out", str(out)],
+           "cannot read config file")
+    assert not out.exists()
+
+
+def test_default_planners_skip_the_unbuildable(monkeypatch, capsys):
+    module = sys.modules["reports.compare"]
+
+    def fake_make(name, **options):
+        if name == "coma":
+            raise FileNotFoundError("no checkpoint at runs/coma/latest.pt")
+        if name == "ppo":
+            raise ValueError("ppo needs a checkpoint")
+        return object()
+
+    monkeypatch.setattr(module, "available_planners", lambda: ["coma", "ig", "ppo", "random"])
+    monkeypatch.setattr(module, "make_planner", fake_make)
+    assert module.default_planners() == ["ig", "random"]
+    err = capsys.readouterr().err
+    assert "skipping planner 'coma'" in err and "no checkpoint" in err
+    assert "skipping planner 'ppo'" in err
+
+
+@needs_evaluation
+def test_unknown_planner_exits_2_and_lists_registered(capsys, tmp_path):
+    out = tmp_path / "out"
+    err = _fails(capsys, ["--planners", "random,astar", "--out", str(out)],
+                 "unknown planner 'astar'; registered planners: ")
+    for name in available_planners():
+        assert name in err
+    assert not out.exists()
+
+
+@needs_evaluation
+@needs_baselines
+def test_end_to_end_writes_everything_and_refuses_another_config(capsys, tmp_path,
+                                                                 monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert compare_main(TINY) == 0
+    printed = capsys.readouterr().out
+    out = tmp_path / "results" / "compare-a2-d25"  # the default --out
+    for name in ("summary.md", "summary.csv", "summary.tex", "curves.png", "curves.pdf",
+                 "results.csv", "config.json", "trajectories/random_mission0.png",
+                 "trajectories/random_mission0.pdf", "trajectories/coverage_mission0.png",
+                 "trajectories/coverage_mission0.pdf"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    table = (out / "summary.md").read_text(encoding="utf-8")
+    assert table in printed
+    assert "| random |" in table and "| coverage |" in table
+    assert "2 missions" in table and "2 UAVs" in table and "D = 25 m" in table
+    assert "Entropy 33 % (s=1)" in table and "F1 100 % (s=3)" in table
+    assert "Planning time per step:" in printed and " ms" in printed
+
+    before = snapshot(out)
+    argv = [*TINY, "--out", str(out)]
+    budget = argv.index("--budget") + 1
+    argv[budget] = "4"
+    _fails(capsys, argv, "")  # another configuration into the same folder
+    assert snapshot(out) == before
+
+    # The same configuration again resumes from the stored results.
+    assert compare_main([*TINY, "--out", str(out)]) == 0
+    assert (out / "summary.md").read_text(encoding="utf-8") == table
+
+
+def test_compare_is_exported():
+    import reports
+
+    assert reports.compare is compare_function and callable(compare_function)
+    assert {"compare", "summarise", "plot_curves", "plot_trajectories"} <= set(reports.__all__)
+
+
+@needs_evaluation
+@needs_baselines
+def test_raster_terrain_file_end_to_end(capsys, tmp_path):
+    raster = tmp_path / "field.npy"
+    values = np.zeros((20, 20))
+    values[:, :8] = 1.0
+    np.save(raster, values)
+    out = tmp_path / "raster"
+    argv = ["--agents", "3", "--trials", "1", "--resolution", "0.5", "--budget", "2",
+            "--planners", "random", "--workers", "1", "--no-progress", "--terrain", str(raster),
+            "--threshold", "0.5", "--out", str(out)]
+    assert compare_main(argv) == 0
+    assert "terrain field.npy" in capsys.readouterr().out  # evaluate names it by file
+    assert (out / "trajectories" / "random_mission0.png").is_file()

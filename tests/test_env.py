@@ -1,0 +1,165 @@
+import math
+import warnings
+
+import numpy as np
+import pytest
+from conftest import small_config
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from ipp_toolkit.env import IPPEnv
+from ipp_toolkit.features import actor_plane_names, critic_plane_names, state_plane_names
+from ipp_toolkit.mission import InvalidActionError
+
+TEAMS = [2, 4, 8]
+RANGES = [0.0, 25.0, math.inf]
+
+
+@pytest.mark.parametrize("n_agents", TEAMS)
+@pytest.mark.parametrize("comm_range", RANGES)
+def test_pettingzoo_conformance(n_agents, comm_range):
+    config = small_config(n_agents=n_agents, comm_range=comm_range)
+    with warnings.catch_warnings():
+        # api_test warns that Dict observations are not Box; that is by design (masks).
+        warnings.simplefilter("ignore", UserWarning)
+        parallel_api_test(IPPEnv(config), num_cycles=100)
+        api_test(parallel_to_aec(IPPEnv(config)), num_cycles=100)
+    # The seed test samples actions without masks, so it runs the no-mask ablation mode.
+    hold = config.replace(team={"invalid_action": "hold"})
+    parallel_seed_test(lambda: IPPEnv(hold), num_cycles=100)
+
+
+def test_spaces_and_observation_contents():
+    env = IPPEnv(small_config())
+    obs, infos = env.reset(seed=0)
+    space = env.observation_space("uav_0")
+    assert space is env.observation_space("uav_0")
+    assert space["observation"].shape == (7, 11, 11)
+    for agent in env.agents:
+        assert space.contains(obs[agent])
+        assert obs[agent]["action_mask"].dtype == np.int8
+        assert (infos[agent]["action_mask"] == obs[agent]["action_mask"]).all()
+    planes = obs["uav_0"]["observation"]
+    names = actor_plane_names(env.config.features)
+    assert planes[names.index("budget")].max() == 1.0
+    assert planes[names.index("agent_id")][0, 0] == pytest.approx(1 / 8)
+    assert obs["uav_3"]["observation"][names.index("agent_id")][0, 0] == pytest.approx(4 / 8)
+    position = planes[names.index("position")]
+    assert position[5, 5] == pytest.approx(1.0)  # itself at the centre, top level
+    assert position[0, 0] == -1 and position[5, 7] == 0  # (0, 0) m lies outside the window
+    assert env.state().shape == env.state_space.shape == (5, 11, 11)
+    assert env.state_space.contains(env.state())
+
+
+def test_position_window_shows_heard_teammates():
+    config = small_config(n_agents=2, comm_range=math.inf)
+    env = IPPEnv(config)
+    obs, _ = env.reset(seed=0)  # (10, 10) and (40, 40): 6 cells apart, outside the window
+    names = actor_plane_names(config.features)
+    position = obs["uav_0"]["observation"][names.index("position")]
+    assert np.count_nonzero(position > 0) == 1
+    env.mission.positions[1, :2] = [4, 3]  # (20, 15): 2 east, 1 north of uav_0
+    env.mission.heard[:] = True
+    obs, _ = env._observe()
+    position = obs["uav_0"]["observation"][names.index("position")]
+    assert position[6, 7] == pytest.approx(1.0)
+    env.mission.heard[0, 1] = False
+    obs, _ = env._observe()
+    assert obs["uav_0"]["observation"][names.index("position")][6, 7] == 0
+
+
+def test_budget_end_is_terminal_not_truncation():
+    env = IPPEnv(small_config())
+    obs, _ = env.reset(seed=1)
+    rng = np.random.default_rng(0)
+    for step in range(15):
+        actions = {a: int(rng.choice(np.flatnonzero(obs[a]["action_mask"]))) for a in env.agents}
+        obs, rewards, terminations, truncations, infos = env.step(actions)
+        assert len(set(rewards.values())) == 1  # one team reward
+        assert not any(truncations.values())
+        assert all(terminations.values()) == (step == 14)
+    assert env.agents == []
+    names = actor_plane_names(env.config.features)
+    assert obs["uav_0"]["observation"][names.index("budget")].max() == 0.0
+    assert infos["uav_0"]["metrics"]["entropy"] < 1.0
+
+
+def test_step_errors_name_agent_and_action():
+    env = IPPEnv(small_config())
+    env.reset(seed=0)
+    with pytest.raises(InvalidActionError, match=r"uav_1.*action 0 \(up\) is masked"):
+        env.step({"uav_0": 1, "uav_1": 0, "uav_2": 1, "uav_3": 1})
+    with pytest.raises(InvalidActionError, match="uav_3.*action 7 is out of range"):
+        env.step({"uav_0": 1, "uav_1": 1, "uav_2": 1, "uav_3": 7})
+    with pytest.raises(InvalidActionError, match=r"no action for agent\(s\) \['uav_3'\]"):
+        env.step({"uav_0": 1, "uav_1": 1, "uav_2": 1})
+    with pytest.raises(InvalidActionError, match="uav_9"):
+        env.step({"uav_0": 1, "uav_1": 1, "uav_2": 1, "uav_3": 1, "uav_9": 1})
+    with pytest.raises(InvalidActionError, match="must be an integer"):
+        env.step({"uav_0": 1.5, "uav_1": 1, "uav_2": 1, "uav_3": 1})
+    with pytest.raises(ValueError, match="unknown agent 'uav_7'"):
+        env.action_space("uav_7")
+
+
+def test_reset_seeding_and_mission_option():
+    env = IPPEnv(small_config())
+    env.reset(seed=5)
+    first = env.mission.ground_truth.copy()
+    env.reset()
+    second = env.mission.ground_truth.copy()
+    assert not (first == second).all()
+    env.reset(options={"mission": 0})
+    assert (env.mission.ground_truth == first).all()
+    other = IPPEnv(small_config())
+    other.reset(seed=5)
+    other.reset()
+    assert (other.mission.ground_truth == second).all()
+    with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+        env.reset(seed=-1)
+
+
+def test_unseeded_copies_differ():
+    a, b = IPPEnv(small_config()), IPPEnv(small_config())
+    a.reset()
+    b.reset()
+    assert not (a.mission.ground_truth == b.mission.ground_truth).all()
+
+
+def test_critic_observations_and_action_planes():
+    config = small_config()
+    env = IPPEnv(config)
+    env.reset(seed=0)
+    joint = {"uav_0": 1, "uav_1": 2, "uav_2": 3, "uav_3": 2}
+    critic = env.critic_observations(joint)
+    names = critic_plane_names(config.features)
+    assert critic.shape == (4, len(names), 11, 11)
+    east = names.index("other_actions_2")
+    # uav_0 sees uav_1 (at (40, 10)) and uav_3 (at (10, 40)) choosing east, not itself.
+    assert critic[0, east, 2, 8] == 1 and critic[0, east, 8, 2] == 1
+    assert critic[0, east].sum() == 2
+    assert critic[1, east, 2, 8] == 0 and critic[1, east].sum() == 1
+    assert critic[0, names.index("other_actions_1")].sum() == 0  # only uav_0 chose north
+    assert state_plane_names(config.features)[0] == "budget"
+
+
+def test_feature_switches_change_channels():
+    features = {"local_entropy": False, "measurement_entropy": False, "global_map": False,
+                "other_actions": False, "centred": False}
+    config = small_config().replace(features=features)
+    env = IPPEnv(config)
+    obs, _ = env.reset(seed=0)
+    assert obs["uav_0"]["observation"].shape == (5, 11, 11)
+    names = actor_plane_names(config.features)
+    position = obs["uav_0"]["observation"][names.index("position")]
+    assert position[2, 2] == pytest.approx(1.0) and position.min() == 0  # absolute grid
+    assert env.critic_observations(np.zeros(4, int)).shape == (4, 5 + 3, 11, 11)
+
+
+def test_render_rgb_array():
+    env = IPPEnv(small_config(), render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    assert IPPEnv(small_config()).render() is None
+    with pytest.raises(ValueError, match="render_mode 'human'"):
+        IPPEnv(small_config(), render_mode="human")

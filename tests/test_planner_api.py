@@ -1,0 +1,70 @@
+import numpy as np
+import pytest
+from conftest import small_config
+
+from ipp_toolkit.mission import reset_mission, step_mission
+from ipp_toolkit.planners import (
+    Planner,
+    agent_views,
+    available_planners,
+    make_planner,
+    register_planner,
+)
+
+
+@register_planner("test-first-valid")
+class FirstValid(Planner):
+    needs_observations = False
+
+    def act(self, views):
+        return np.array([int(np.flatnonzero(v.mask)[0]) for v in views])
+
+
+def test_registered_planner_is_found_and_flies():
+    assert "test-first-valid" in available_planners()
+    planner = make_planner("test-first-valid")
+    state = reset_mission(small_config(), seed=0)
+    planner.reset(state.config, seed=0)
+    while not state.done:
+        step_mission(state, planner.act(agent_views(state, planner.needs_observations)))
+    assert state.step == state.budget
+
+
+def test_views_are_read_only_and_local():
+    config = small_config(comm_range=0.0)
+    state = reset_mission(config, seed=0)
+    views = agent_views(state)
+    assert len(views) == 4
+    with pytest.raises(ValueError):
+        views[0].local_prob[0, 0] = 1.0
+    with pytest.raises(ValueError):
+        views[0].mask[0] = 1
+    # D = 0: nobody is heard; the local map is the agent's own, not the global one.
+    assert views[0].teammates.size == 0
+    assert not np.array_equal(views[0].local_prob, state.maps.prob[state.global_index])
+    assert views[2].observation.shape == (7, 11, 11)
+    assert agent_views(state, with_observations=False)[0].observation.shape[0] == 0
+
+
+def test_views_list_heard_teammates():
+    state = reset_mission(small_config(comm_range=float("inf")), seed=0)
+    view = agent_views(state)[1]
+    assert view.teammates.tolist() == [0, 2, 3]
+    assert view.teammate_positions.shape == (3, 3) and view.teammate_footprints.shape == (3, 4)
+
+
+def test_registry_errors():
+    with pytest.raises(ValueError, match="unknown planner 'nope'; registered planners: .*"
+                                         "test-first-valid"):
+        make_planner("nope")
+    with pytest.raises(ValueError, match="already registered"):
+        register_planner("test-first-valid")(type("Other", (Planner,), {"act": None}))
+    with pytest.raises(ValueError, match="invalid planner name"):
+        register_planner("a,b")
+
+    @register_planner("test-not-a-planner")
+    def factory():
+        return object()
+
+    with pytest.raises(TypeError, match="not a Planner"):
+        make_planner("test-not-a-planner")
