@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import START_POSITIONS, EnvConfig
-from .mapping import BeliefMaps, BlockGrid, RegionChange
+from .mapping import BeliefMaps, BlockGrid, RegionChange, binary_entropy
 from .seeding import MissionStreams, mission_streams
 from .sensor import Camera
 from .team import (
@@ -371,7 +371,7 @@ def _measure_exchange_fuse(state: MissionState) -> float:
         rects.append(rect)
         deltas.append(camera.reading_logodds(reading, iz))
         # (d): W(z) H(z) per cell; z is p(h) or 1 - p(h), so H(z) is one number per altitude.
-        h = float(_entropy_of_accuracy(camera.accuracy[iz]))
+        h = float(binary_entropy(camera.accuracy[iz]))
         weights = np.where(reading, state.maps.weight_interesting * h,
                            state.maps.weight_uninteresting * h)
         plane = np.zeros(blocks.block_area.shape)
@@ -401,11 +401,6 @@ def _measure_exchange_fuse(state: MissionState) -> float:
     if denominator <= 1e-9:
         return float(reward_cfg.beta)
     return float(reward_cfg.alpha * numerator / denominator + reward_cfg.beta)
-
-
-def _entropy_of_accuracy(accuracy: float) -> float:
-    p = min(max(accuracy, 1e-4), 1 - 1e-4)
-    return -(p * math.log2(p) + (1 - p) * math.log2(1 - p))
 
 
 def _update_global_stats(state: MissionState, change: RegionChange) -> tuple[float, float]:
