@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import START_POSITIONS, EnvConfig
-from .mapping import BeliefMaps, BlockGrid, RegionChange, binary_entropy
+from .mapping import BeliefMaps, BlockGrid, RegionChange
 from .seeding import MissionStreams, mission_streams
 from .sensor import Camera
 from .team import (
@@ -371,7 +371,7 @@ def _measure_exchange_fuse(state: MissionState) -> float:
         rects.append(rect)
         deltas.append(camera.reading_logodds(reading, iz))
         # (d): W(z) H(z) per cell; z is p(h) or 1 - p(h), so H(z) is one number per altitude.
-        h = float(binary_entropy(camera.accuracy[iz]))
+        h = float(camera.reading_entropy[iz])
         weights = np.where(reading, state.maps.weight_interesting * h,
                            state.maps.weight_uninteresting * h)
         plane = np.zeros(blocks.block_area.shape)

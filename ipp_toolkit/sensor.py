@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from .config import SensorConfig, WorldConfig
-from .mapping import Rect, logit
+from .mapping import Rect, binary_entropy, logit
 
 __all__ = ["Camera", "footprint_side"]
 
@@ -31,6 +31,8 @@ class Camera:
             lies inside the footprint square, clipped at the area border.
         accuracy: (Z,) probability that a cell reading is correct, per altitude index.
         delta_logodds: (Z, 2) float32 log-odds increment of a reading 0 / 1 per altitude.
+        reading_entropy: (Z,) entropy in bits of one stored reading z (p(h) or 1 - p(h)),
+            the same for both values of the reading.
     """
 
     def __init__(self, world: WorldConfig, sensor: SensorConfig):
@@ -59,6 +61,7 @@ class Camera:
         prior_logodds = float(logit(world.prior))
         self.delta_logodds = np.stack([logit(1 - self.accuracy), logit(self.accuracy)],
                                       axis=1).astype(np.float32) - np.float32(prior_logodds)
+        self.reading_entropy = binary_entropy(self.accuracy)
 
     def altitude_index(self, altitude: float) -> int:
         """Index of a flight level; an unknown altitude is an error, never a perfect sensor."""
