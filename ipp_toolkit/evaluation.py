@@ -35,18 +35,18 @@ import pickle
 import re
 import sys
 import time
-import uuid
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
 from .config import EnvConfig, config_from_dict, config_to_dict
+from .io import atomic_write, write_json
 from .mission import MissionGeometry, reset_mission, step_mission
 from .planners import (
     ENTRY_POINT_GROUP,
@@ -415,25 +415,6 @@ def _transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
 # Files
 
 
-def _atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
-    """Write ``path`` through a temporary file in the same folder and ``os.replace``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        with open(tmp, "xb") as handle:
-            write(handle)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-
-
-def _write_json(path: Path, value: Any) -> None:
-    data = json.dumps(value, indent=1).encode("utf-8")
-    _atomic_write(path, lambda handle: handle.write(data))
-
-
 def _identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, Any]:
     from . import __version__
 
@@ -547,7 +528,7 @@ def _write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str
             "footprints": np.asarray(trajectory["footprints"]).tolist(),
         },
     }
-    _write_json(_shard_path(folder, spec.effective_label, mission), shard)
+    write_json(_shard_path(folder, spec.effective_label, mission), shard)
 
 
 def _write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
@@ -559,7 +540,7 @@ def _write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
         "area_size": np.float64(trajectory["area_size"]),
         "resolution": np.float64(trajectory["resolution"]),
     }
-    _atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
+    atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
 
 
 def _read_trajectory(path: Path) -> dict[str, Any]:
@@ -600,7 +581,7 @@ def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
     for row in rows:
         writer.writerow([_format_cell(row[column]) for column in RESULT_COLUMNS])
     data = text.getvalue().encode("utf-8")
-    _atomic_write(path, lambda handle: handle.write(data))
+    atomic_write(path, lambda handle: handle.write(data))
 
 
 def _parse_cell(column: str, text: str) -> Any:
@@ -857,11 +838,11 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     if folder is not None:
         folder.mkdir(parents=True, exist_ok=True)
         if not has_identity:
-            _write_json(folder / "config.json", identity)
+            write_json(folder / "config.json", identity)
         for spec in specs:
             path = folder / "shards" / _file_stem(spec.effective_label) / "planner.json"
             if not path.exists():
-                _write_json(path, spec.to_dict())
+                write_json(path, spec.to_dict())
 
     def finish(label: str, mission: int, result: dict[str, Any]) -> None:
         if folder is not None:

@@ -6,6 +6,8 @@ the metrics after every step and write the per-step metrics (CSV) and the final 
 ``ipp-compare``: evaluate planners on the test missions of one configuration, print the
 Markdown table (Table I style) and the planning time per step, and write the tables, the
 figures and the raw results (see :func:`compare_main`).
+
+``ipp-train coma|ppo``: train a learned planner (see :func:`train_main`).
 """
 
 from __future__ import annotations
@@ -235,3 +237,30 @@ def compare_main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(simulate_main())
+
+
+TRAINERS = {"coma": "coma.learner", "ppo": "baselines.ppo"}
+
+
+def train_main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ipp-train {coma,ppo} ...``: dispatch to the trainer's own ``main``.
+
+    Returns the trainer's exit code (0 ok, 1 training failed, 2 bad input).
+    """
+    import importlib
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    usage = (f"usage: ipp-train {{{','.join(TRAINERS)}}} [options]   "
+             "(ipp-train coma --help for the options)")
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage)
+        return 0 if argv else 2
+    if argv[0] not in TRAINERS:
+        print(f"ipp-train: error: unknown trainer {argv[0]!r}; choose from {sorted(TRAINERS)}\n"
+              f"{usage}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(TRAINERS[argv[0]])
+    try:
+        return int(module.main(argv[1:]))
+    except SystemExit as exit_:  # argparse: --help (0) or a usage error (2, already printed)
+        return exit_.code if isinstance(exit_.code, int) else 2

@@ -1,0 +1,66 @@
+"""COMA training throughput in agent-transitions per second (run by hand, one core).
+
+    python benchmarks/coma_throughput.py                    # cpu preset, r_M = 0.5 m
+    python benchmarks/coma_throughput.py --preset paper --resolution 0.1
+
+Prints, per preset: rollout only (simulator + features + actor sampling), one update only
+(TD(lambda) targets, critic and actor mini-batch steps) and the whole training step, each in
+agent-transitions per second, plus seconds per update (the authors' code: about 42 s per
+300-transition update on a 2-core VM, i.e. ~7 transitions/s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import torch  # noqa: E402
+
+from coma.checkpoints import build_networks  # noqa: E402
+from coma.config import preset  # noqa: E402
+from coma.learner import _make_optimisers, collect_rollout, update  # noqa: E402
+from ipp_toolkit.config import EnvConfig  # noqa: E402
+from ipp_toolkit.mission import MissionGeometry  # noqa: E402
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--preset", default="cpu", choices=["cpu", "paper"])
+    parser.add_argument("--resolution", type=float, default=0.5)
+    parser.add_argument("--updates", type=int, default=3)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    torch.manual_seed(0)
+    config = preset(args.preset)
+    env = EnvConfig().replace(world={"resolution": args.resolution})
+    networks = build_networks(config, env)
+    optimisers = _make_optimisers(networks)
+    target = copy.deepcopy(networks.critic)
+    geometry = MissionGeometry(env)
+    generator = torch.Generator().manual_seed(0)
+    rollout_s = update_s = 0.0
+    transitions = 0
+    for k in range(args.updates):
+        start = time.perf_counter()
+        rollout = collect_rollout(networks, env, geometry, 0, k * config.missions_per_update,
+                                  config.missions_per_update, 0.3, generator)
+        middle = time.perf_counter()
+        update(networks, target, optimisers, rollout, 0.3, generator)
+        rollout_s += middle - start
+        update_s += time.perf_counter() - middle
+        transitions += rollout.transitions
+    print(f"preset={args.preset} width={config.width} r_M={args.resolution} m, "
+          f"{config.missions_per_update} missions ({transitions // args.updates} "
+          f"agent-transitions) per update, {config.epochs} epochs, one thread")
+    print(f"  rollout only     {transitions / rollout_s:8.0f} agent-transitions/s")
+    print(f"  update only      {transitions / update_s:8.0f} agent-transitions/s")
+    print(f"  training         {transitions / (rollout_s + update_s):8.0f} agent-transitions/s "
+          f"({(rollout_s + update_s) / args.updates:.2f} s per update)")
+
+
+if __name__ == "__main__":
+    main()

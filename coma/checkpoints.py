@@ -1,0 +1,162 @@
+"""COMA networks on disk: plain state dicts plus the configs that rebuild them.
+
+A policy file holds the actor, the critic (the teaching examples need it) and, for
+``central_qv``, the state-value critic, with the :class:`~coma.config.COMAConfig` and the
+mission's :class:`~ipp_toolkit.config.EnvConfig` as plain dicts. Training checkpoints add the
+optimisers, the target critic, the sampling generator and the progress counters. Files are
+written atomically and read with ``torch.load(weights_only=True)``.
+
+Transfer (SPEC §8, the paper's robustness study): a policy trained with N agents and range D
+may run with other team sizes, ranges, budgets and map resolutions, because its inputs do not
+depend on them; the feature switches and the planning grid must match exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
+from ipp_toolkit.features import actor_plane_names
+from ipp_toolkit.io import CheckpointError, load_torch, save_torch
+from ipp_toolkit.team import N_ACTIONS
+
+from .config import COMAConfig, from_dict
+from .inputs import critic_channels, value_channels
+from .networks import ConvNet
+
+__all__ = ["CHECKPOINT_KIND", "COMANetworks", "build_networks", "save_policy", "load_policy",
+           "check_transfer", "shipped_policy"]
+
+CHECKPOINT_KIND = "ipp-toolkit/coma"
+SHIPPED_POLICY = "coma_4agents_d25.pt"
+
+
+@dataclass
+class COMANetworks:
+    """The networks of one COMA run and the configs that built them.
+
+    Attributes:
+        actor: (B, C_actor, G, G) -> (B, 6) logits.
+        critic: (B, C_critic, G, G) -> (B, 6) Q(s, (u_-i, a)).
+        value: (B, C_value, G, G) -> (B, 1) V(s); only for ``central_qv``.
+        coma_config: the training hyper-parameters.
+        env_config: the mission the networks were trained on.
+    """
+
+    actor: ConvNet
+    critic: ConvNet
+    value: ConvNet | None
+    coma_config: COMAConfig
+    env_config: EnvConfig
+
+    def state_dicts(self) -> dict[str, Any]:
+        """Plain state dicts of the networks (``value`` is None without a V critic)."""
+        return {"actor": self.actor.state_dict(), "critic": self.critic.state_dict(),
+                "value": None if self.value is None else self.value.state_dict()}
+
+
+def build_networks(coma_config: COMAConfig, env_config: EnvConfig) -> COMANetworks:
+    """Fresh networks sized for ``env_config``'s feature planes (torch's global RNG inits)."""
+    features = env_config.features
+    grid = env_config.world.grid_points
+    width, hidden = coma_config.width, coma_config.hidden
+    actor = ConvNet(len(actor_plane_names(features)), grid, N_ACTIONS, width, hidden)
+    critic = ConvNet(critic_channels(coma_config.variant, features), grid, N_ACTIONS, width,
+                     hidden)
+    value = (ConvNet(value_channels(features), grid, 1, width, hidden)
+             if coma_config.variant == "central_qv" else None)
+    return COMANetworks(actor, critic, value, coma_config, env_config)
+
+
+def save_policy(path: str | os.PathLike[str], networks: COMANetworks,
+                extra: dict[str, Any] | None = None) -> None:
+    """Atomically write the networks and their configs (plus ``extra`` plain data)."""
+    payload = {"coma_config": networks.coma_config.to_dict(),
+               "env_config": config_to_dict(networks.env_config),
+               **networks.state_dicts(), **(extra or {})}
+    save_torch(path, payload, CHECKPOINT_KIND)
+
+
+def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, Any]]:
+    """Rebuild the networks of a policy or training checkpoint.
+
+    Returns:
+        the networks (in eval mode) and the raw file contents (for training state).
+
+    Raises:
+        CheckpointError: the file is missing, corrupt, foreign, or its weights do not fit its
+            own configs.
+    """
+    data = load_torch(path, CHECKPOINT_KIND)
+    try:
+        coma_config = from_dict(data["coma_config"])
+        env_config = config_from_dict(data["env_config"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise CheckpointError(f"checkpoint {str(path)!r} has no valid configs: {error}") \
+            from None
+    networks = build_networks(coma_config, env_config)
+    for name in ("actor", "critic", "value"):
+        module = getattr(networks, name)
+        if module is None:
+            continue
+        try:
+            module.load_state_dict(data[name])
+        except (KeyError, TypeError, RuntimeError) as error:
+            raise CheckpointError(f"checkpoint {str(path)!r}: the {name} weights do not fit "
+                                  f"its configs ({str(error).splitlines()[0][:200]})") from None
+        module.eval()
+    return networks, data
+
+
+def check_transfer(trained: EnvConfig, requested: EnvConfig, path: str = "") -> list[str]:
+    """Check that a policy trained on ``trained`` can run ``requested``.
+
+    Team size, communication range, budget, map resolution, terrain, sensor and reward may
+    differ (the documented transfer); the feature switches and the planning grid may not.
+
+    Returns:
+        human-readable notes of the transferred settings (empty if none differ).
+
+    Raises:
+        CheckpointError: naming the mismatching setting and both values.
+    """
+    where = f"checkpoint {path!r}" if path else "the policy"
+    if trained.features != requested.features:
+        old = dataclasses.asdict(trained.features)
+        new = dataclasses.asdict(requested.features)
+        diffs = [f"features.{k}: trained {old[k]!r}, requested {new[k]!r}"
+                 for k in old if old[k] != new[k]]
+        raise CheckpointError(f"{where} was trained with other observation features: "
+                              + "; ".join(diffs))
+    if trained.world.grid_points != requested.world.grid_points:
+        raise CheckpointError(f"{where} was trained on a {trained.world.grid_points}-waypoint "
+                              f"grid, requested {requested.world.grid_points}")
+    notes = []
+    for section, name in (("team", "n_agents"), ("team", "comm_range"), ("team", "budget"),
+                          ("world", "resolution")):
+        old = getattr(getattr(trained, section), name)
+        new = getattr(getattr(requested, section), name)
+        if old != new:
+            notes.append(f"{section}.{name}: trained {old}, running {new}")
+    return notes
+
+
+def shipped_policy() -> Path:
+    """Path of the policy shipped with the package (4 agents, D = 25 m)."""
+    return Path(str(resources.files("coma") / "checkpoints" / SHIPPED_POLICY))
+
+
+def load_state_into(module: torch.nn.Module, state: Any, what: str, path: str) -> None:
+    """``module.load_state_dict(state)`` with a :class:`CheckpointError` naming the file."""
+    try:
+        module.load_state_dict(state)
+    except (TypeError, RuntimeError, KeyError) as error:
+        raise CheckpointError(f"checkpoint {path!r}: cannot restore {what} "
+                              f"({str(error).splitlines()[0][:200]})") from None

@@ -1,0 +1,151 @@
+"""Hyper-parameters of COMA training, in one dataclass (SPEC §5).
+
+Two presets: ``paper`` (the paper's network size and schedule) and ``cpu`` (the default: a
+narrower network, a shorter exploration schedule and larger learning rates, measured to train
+on two CPU cores; see the README). The mission itself (team, world, features) is an
+:class:`~ipp_toolkit.config.EnvConfig`, kept separately and stored beside this in checkpoints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["VARIANTS", "PRESETS", "COMAConfig", "preset"]
+
+#: The credit-assignment variants of the paper's study (SPEC §5).
+VARIANTS = ("coma", "central_qv", "actor_independent", "decentralised")
+
+
+@dataclass(frozen=True)
+class COMAConfig:
+    """COMA hyper-parameters. Every field is validated at construction.
+
+    Attributes:
+        variant: credit assignment: ``coma`` (counterfactual baseline over the agent's own
+            actions, the critic sees the others' actions), ``central_qv`` (A = Q - V with a
+            second critic for V), ``actor_independent`` (the critic does not see the other
+            agents' actions), ``decentralised`` (the critic sees only the agent's observation).
+        width: channels of each of the three convolutions (paper: 256).
+        hidden: units of the hidden fully connected layer (paper: 256).
+        missions: training missions in total (one mission = one episode of B steps).
+        missions_per_update: missions collected in lock-step per update; with N agents and
+            B steps an update sees ``missions_per_update * N * B`` agent-transitions (paper:
+            50 missions = 3,000 transitions at N = 4, B = 15).
+        minibatch_size: agent-transitions per gradient step (paper: 600).
+        epochs: passes over each update's data (paper: 5).
+        lr_actor: Adam learning rate of the actor (paper: 1e-5).
+        lr_critic: Adam learning rate of the critic(s) (paper: 1e-4).
+        gamma: discount.
+        td_lambda: lambda of the per-episode TD(lambda) targets.
+        target_update_transitions: the target critic is refreshed after this many
+            agent-transitions (paper: 30,000).
+        eps_start: exploration weight of the bounded softmax at the first mission.
+        eps_end: its final value.
+        eps_anneal_missions: missions over which eps falls linearly (paper: 10,000).
+        max_grad_norm: gradient clipping (global L2 norm) of every network.
+        eval_every: updates between greedy evaluations on held-out (``validation``) terrains.
+        eval_missions: missions per evaluation.
+        checkpoint_every: updates between checkpoints (the last one is always written).
+        seed: seed of the run: terrains, sensor noise, network initialisation and sampling.
+    """
+
+    variant: str = "coma"
+    width: int = 64
+    hidden: int = 128
+    missions: int = 20_000
+    missions_per_update: int = 50
+    minibatch_size: int = 600
+    epochs: int = 2
+    lr_actor: float = 2e-4
+    lr_critic: float = 5e-4
+    gamma: float = 0.99
+    td_lambda: float = 0.8
+    target_update_transitions: int = 30_000
+    eps_start: float = 0.5
+    eps_end: float = 0.02
+    eps_anneal_missions: int = 5_000
+    max_grad_norm: float = 10.0
+    eval_every: int = 20
+    eval_missions: int = 50
+    checkpoint_every: int = 10
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            _fail("variant", self.variant, f"choose from {list(VARIANTS)}")
+        for name in ("width", "hidden", "missions", "missions_per_update", "minibatch_size",
+                     "epochs", "target_update_transitions", "eval_every", "eval_missions",
+                     "checkpoint_every"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                _fail(name, value, "must be an integer >= 1")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            _fail("seed", self.seed, "must be a non-negative integer")
+        for name in ("lr_actor", "lr_critic", "max_grad_norm"):
+            value = getattr(self, name)
+            if not _is_number(value) or value <= 0:
+                _fail(name, value, "must be a positive finite number")
+        for name in ("gamma", "td_lambda"):
+            value = getattr(self, name)
+            if not _is_number(value) or not 0 <= value <= 1:
+                _fail(name, value, "must lie in [0, 1]")
+        for name in ("eps_start", "eps_end"):
+            value = getattr(self, name)
+            if not _is_number(value) or not 0 <= value < 1:
+                _fail(name, value, "must lie in [0, 1)")
+        if isinstance(self.eps_anneal_missions, bool) or not isinstance(
+                self.eps_anneal_missions, int) or self.eps_anneal_missions < 0:
+            _fail("eps_anneal_missions", self.eps_anneal_missions,
+                  "must be a non-negative integer")
+
+    def replace(self, **changes: Any) -> COMAConfig:
+        """Copy with some fields changed (validated; unknown names are refused)."""
+        return from_dict({**dataclasses.asdict(self), **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-safe dict of the fields."""
+        return dataclasses.asdict(self)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
+def _fail(name: str, value: Any, why: str) -> None:
+    raise ValueError(f"invalid COMA config: {name} = {value!r}: {why}")
+
+
+def from_dict(values: Mapping[str, Any]) -> COMAConfig:
+    """Build a :class:`COMAConfig` from a mapping; unknown keys are refused by name."""
+    if not isinstance(values, Mapping):
+        raise ValueError(f"invalid COMA config: expected a mapping, got {values!r}")
+    known = {f.name for f in dataclasses.fields(COMAConfig)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"invalid COMA config: unknown key(s) {unknown}; "
+                         f"known keys: {sorted(known)}")
+    return COMAConfig(**values)
+
+
+#: Named starting points; ``cpu`` is the default of :class:`COMAConfig`.
+PRESETS: dict[str, dict[str, Any]] = {
+    "cpu": {},
+    "paper": {
+        "width": 256, "hidden": 256, "missions": 75_000, "missions_per_update": 50,
+        "minibatch_size": 600, "epochs": 5, "lr_actor": 1e-5, "lr_critic": 1e-4,
+        "target_update_transitions": 30_000, "eps_anneal_missions": 10_000,
+        "eval_every": 50,
+    },
+}
+
+
+def preset(name: str, **changes: Any) -> COMAConfig:
+    """The named preset (``cpu`` or ``paper``) with optional field changes."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown COMA preset {name!r}; choose from {sorted(PRESETS)}")
+    return from_dict({**dataclasses.asdict(COMAConfig()), **PRESETS[name], **changes})

@@ -1,0 +1,605 @@
+"""COMA: counterfactual multi-agent policy gradients for the UAV team, top to bottom.
+
+Read in order: the rollout (missions in lock-step, a shared actor sampling from the bounded
+softmax), the critic update (TD(lambda) targets per episode from a target critic refreshed
+every ``target_update_transitions``), the advantage (``coma.advantages``), the actor update,
+then logging, evaluation and checkpoints. Hyper-parameters live in :class:`COMAConfig`; the
+mission in an :class:`EnvConfig`. ``train`` is the Python entry point, ``main`` the
+``ipp-train coma`` command.
+
+Reproducibility: mission k of a run always has the same terrain and sensor noise
+(``ipp_toolkit.seeding``); action sampling and mini-batch shuffling draw from one torch
+Generator whose state is checkpointed, so an interrupted run resumed with ``resume=True``
+continues exactly as if it had not stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import csv
+import io
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from ipp_toolkit.config import EnvConfig, config_to_dict, load_config
+from ipp_toolkit.features import actor_observations
+from ipp_toolkit.io import CheckpointError, atomic_write, write_json
+from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
+from ipp_toolkit.team import N_ACTIONS
+
+from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
+from .checkpoints import COMANetworks, build_networks, load_policy, load_state_into, save_policy
+from .config import PRESETS, VARIANTS, COMAConfig, preset
+from .inputs import critic_input, value_input
+from .networks import bounded_softmax, epsilon_at
+
+__all__ = ["TrainingDiverged", "TrainResult", "Rollout", "collect_rollout", "greedy_actions",
+           "evaluate_greedy", "train", "main", "training_env_config"]
+
+
+class TrainingDiverged(RuntimeError):
+    """A loss became NaN or infinite; the last good checkpoint is kept."""
+
+
+# --------------------------------------------------------------------------------------------
+# Rollout
+
+
+@dataclass
+class Rollout:
+    """One update's data: E missions of T steps with N agents, in lock-step.
+
+    Attributes:
+        actor_obs: (E, N, T, C_actor, G, G) float32.
+        critic_obs: (E, N, T, C_critic, G, G) float32.
+        value_obs: (E, N, T, C_value, G, G) float32, or None unless ``central_qv``.
+        masks: (E, N, T, 6) bool valid actions.
+        actions: (E, N, T) int64.
+        rewards: (E, T) float32 team rewards.
+        returns: (E,) undiscounted return of each mission.
+        final_entropy: (E,) entropy metric at the end of each mission.
+    """
+
+    actor_obs: torch.Tensor
+    critic_obs: torch.Tensor
+    value_obs: torch.Tensor | None
+    masks: torch.Tensor
+    actions: torch.Tensor
+    rewards: torch.Tensor
+    returns: np.ndarray
+    final_entropy: np.ndarray
+
+    @property
+    def transitions(self) -> int:
+        """Agent-transitions in the rollout: E * N * T."""
+        return int(np.prod(self.actions.shape))
+
+
+def _stack_time(frames: list[np.ndarray]) -> torch.Tensor:
+    """T frames of (E, N, ...) -> (E, N, T, ...)."""
+    return torch.from_numpy(np.stack(frames, axis=2))
+
+
+def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: MissionGeometry,
+                    seed: int, first_mission: int, n_missions: int, eps: float,
+                    generator: torch.Generator, namespace: str = "train") -> Rollout:
+    """Play ``n_missions`` missions in lock-step with the bounded-softmax policy.
+
+    Missions ``first_mission ... first_mission + n_missions - 1`` of run ``seed`` are used, so
+    consecutive updates see fresh terrains. The actor runs once per step for all agents of all
+    missions; the critic inputs are built with the joint action just sampled.
+    """
+    variant = networks.coma_config.variant
+    features = env_config.features
+    states = [reset_mission(env_config, seed, first_mission + e, namespace, geometry)
+              for e in range(n_missions)]
+    actor_frames, critic_frames, value_frames, mask_frames, action_frames, reward_frames = \
+        [], [], [], [], [], []
+    returns = np.zeros(n_missions)
+    for _ in range(env_config.team.budget):
+        obs = np.stack([actor_observations(s, features) for s in states])  # (E, N, C, G, G)
+        masks = np.stack([s.masks() for s in states]).astype(bool)  # (E, N, 6)
+        with torch.no_grad():
+            logits = networks.actor(torch.from_numpy(obs).flatten(0, 1))
+            probs = bounded_softmax(logits, torch.from_numpy(masks).flatten(0, 1), eps)
+        actions = torch.multinomial(probs, 1, generator=generator).view(n_missions, -1).numpy()
+        critic_frames.append(np.stack([critic_input(s, features, variant, actions[e], obs[e])
+                                       for e, s in enumerate(states)]))
+        if networks.value is not None:
+            value_frames.append(np.stack([value_input(s, features, obs[e])
+                                          for e, s in enumerate(states)]))
+        rewards = np.array([step_mission(s, actions[e]) for e, s in enumerate(states)])
+        returns += rewards
+        actor_frames.append(obs)
+        mask_frames.append(masks)
+        action_frames.append(actions)
+        reward_frames.append(rewards)
+    return Rollout(
+        actor_obs=_stack_time(actor_frames),
+        critic_obs=_stack_time(critic_frames),
+        value_obs=_stack_time(value_frames) if value_frames else None,
+        masks=_stack_time(mask_frames),
+        actions=_stack_time(action_frames).long(),
+        rewards=torch.from_numpy(np.stack(reward_frames, axis=1)).float(),
+        returns=returns,
+        final_entropy=np.array([s.history[-1].entropy for s in states]),
+    )
+
+
+def greedy_actions(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """Deployment policy: eps = 0 and the most probable valid action.
+
+    Args:
+        actor: the actor network.
+        observations: (B, C, G, G) float32 actor planes.
+        masks: (B, 6) valid actions.
+
+    Returns:
+        (B,) int64 actions, always valid.
+    """
+    with torch.no_grad():
+        logits = actor(torch.as_tensor(observations, dtype=torch.float32))
+    logits = logits.masked_fill(~torch.as_tensor(masks, dtype=torch.bool), -math.inf)
+    return logits.argmax(dim=-1).numpy()
+
+
+def evaluate_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometry,
+                    seed: int, n_missions: int, namespace: str = "validation"
+                    ) -> dict[str, float]:
+    """Mean entropy and F1 of the greedy policy on held-out missions, after every step.
+
+    Returns:
+        ``entropy_s`` and ``f1_s`` for s = 0..B, and ``return``: the mean team return.
+    """
+    states = [reset_mission(env_config, seed, m, namespace, geometry) for m in range(n_missions)]
+    total_return = 0.0
+    features = env_config.features
+    for _ in range(env_config.team.budget):
+        obs = np.stack([actor_observations(s, features) for s in states])
+        masks = np.stack([s.masks() for s in states])
+        actions = greedy_actions(actor, obs.reshape(-1, *obs.shape[2:]),
+                                 masks.reshape(-1, N_ACTIONS)).reshape(n_missions, -1)
+        total_return += sum(step_mission(s, actions[e]) for e, s in enumerate(states))
+    result = {"return": total_return / n_missions}
+    for step in range(env_config.team.budget + 1):
+        result[f"entropy_{step}"] = float(np.mean([s.history[step].entropy for s in states]))
+        result[f"f1_{step}"] = float(np.mean([s.history[step].f1 for s in states]))
+    return result
+
+
+# --------------------------------------------------------------------------------------------
+# One update: critic(s) on TD(lambda) targets, then the actor on the advantage
+
+
+def _clip_step(optimiser: torch.optim.Optimizer, module: nn.Module, loss: torch.Tensor,
+               max_norm: float) -> float:
+    optimiser.zero_grad(set_to_none=True)
+    loss.backward()
+    norm = nn.utils.clip_grad_norm_(module.parameters(), max_norm)
+    optimiser.step()
+    return float(norm)
+
+
+def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[str, Any],
+           rollout: Rollout, eps: float, generator: torch.Generator) -> dict[str, float]:
+    """One COMA update on a rollout; returns the mean losses and diagnostics.
+
+    Raises:
+        TrainingDiverged: a loss is not finite (the networks may be damaged: do not save).
+    """
+    cfg = networks.coma_config
+    e, n, t = rollout.actions.shape
+    # TD(lambda) targets per agent and episode from the target critic.
+    with torch.no_grad():
+        q_target = target_critic(rollout.critic_obs.flatten(0, 2)).view(e, n, t, N_ACTIONS)
+        q_target_taken = q_target.gather(-1, rollout.actions.unsqueeze(-1)).squeeze(-1)
+        next_values = torch.roll(q_target_taken, shifts=-1, dims=-1)  # Q'(s_{t+1}, u_{t+1})
+        terminal = torch.zeros(e, n, t, dtype=torch.bool)
+        terminal[..., -1] = True
+        rewards = rollout.rewards.unsqueeze(1).expand(e, n, t)
+        targets = td_lambda_targets(rewards, next_values, terminal, cfg.gamma, cfg.td_lambda)
+
+    actor_obs = rollout.actor_obs.flatten(0, 2)
+    critic_obs = rollout.critic_obs.flatten(0, 2)
+    value_obs = rollout.value_obs.flatten(0, 2) if rollout.value_obs is not None else None
+    masks = rollout.masks.flatten(0, 2)
+    actions = rollout.actions.flatten()
+    targets = targets.flatten()
+    samples = len(actions)
+    logs: dict[str, list[float]] = {k: [] for k in (
+        "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
+        "critic_grad_norm", "actor_grad_norm")}
+    for _ in range(cfg.epochs):
+        order = torch.randperm(samples, generator=generator)
+        for start in range(0, samples, cfg.minibatch_size):
+            batch = order[start:start + cfg.minibatch_size]
+            q = networks.critic(critic_obs[batch])
+            q_taken = q.gather(-1, actions[batch].unsqueeze(-1)).squeeze(-1)
+            critic_loss = torch.mean((q_taken - targets[batch]) ** 2)
+            _check_finite("critic loss", critic_loss)
+            logs["critic_grad_norm"].append(_clip_step(optimisers["critic"], networks.critic,
+                                                       critic_loss, cfg.max_grad_norm))
+            logs["critic_loss"].append(critic_loss.item())
+            if networks.value is not None:
+                v = networks.value(value_obs[batch]).squeeze(-1)
+                value_loss = torch.mean((v - targets[batch]) ** 2)
+                _check_finite("value loss", value_loss)
+                _clip_step(optimisers["value"], networks.value, value_loss, cfg.max_grad_norm)
+                logs["value_loss"].append(value_loss.item())
+
+            probs = bounded_softmax(networks.actor(actor_obs[batch]), masks[batch], eps)
+            # The critic's pre-step Q serves the actor: one forward pass fewer per mini-batch.
+            q = q.detach()
+            with torch.no_grad():
+                if cfg.variant == "central_qv":
+                    v = networks.value(value_obs[batch]).squeeze(-1)
+                    advantage = central_value_advantage(q, actions[batch], v)
+                else:
+                    advantage = counterfactual_advantage(q, actions[batch], probs.detach(),
+                                                         masks[batch])
+            taken = probs.gather(-1, actions[batch].unsqueeze(-1)).squeeze(-1)
+            actor_loss = -torch.mean(torch.log(taken.clamp_min(1e-12)) * advantage)
+            _check_finite("actor loss", actor_loss)
+            logs["actor_grad_norm"].append(_clip_step(optimisers["actor"], networks.actor,
+                                                      actor_loss, cfg.max_grad_norm))
+            logs["actor_loss"].append(actor_loss.item())
+            logs["advantage_std"].append(float(advantage.std()) if len(batch) > 1 else 0.0)
+            with torch.no_grad():
+                p = probs.clamp_min(1e-12)
+                logs["policy_entropy"].append(float(-(probs * torch.log(p)).sum(-1).mean()))
+    return {k: float(np.mean(v)) for k, v in logs.items() if v}
+
+
+def _check_finite(what: str, value: torch.Tensor) -> None:
+    if not torch.isfinite(value):
+        raise TrainingDiverged(f"{what} is {value.item()}")
+
+
+# --------------------------------------------------------------------------------------------
+# Training run: state, checkpoints, logs
+
+
+CSV_COLUMNS = ["update", "missions", "transitions", "eps", "return_mean", "final_entropy_mean",
+               "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
+               "critic_grad_norm", "actor_grad_norm", "transitions_per_s", "wall_s",
+               "eval_return", "eval_entropy_final", "eval_f1_final"]
+
+
+@dataclass
+class TrainResult:
+    """Where a run left its files and how it ended.
+
+    Attributes:
+        out_dir: the run folder.
+        best_policy: path of the policy with the lowest validation entropy (``best.pt``).
+        last_checkpoint: path of the resumable training checkpoint (``last.pt``).
+        updates: updates done in total.
+        missions: training missions played in total.
+        best_entropy: validation final entropy of the best policy.
+        history: one dict per update (the CSV rows).
+    """
+
+    out_dir: Path
+    best_policy: Path
+    last_checkpoint: Path
+    updates: int
+    missions: int
+    best_entropy: float
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+
+def training_env_config(env_config: EnvConfig, resolution: float | None) -> EnvConfig:
+    """The mission config used for training: ``env_config`` at map resolution ``resolution``."""
+    if resolution is None:
+        return env_config
+    return env_config.replace(world={"resolution": resolution})
+
+
+def _make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
+    cfg = networks.coma_config
+    optimisers = {"actor": torch.optim.Adam(networks.actor.parameters(), lr=cfg.lr_actor),
+                  "critic": torch.optim.Adam(networks.critic.parameters(), lr=cfg.lr_critic)}
+    if networks.value is not None:
+        optimisers["value"] = torch.optim.Adam(networks.value.parameters(), lr=cfg.lr_critic)
+    return optimisers
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, extrasaction="ignore")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: ("" if row.get(k) is None else row.get(k)) for k in CSV_COLUMNS})
+    data = buffer.getvalue().encode("utf-8")
+    atomic_write(path, lambda handle: handle.write(data))
+
+
+def _comparable(config: COMAConfig) -> dict[str, Any]:
+    """Fields that must match to resume a run (the total length may be extended)."""
+    values = config.to_dict()
+    values.pop("missions")
+    return values
+
+
+def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
+          resume: bool = False, progress: bool = True, tensorboard: bool = True,
+          max_updates: int | None = None) -> TrainResult:
+    """Train COMA (or a variant) and write its run folder.
+
+    The folder gets ``config.json`` (both configs), ``progress.csv`` (one row per update),
+    ``tb/`` (TensorBoard), ``last.pt`` (resumable training checkpoint, written every
+    ``checkpoint_every`` updates and at the end) and ``best.pt`` (the policy with the lowest
+    validation entropy so far).
+
+    Args:
+        coma_config: hyper-parameters.
+        env_config: the training missions (use a coarse ``world.resolution`` for speed).
+        out_dir: the run folder. A folder with a checkpoint is only continued with ``resume``.
+        resume: continue from ``out_dir/last.pt``; the configs must match (``missions`` may
+            grow).
+        progress: show a tqdm bar.
+        tensorboard: write TensorBoard event files.
+        max_updates: stop after this many updates in this call (for tests and time slices).
+
+    Raises:
+        TrainingDiverged: a loss became non-finite; ``last.pt`` and ``best.pt`` keep the last
+            good state.
+        CheckpointError: a checkpoint to resume is corrupt or belongs to another run.
+        FileExistsError: ``out_dir`` holds a run and ``resume`` is false.
+    """
+    torch.set_num_threads(1)
+    out = Path(out_dir)
+    last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
+    geometry = MissionGeometry(env_config)
+    eval_geometry = geometry
+
+    if last_path.exists() and not resume:
+        raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
+                              "(--resume) to continue it, or choose another folder")
+    generator = torch.Generator().manual_seed(coma_config.seed)
+    history: list[dict[str, Any]] = []
+    if resume and last_path.exists():
+        networks, data = load_policy(last_path)
+        if _comparable(networks.coma_config) != _comparable(coma_config):
+            raise CheckpointError(f"checkpoint {str(last_path)!r} belongs to a run with other "
+                                  "COMA settings; start a new folder instead")
+        if config_to_dict(networks.env_config) != config_to_dict(env_config):
+            raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
+                                  "mission config; start a new folder instead")
+        networks.coma_config = coma_config
+        for module in (networks.actor, networks.critic, networks.value):
+            if module is not None:
+                module.train()
+        target_critic = copy.deepcopy(networks.critic)
+        load_state_into(target_critic, data["target_critic"], "the target critic",
+                        str(last_path))
+        optimisers = _make_optimisers(networks)
+        for name, optimiser in optimisers.items():
+            try:
+                optimiser.load_state_dict(data["optimisers"][name])
+            except (KeyError, ValueError) as error:
+                raise CheckpointError(f"checkpoint {str(last_path)!r}: cannot restore the "
+                                      f"{name} optimiser ({error})") from None
+        generator.set_state(data["generator"])
+        state = dict(data["progress"])
+        if csv_path.exists():
+            with open(csv_path, newline="") as handle:
+                history = [{k: _parse(v) for k, v in row.items()}
+                           for row in csv.DictReader(handle)]
+            history = [row for row in history if row["update"] <= state["update"]]
+    else:
+        torch.manual_seed(coma_config.seed)
+        networks = build_networks(coma_config, env_config)
+        target_critic = copy.deepcopy(networks.critic)
+        optimisers = _make_optimisers(networks)
+        state = {"update": 0, "missions": 0, "transitions": 0, "since_target": 0,
+                 "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
+        write_json(out / "config.json", {"coma": coma_config.to_dict(),
+                                         "env": config_to_dict(env_config)})
+
+    def save_checkpoint() -> None:
+        save_policy(last_path, networks, {
+            "target_critic": target_critic.state_dict(),
+            "optimisers": {k: o.state_dict() for k, o in optimisers.items()},
+            "generator": generator.get_state(),
+            "progress": dict(state),
+        })
+        _write_csv(csv_path, history)
+
+    writer = None
+    if tensorboard:
+        from torch.utils.tensorboard import SummaryWriter
+
+        writer = SummaryWriter(str(out / "tb"), purge_step=state["update"] + 1)
+
+    per_update = coma_config.missions_per_update
+    total_updates = math.ceil(coma_config.missions / per_update)
+    bar = tqdm(total=total_updates, initial=state["update"], disable=not progress,
+               desc=f"COMA ({coma_config.variant})", unit="update")
+    updates_this_call = 0
+    try:
+        while state["update"] < total_updates and (max_updates is None
+                                                   or updates_this_call < max_updates):
+            tick = time.perf_counter()
+            eps = epsilon_at(state["missions"], coma_config.eps_start, coma_config.eps_end,
+                             coma_config.eps_anneal_missions)
+            if state["since_target"] >= coma_config.target_update_transitions:
+                target_critic.load_state_dict(networks.critic.state_dict())
+                state["since_target"] = 0
+            rollout = collect_rollout(networks, env_config, geometry, coma_config.seed,
+                                      state["missions"], per_update, eps, generator)
+            try:
+                losses = update(networks, target_critic, optimisers, rollout, eps, generator)
+            except TrainingDiverged as error:
+                raise TrainingDiverged(
+                    f"{error} at update {state['update'] + 1}; training stopped. The last "
+                    f"good checkpoint is kept: {str(last_path)!r} (update "
+                    f"{_saved_update(last_path)}); lower the learning rates or check the "
+                    "rewards") from None
+            elapsed = time.perf_counter() - tick
+            state["update"] += 1
+            state["missions"] += per_update
+            state["transitions"] += rollout.transitions
+            state["since_target"] += rollout.transitions
+            state["wall_s"] += elapsed
+            row: dict[str, Any] = {
+                "update": state["update"], "missions": state["missions"],
+                "transitions": state["transitions"], "eps": eps,
+                "return_mean": float(rollout.returns.mean()),
+                "final_entropy_mean": float(rollout.final_entropy.mean()),
+                **losses, "transitions_per_s": rollout.transitions / elapsed,
+                "wall_s": state["wall_s"]}
+            last_update = state["update"] == total_updates
+            if state["update"] % coma_config.eval_every == 0 or last_update:
+                networks.actor.eval()
+                scores = evaluate_greedy(networks.actor, env_config, eval_geometry,
+                                         coma_config.seed, coma_config.eval_missions)
+                networks.actor.train()
+                budget = env_config.team.budget
+                row.update(eval_return=scores["return"],
+                           eval_entropy_final=scores[f"entropy_{budget}"],
+                           eval_f1_final=scores[f"f1_{budget}"])
+                if scores[f"entropy_{budget}"] < state["best_entropy"]:
+                    state["best_entropy"] = scores[f"entropy_{budget}"]
+                    state["best_update"] = state["update"]
+                    save_policy(best_path, networks, {"validation": scores,
+                                                      "update": state["update"]})
+            history.append(row)
+            if writer is not None:
+                for key, value in row.items():
+                    if key != "update" and value is not None:
+                        writer.add_scalar(f"coma/{key}", value, state["update"])
+            updates_this_call += 1
+            if state["update"] % coma_config.checkpoint_every == 0 or last_update:
+                save_checkpoint()
+            bar.update(1)
+            bar.set_postfix(ret=f"{row['return_mean']:.2f}", eps=f"{eps:.2f}",
+                            val_H=f"{state['best_entropy']:.3f}")
+        if updates_this_call and (state["update"] % coma_config.checkpoint_every):
+            save_checkpoint()
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.close()
+    return TrainResult(out, best_path, last_path, state["update"], state["missions"],
+                       state["best_entropy"], history)
+
+
+def _saved_update(path: Path) -> str:
+    if not path.exists():
+        return "none yet"
+    try:
+        _, data = load_policy(path)
+        return str(data["progress"]["update"])
+    except (CheckpointError, KeyError):
+        return "unreadable"
+
+
+def _parse(text: str) -> Any:
+    if text == "":
+        return None
+    number = float(text)
+    return int(number) if number.is_integer() and "." not in text and "e" not in text \
+        else number
+
+
+# --------------------------------------------------------------------------------------------
+# Command line: ipp-train coma
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ipp-train coma",
+        description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.")
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
+                        help="hyper-parameter preset (default: cpu)")
+    parser.add_argument("--variant", choices=VARIANTS, help="credit-assignment variant")
+    parser.add_argument("--config", help="YAML mission config (world, team, features, ...)")
+    parser.add_argument("--seed", type=int, help="run seed")
+    parser.add_argument("--out", required=True, help="run folder")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out")
+    parser.add_argument("--missions", type=int, help="training missions in total")
+    parser.add_argument("--width", type=int, help="convolution channels")
+    parser.add_argument("--agents", type=int, help="team size (default: from --config, 4)")
+    parser.add_argument("--comm", type=float, help="communication range in metres")
+    parser.add_argument("--resolution", type=float, default=0.5,
+                        help="map resolution for training in metres (default 0.5; evaluation "
+                             "runs at the mission config's own resolution)")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="any COMAConfig field, e.g. --set lr_actor=1e-4 (repeatable)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return parser
+
+
+def _coerce(text: str) -> Any:
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
+    """The configs a parsed ``ipp-train coma`` command asks for (ValueError on bad input)."""
+    changes: dict[str, Any] = {}
+    for item in args.set:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
+        changes[name.strip()] = _coerce(value.strip())
+    for name in ("variant", "seed", "missions", "width"):
+        if getattr(args, name) is not None:
+            changes[name] = getattr(args, name)
+    coma_config = preset(args.preset, **changes)
+    env_config = load_config(args.config) if args.config else EnvConfig()
+    team: dict[str, Any] = {}
+    if args.agents is not None:
+        team["n_agents"] = args.agents
+        team["start"] = "fixed" if args.agents in (2, 4, 8) else "random"
+    if args.comm is not None:
+        team["comm_range"] = args.comm
+    if team:
+        env_config = env_config.replace(team=team)
+    return coma_config, training_env_config(env_config, args.resolution)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``ipp-train coma``: returns 0 on success, 1 on divergence, 2 on bad input."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        coma_config, env_config = configs_from_args(args)
+    except ValueError as error:
+        print(f"ipp-train coma: error: {error}", file=sys.stderr)
+        return 2
+    try:
+        result = train(coma_config, env_config, args.out, resume=args.resume,
+                       progress=not args.no_progress)
+    except (FileExistsError, CheckpointError) as error:
+        print(f"ipp-train coma: error: {error}", file=sys.stderr)
+        return 2
+    except TrainingDiverged as error:
+        print(f"ipp-train coma: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"\nipp-train coma: interrupted; continue with --resume --out {args.out} "
+              "(from the last checkpoint)", file=sys.stderr)
+        return 130
+    print(f"trained {result.updates} updates ({result.missions} missions); best validation "
+          f"entropy {result.best_entropy:.3f}; policy: {result.best_policy}")
+    return 0
+
+
+

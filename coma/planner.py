@@ -1,0 +1,56 @@
+"""The ``coma`` planner: a trained actor, greedy and decentralised, behind the planner API.
+
+Each UAV decides from its own observation planes (``AgentView.observation``) and mask; one
+batched forward pass serves the whole team. Loading refuses a corrupt or foreign file and a
+policy trained on other observation features; a different team size, range, budget or map
+resolution is the documented transfer of the paper's robustness study (noted once per
+configuration in :attr:`COMAPlanner.transfer_notes`).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import torch
+
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.planners import AgentView, Planner
+
+from .checkpoints import check_transfer, load_policy, shipped_policy
+from .learner import greedy_actions
+
+__all__ = ["COMAPlanner"]
+
+
+class COMAPlanner(Planner):
+    """Greedy (eps = 0, argmax over valid actions) COMA actor.
+
+    Args:
+        checkpoint: a policy file (``best.pt`` / ``last.pt`` of ``ipp-train coma``); default:
+            the policy shipped with the package (4 agents, D = 25 m).
+    """
+
+    name = "coma"
+    needs_observations = True
+
+    def __init__(self, checkpoint: str | os.PathLike[str] | None = None):
+        torch.set_num_threads(1)
+        path = shipped_policy() if checkpoint is None else checkpoint
+        if checkpoint is None and not os.path.exists(path):
+            raise FileNotFoundError(f"no shipped COMA policy at {str(path)!r}; train one with "
+                                    "`ipp-train coma --out RUN` and pass coma=RUN/best.pt")
+        self.checkpoint = str(path)
+        networks, _ = load_policy(path)
+        self.actor = networks.actor
+        self.trained_config = networks.env_config
+        self.variant = networks.coma_config.variant
+        self.transfer_notes: list[str] = []
+
+    def reset(self, config: EnvConfig, seed: int) -> None:
+        self.transfer_notes = check_transfer(self.trained_config, config, self.checkpoint)
+
+    def act(self, views: list[AgentView]) -> np.ndarray:
+        observations = np.stack([view.observation for view in views])
+        masks = np.stack([view.mask for view in views]).astype(bool)
+        return greedy_actions(self.actor, observations, masks)

@@ -1,0 +1,90 @@
+"""Files that must never be half-written or trusted blindly.
+
+Atomic writes (temporary file in the same folder, then ``os.replace``) for results and
+checkpoints, and the one loader of saved weights: ``torch.load(weights_only=True)`` with a
+format tag, so a corrupt, truncated or foreign file is refused with an error naming it.
+
+torch is imported lazily: the simulator itself never needs it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import uuid
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+__all__ = ["CheckpointError", "atomic_write", "write_json", "save_torch", "load_torch"]
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is missing, corrupt, foreign or does not fit what is asked of it."""
+
+
+def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None]) -> None:
+    """Write ``path`` through a temporary file in the same folder and ``os.replace``.
+
+    Args:
+        path: the destination; its folder is created.
+        write: called with a binary file handle open for writing.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "xb") as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def write_json(path: str | os.PathLike[str], value: Any) -> None:
+    """Atomically write ``value`` as indented JSON."""
+    data = json.dumps(value, indent=1).encode("utf-8")
+    atomic_write(path, lambda handle: handle.write(data))
+
+
+def save_torch(path: str | os.PathLike[str], payload: Mapping[str, Any], kind: str) -> None:
+    """Atomically save plain data (tensors, state dicts, numbers, strings) with a format tag.
+
+    Args:
+        path: destination file.
+        payload: only types that ``torch.load(weights_only=True)`` accepts.
+        kind: format tag checked by :func:`load_torch` (e.g. ``"ipp-toolkit/coma"``).
+    """
+    import torch
+
+    data = {"format": kind, **payload}
+    atomic_write(path, lambda handle: torch.save(data, handle))
+
+
+def load_torch(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
+    """Load a file written by :func:`save_torch` without unpickling code.
+
+    Raises:
+        CheckpointError: missing, unreadable, corrupt, or saved with another format tag.
+    """
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint {str(path)!r} does not exist")
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as error:  # torch raises many types for corrupt or foreign files
+        raise CheckpointError(f"checkpoint {str(path)!r} is corrupt or not a plain-weights file "
+                              f"({type(error).__name__}: {str(error).splitlines()[0][:200]})") \
+            from None
+    if not isinstance(data, dict) or data.get("format") != kind:
+        found = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise CheckpointError(f"checkpoint {str(path)!r} is not an {kind!r} file "
+                              f"(format tag: {found!r})")
+    return data

@@ -1,0 +1,303 @@
+"""COMA: targets, advantages, policy, training runs, checkpoints and the planner."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
+from coma.checkpoints import check_transfer, load_policy
+from coma.config import VARIANTS, COMAConfig, preset
+from coma.learner import TrainingDiverged, collect_rollout, train
+from coma.networks import bounded_softmax, epsilon_at
+from coma.planner import COMAPlanner
+from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.mission import MissionGeometry
+from reports.cli import train_main
+from tests.conftest import small_config
+
+# ---------------------------------------------------------------------------- TD(lambda)
+
+
+def test_td_lambda_matches_hand_values_per_episode():
+    # r = 1 everywhere, Q' = 0, two episodes of 4 steps side by side in one row.
+    rewards = torch.ones(1, 8)
+    terminal = torch.tensor([[False, False, False, True] * 2])
+    targets = td_lambda_targets(rewards, torch.zeros(1, 8), terminal, 0.99, 0.8)
+    expected = [2.916, 2.419, 1.792, 1.0]
+    assert torch.allclose(targets[0], torch.tensor(expected * 2), atol=1e-3)
+
+
+def _brute_force_lambda_return(rewards, next_values, gamma, lam):
+    """Forward view: (1 - lam) sum_n lam^(n-1) G^(n) + lam^(T-t-1) G^MC, one episode."""
+    length = len(rewards)
+    out = []
+    for t in range(length):
+        horizon = length - t
+        total = 0.0
+        for n in range(1, horizon):
+            n_step = sum(gamma ** k * rewards[t + k] for k in range(n))
+            n_step += gamma ** n * next_values[t + n - 1]  # Q'(s_{t+n}, u_{t+n})
+            total += (1 - lam) * lam ** (n - 1) * n_step
+        monte_carlo = sum(gamma ** k * rewards[t + k] for k in range(horizon))
+        out.append(total + lam ** (horizon - 1) * monte_carlo)
+    return out
+
+
+@pytest.mark.parametrize("lam", [0.0, 0.8, 1.0])
+def test_td_lambda_equals_forward_view(lam):
+    rng = np.random.default_rng(3)
+    rewards = rng.normal(size=6)
+    next_values = rng.normal(size=6)
+    terminal = torch.zeros(6, dtype=torch.bool)
+    terminal[-1] = True
+    got = td_lambda_targets(torch.tensor(rewards), torch.tensor(next_values), terminal, 0.9, lam)
+    want = _brute_force_lambda_return(rewards, next_values, 0.9, lam)
+    assert np.allclose(got.numpy(), want)
+
+
+def test_td_lambda_never_bootstraps_across_episodes():
+    rewards = torch.tensor([[0.0, 2.0, 5.0, 7.0]])
+    huge = torch.tensor([[1.0, 1e6, 1.0, 1e6]])  # the values after each episode's end
+    terminal = torch.tensor([[False, True, False, True]])
+    targets = td_lambda_targets(rewards, huge, terminal, 1.0, 0.5)
+    assert targets[0, 1] == 2.0 and targets[0, 3] == 7.0
+    assert targets[0, 0] == pytest.approx(0.0 + 0.5 * 1.0 + 0.5 * 2.0)
+
+
+def test_td_lambda_rejects_mismatched_shapes():
+    with pytest.raises(ValueError, match="same shape"):
+        td_lambda_targets(torch.zeros(2, 3), torch.zeros(2, 4), torch.zeros(2, 3).bool(),
+                          0.9, 0.8)
+
+
+# ---------------------------------------------------------------------------- advantages
+
+
+def test_counterfactual_advantage_against_brute_force_sum():
+    rng = np.random.default_rng(0)
+    q = rng.normal(size=(5, 6))
+    mask = rng.random((5, 6)) < 0.7
+    mask[:, 2] = True
+    logits = torch.tensor(rng.normal(size=(5, 6)))
+    policy = bounded_softmax(logits, torch.tensor(mask), 0.3).numpy()
+    actions = np.array([np.flatnonzero(row)[0] for row in mask])
+    got = counterfactual_advantage(torch.tensor(q), torch.tensor(actions), torch.tensor(policy),
+                                   torch.tensor(mask)).numpy()
+    for b in range(5):
+        baseline = sum(policy[b, a] * q[b, a] for a in range(6) if mask[b, a])
+        assert got[b] == pytest.approx(q[b, actions[b]] - baseline)
+
+
+def test_counterfactual_advantage_ignores_probability_on_masked_actions():
+    q = torch.tensor([[1.0, 100.0, 3.0]])
+    policy = torch.tensor([[0.25, 0.5, 0.25]])  # gives weight to a masked action
+    mask = torch.tensor([[True, False, True]])
+    advantage = counterfactual_advantage(q, torch.tensor([0]), policy, mask)
+    assert advantage.item() == pytest.approx(1.0 - 2.0)
+
+
+def test_central_value_advantage():
+    q = torch.tensor([[1.0, 4.0], [2.0, 0.0]])
+    got = central_value_advantage(q, torch.tensor([1, 0]), torch.tensor([3.0, 5.0]))
+    assert torch.equal(got, torch.tensor([1.0, -3.0]))
+
+
+# ---------------------------------------------------------------------------- policy
+
+
+def test_bounded_softmax_floor_mask_and_normalisation():
+    logits = torch.tensor([[50.0, 0.0, 0.0, 0.0, 0.0, 0.0]])
+    mask = torch.tensor([[1, 1, 0, 1, 1, 1]])
+    probs = bounded_softmax(logits, mask, 0.5)
+    assert probs[0, 2] == 0
+    assert probs.sum().item() == pytest.approx(1.0)
+    # (1 - eps) on action 0 plus eps/6 everywhere, renormalised over the 5 valid actions.
+    assert probs[0, 1].item() == pytest.approx((0.5 / 6) / (1 - 0.5 / 6))
+    greedy = bounded_softmax(logits, mask, 0.0)
+    assert greedy[0, 0].item() == pytest.approx(1.0)
+
+
+def test_epsilon_schedule_paper_values():
+    assert epsilon_at(0, 0.5, 0.02, 10_000) == 0.5
+    assert epsilon_at(5_000, 0.5, 0.02, 10_000) == pytest.approx(0.26)
+    assert epsilon_at(10_000, 0.5, 0.02, 10_000) == 0.02
+    assert epsilon_at(70_000, 0.5, 0.02, 10_000) == 0.02
+
+
+def test_rollout_never_samples_masked_actions():
+    env = small_config(n_agents=4)
+    config = tiny_coma()
+    from coma.checkpoints import build_networks
+
+    torch.manual_seed(0)
+    networks = build_networks(config, env)
+    with torch.no_grad():  # a policy that wants "up" and "north" (masked at the start) badly
+        networks.actor.head[-1].bias.copy_(torch.tensor([30.0, 30.0, 0, 0, 0, 0]))
+    rollout = collect_rollout(networks, env, MissionGeometry(env), 0, 0, 3, 0.5,
+                              torch.Generator().manual_seed(0))
+    taken = rollout.masks.gather(-1, rollout.actions.unsqueeze(-1))
+    assert taken.all()
+    assert rollout.actor_obs.shape[:3] == (3, 4, env.team.budget)
+    assert rollout.transitions == 3 * 4 * env.team.budget
+
+
+# ---------------------------------------------------------------------------- config
+
+
+def test_config_validation_names_field_and_value():
+    with pytest.raises(ValueError, match=r"variant = 'comma'"):
+        COMAConfig(variant="comma")
+    with pytest.raises(ValueError, match=r"gamma = 1.5"):
+        COMAConfig(gamma=1.5)
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['lr'\]"):
+        COMAConfig().replace(lr=1.0)
+    assert preset("paper").width == 256 and preset("paper").lr_actor == 1e-5
+    with pytest.raises(ValueError, match="unknown COMA preset"):
+        preset("gpu")
+
+
+# ---------------------------------------------------------------------------- training
+
+
+def tiny_coma(**changes) -> COMAConfig:
+    values = dict(width=8, hidden=16, missions=4, missions_per_update=2, minibatch_size=40,
+                  epochs=1, eval_every=1, eval_missions=2, checkpoint_every=1,
+                  target_update_transitions=100)
+    values.update(changes)
+    return COMAConfig(**values)
+
+
+def tiny_env(n_agents: int = 2):
+    return small_config(n_agents=n_agents, resolution=1.0, team={"budget": 4})
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_each_variant_trains_and_its_policy_plays(variant, tmp_path):
+    result = train(tiny_coma(variant=variant), tiny_env(), tmp_path, progress=False,
+                   tensorboard=False)
+    assert result.updates == 2 and result.missions == 4
+    assert math.isfinite(result.best_entropy)
+    assert (tmp_path / "progress.csv").read_text().count("\n") == 3
+    networks, data = load_policy(result.best_policy)
+    assert networks.coma_config.variant == variant
+    assert (networks.value is not None) == (variant == "central_qv")
+    planner = COMAPlanner(result.best_policy)
+    outcome = run_mission(tiny_env(), planner, seed=0, mission=0)
+    assert len(outcome["rows"]) == tiny_env().team.budget + 1
+
+
+def test_tensorboard_and_cli(tmp_path):
+    out = tmp_path / "run"
+    code = train_main(["coma", "--out", str(out), "--missions", "2", "--agents", "2",
+                       "--resolution", "1.0", "--no-progress", "--set", "width=8",
+                       "--set", "hidden=16", "--set", "missions_per_update=2",
+                       "--set", "eval_missions=1", "--set", "minibatch_size=60"])
+    assert code == 0
+    assert any((out / "tb").iterdir())
+    # A folder that holds a run is never overwritten without --resume.
+    assert train_main(["coma", "--out", str(out), "--missions", "2"]) == 2
+    assert train_main(["coma", "--out", str(tmp_path / "x"), "--variant", "comma"]) == 2
+    assert train_main(["coma", "--out", str(tmp_path / "y"), "--set", "lr_actor=-1"]) == 2
+
+
+def test_resume_continues_the_same_run(tmp_path):
+    config, env = tiny_coma(missions=6), tiny_env()
+    straight = train(config, env, tmp_path / "a", progress=False, tensorboard=False)
+    train(config, env, tmp_path / "b", progress=False, tensorboard=False, max_updates=1)
+    resumed = train(config, env, tmp_path / "b", resume=True, progress=False,
+                    tensorboard=False)
+    assert resumed.updates == straight.updates == 3
+    a, _ = load_policy(straight.last_checkpoint)
+    b, _ = load_policy(resumed.last_checkpoint)
+    for key, value in a.actor.state_dict().items():
+        assert torch.equal(value, b.actor.state_dict()[key]), key
+    for key, value in a.critic.state_dict().items():
+        assert torch.equal(value, b.critic.state_dict()[key]), key
+    keys = ("update", "return_mean", "critic_loss", "actor_loss", "eval_entropy_final")
+    assert [r[k] for r in straight.history for k in keys] == pytest.approx(
+        [r[k] for r in resumed.history for k in keys])
+    with pytest.raises(CheckpointError, match="other COMA settings"):
+        train(config.replace(lr_actor=1.0), env, tmp_path / "b", resume=True, progress=False,
+              tensorboard=False)
+    with pytest.raises(FileExistsError, match="resume"):
+        train(config, env, tmp_path / "b", progress=False, tensorboard=False)
+
+
+def test_nan_loss_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
+    config, env = tiny_coma(missions=6), tiny_env()
+    train(config, env, tmp_path, progress=False, tensorboard=False, max_updates=1)
+    before = (tmp_path / "last.pt").read_bytes()
+    import coma.learner
+
+    monkeypatch.setattr(coma.learner, "step_mission", lambda state, actions: float("nan"))
+    with pytest.raises(TrainingDiverged, match=r"critic loss is nan at update 2.*update 1"):
+        train(config, env, tmp_path, resume=True, progress=False, tensorboard=False)
+    assert (tmp_path / "last.pt").read_bytes() == before
+
+
+# ---------------------------------------------------------------------------- checkpoints
+
+
+@pytest.fixture(scope="module")
+def trained_policy(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("policy")
+    return train(tiny_coma(missions=2), small_config(n_agents=4, resolution=1.0), folder,
+                 progress=False, tensorboard=False).best_policy
+
+
+def test_round_trip_gives_identical_actions(trained_policy):
+    networks, _ = load_policy(trained_policy)
+    again, _ = load_policy(trained_policy)
+    planes = torch.rand(7, networks.actor.in_channels, 11, 11)
+    assert torch.equal(networks.actor(planes), again.actor(planes))
+    assert torch.equal(networks.critic.state_dict()["head.2.bias"],
+                       again.critic.state_dict()["head.2.bias"])
+
+
+def test_corrupt_and_foreign_files_are_refused_by_name(tmp_path, trained_policy):
+    corrupt = tmp_path / "corrupt.pt"
+    corrupt.write_bytes(trained_policy.read_bytes()[:100])
+    with pytest.raises(CheckpointError, match="corrupt.pt"):
+        COMAPlanner(corrupt)
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"weights": torch.zeros(3)}, foreign)
+    with pytest.raises(CheckpointError, match="foreign.pt.*format tag"):
+        COMAPlanner(foreign)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        COMAPlanner(tmp_path / "missing.pt")
+
+
+def test_transfer_to_other_team_sizes_and_feature_mismatch(trained_policy):
+    planner = COMAPlanner(trained_policy)
+    for n_agents, comm in ((2, 0.0), (8, math.inf)):
+        config = small_config(n_agents=n_agents, comm_range=comm, resolution=1.0)
+        result = run_mission(config, planner, seed=1, mission=0)
+        assert len(result["rows"]) == config.team.budget + 1
+        assert f"team.n_agents: trained 4, running {n_agents}" in planner.transfer_notes
+    other = small_config(features={"footprints": False})
+    with pytest.raises(CheckpointError, match="features.footprints: trained True, requested"):
+        planner.reset(other, 0)
+    assert check_transfer(planner.trained_config, planner.trained_config) == []
+
+
+def test_planner_is_greedy_and_deterministic(trained_policy):
+    config = small_config(n_agents=4, resolution=1.0)
+    first = run_mission(config, COMAPlanner(trained_policy), seed=2, mission=3)
+    second = run_mission(config, COMAPlanner(trained_policy), seed=2, mission=3)
+    assert [r["entropy"] for r in first["rows"]] == [r["entropy"] for r in second["rows"]]
+
+
+def test_variants_are_all_distinct_in_what_the_critic_sees():
+    from coma.inputs import critic_channels
+
+    features = small_config().features
+    counts = {v: critic_channels(v, features) for v in VARIANTS}
+    assert counts["coma"] == counts["central_qv"] == counts["actor_independent"] + 6
+    assert counts["decentralised"] == 7
+    assert len(set(itertools.chain(counts.values()))) == 3
