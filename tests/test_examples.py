@@ -44,3 +44,12 @@ def test_uav_advantages_prints_and_draws(tmp_path, monkeypatch, capsys):
     rows = [line for line in out.splitlines() if line.startswith("uav_")]
     assert len(rows) == 2 and all(row.count("*") == 1 for row in rows)
     assert figure.stat().st_size > 10_000
+
+
+def test_credit_assignment_study_runs_every_variant(monkeypatch, capsys):
+    out = run_example("03_credit_assignment_study.py", ["--quick"], monkeypatch, capsys)
+    rows = {line.split()[0]: line.split()[1:] for line in out.splitlines()[1:] if line}
+    assert set(rows) == {"coma", "central_qv", "actor_independent", "decentralised"}
+    for values in rows.values():
+        entropy, f1 = float(values[1]), float(values[2])
+        assert 0 <= entropy <= 1 and 0 <= f1 <= 1
