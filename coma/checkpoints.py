@@ -8,7 +8,8 @@ written atomically and read with ``torch.load(weights_only=True)``.
 
 Transfer (SPEC §8, the paper's robustness study): a policy trained with N agents and range D
 may run with other team sizes, ranges, budgets and map resolutions, because its inputs do not
-depend on them; the feature switches and the planning grid must match exactly.
+depend on them; it always observes with its own feature planes, and the planning grid must
+match (see :func:`check_transfer`).
 """
 
 from __future__ import annotations
@@ -116,28 +117,29 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, A
 
 
 def check_transfer(trained: EnvConfig, requested: EnvConfig, path: str = "") -> list[str]:
-    """Check that a policy trained on ``trained`` can run ``requested``.
+    """Check that a policy trained on ``trained`` can fly missions of ``requested``.
 
-    Team size, communication range, budget, map resolution, terrain, sensor and reward may
-    differ (the documented transfer); the feature switches and the planning grid may not.
+    The policy always observes with the feature planes it was trained on (its planner sets
+    ``observation_features``), so only what those planes cannot express is an error: another
+    planning grid, or more agents than the id plane can number. Team size, communication
+    range, budget, map resolution, terrain, sensor, reward and the mission's own feature
+    switches may differ: the documented transfer of the paper's robustness study.
 
     Returns:
         human-readable notes of the transferred settings (empty if none differ).
 
     Raises:
-        CheckpointError: naming the mismatching setting and both values.
+        CheckpointError: naming the setting and both values.
     """
     where = f"checkpoint {path!r}" if path else "the policy"
-    if trained.features != requested.features:
-        old = dataclasses.asdict(trained.features)
-        new = dataclasses.asdict(requested.features)
-        diffs = [f"features.{k}: trained {old[k]!r}, requested {new[k]!r}"
-                 for k in old if old[k] != new[k]]
-        raise CheckpointError(f"{where} was trained with other observation features: "
-                              + "; ".join(diffs))
     if trained.world.grid_points != requested.world.grid_points:
         raise CheckpointError(f"{where} was trained on a {trained.world.grid_points}-waypoint "
                               f"grid, requested {requested.world.grid_points}")
+    features = trained.features
+    if features.agent_id and requested.team.n_agents > features.agent_id_scale:
+        raise CheckpointError(f"{where} numbers agents up to features.agent_id_scale = "
+                              f"{features.agent_id_scale}; requested "
+                              f"{requested.team.n_agents} agents")
     notes = []
     for section, name in (("team", "n_agents"), ("team", "comm_range"), ("team", "budget"),
                           ("world", "resolution")):
@@ -145,6 +147,11 @@ def check_transfer(trained: EnvConfig, requested: EnvConfig, path: str = "") -> 
         new = getattr(getattr(requested, section), name)
         if old != new:
             notes.append(f"{section}.{name}: trained {old}, running {new}")
+    if trained.features != requested.features:
+        old = dataclasses.asdict(trained.features)
+        new = dataclasses.asdict(requested.features)
+        diffs = ", ".join(f"{k} {new[k]!r} -> {old[k]!r}" for k in old if old[k] != new[k])
+        notes.append(f"features: the policy observes with its own ({diffs})")
     return notes
 
 

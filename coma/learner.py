@@ -536,6 +536,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--resolution", type=float, default=0.5,
                         help="map resolution for training in metres (default 0.5; evaluation "
                              "runs at the mission config's own resolution)")
+    parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
+                        help="switch a feature plane of the mission config, e.g. "
+                             "--feature own_position=true (repeatable)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="any COMAConfig field, e.g. --set lr_actor=1e-4 (repeatable)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -572,6 +575,14 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
         team["comm_range"] = args.comm
     if team:
         env_config = env_config.replace(team=team)
+    switches: dict[str, bool] = {}
+    for item in args.feature:
+        name, sep, value = item.partition("=")
+        if not sep or value.strip().lower() not in ("true", "false", "1", "0", "on", "off"):
+            raise ValueError(f"--feature expects NAME=true|false, got {item!r}")
+        switches[name.strip()] = value.strip().lower() in ("true", "1", "on")
+    if switches:
+        env_config = env_config.replace(features=switches)
     return coma_config, training_env_config(env_config, args.resolution)
 
 

@@ -1,10 +1,11 @@
 """The ``coma`` planner: a trained actor, greedy and decentralised, behind the planner API.
 
-Each UAV decides from its own observation planes (``AgentView.observation``) and mask; one
-batched forward pass serves the whole team. Loading refuses a corrupt or foreign file and a
-policy trained on other observation features; a different team size, range, budget or map
-resolution is the documented transfer of the paper's robustness study (noted once per
-configuration in :attr:`COMAPlanner.transfer_notes`).
+Each UAV decides from its own observation planes (``AgentView.observation``, built with the
+feature switches the policy was trained on) and mask; one batched forward pass serves the
+whole team. Loading refuses a corrupt or foreign file; another planning grid, or more agents
+than the policy's id plane numbers, is refused at ``reset``; a different team size, range,
+budget or map resolution is the documented transfer of the paper's robustness study (listed
+in :attr:`COMAPlanner.transfer_notes`).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ class COMAPlanner(Planner):
         networks, _ = load_policy(path)
         self.actor = networks.actor
         self.trained_config = networks.env_config
+        self.observation_features = networks.env_config.features
         self.variant = networks.coma_config.variant
         self.transfer_notes: list[str] = []
 

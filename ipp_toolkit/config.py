@@ -257,6 +257,7 @@ class FeatureConfig:
     """Which 11 x 11 feature planes the actor and the critic see (SPEC §4, §8).
 
     Actor planes, in this order when switched on: ``budget``, ``agent_id``, ``position`` (a),
+    ``own_position`` (off by default: not in the paper),
     ``local_map`` (b), ``local_entropy`` (c), ``measurement_entropy`` (d), ``footprints`` (e).
     Critic-only planes: ``all_positions`` (f), ``global_map`` (g), ``global_entropy`` (h),
     ``all_footprints`` (i), ``other_actions`` (j, six planes).
@@ -264,6 +265,11 @@ class FeatureConfig:
     Attributes:
         centred: the position plane (a) is an 11 x 11 window centred on the agent (+-25 m at
             the defaults) with out-of-area cells marked -1; otherwise it is the absolute grid.
+        own_position: an extra plane in the map's absolute frame marking only the agent's own
+            cell (altitude code). The paper's centred plane (a) shows the agent always at the
+            centre, so relating it to the absolute map planes (b)-(e) must be learned from the
+            out-of-area border; this plane gives it directly (a departure, see
+            docs/departures.md).
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
     """
@@ -271,6 +277,7 @@ class FeatureConfig:
     budget: bool = True
     agent_id: bool = True
     position: bool = True
+    own_position: bool = False
     local_map: bool = True
     local_entropy: bool = True
     measurement_entropy: bool = True
@@ -290,7 +297,7 @@ class FeatureConfig:
             _fail("features", "actor planes", "all off", "the actor needs at least one plane")
 
 
-ACTOR_PLANES = ("budget", "agent_id", "position", "local_map", "local_entropy",
+ACTOR_PLANES = ("budget", "agent_id", "position", "own_position", "local_map", "local_entropy",
                 "measurement_entropy", "footprints")
 STATE_PLANES = ("budget", "all_positions", "global_map", "global_entropy", "all_footprints")
 

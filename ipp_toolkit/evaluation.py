@@ -245,7 +245,8 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
     positions = [state.positions_m().astype(np.float64)]
     footprints = [state.footprints.astype(np.int64)]
     while not state.done:
-        views = agent_views(state, planner.needs_observations)
+        views = agent_views(state, planner.needs_observations,
+                            getattr(planner, "observation_features", None))
         start = time.perf_counter()
         actions = planner.act(views)
         times.append((time.perf_counter() - start) * 1000.0)

@@ -107,6 +107,10 @@ def actor_observations(state: MissionState, features: FeatureConfig) -> np.ndarr
         planes.append(np.broadcast_to(ids[:, None, None], (n, g, g)))
     if features.position:
         planes.append(_position_planes(state, features.centred))
+    if features.own_position:
+        own = np.zeros((n, g, g))
+        own[np.arange(n), state.positions[:, 1], state.positions[:, 0]] = _altitude_code(state)
+        planes.append(own)
     if features.local_map:
         planes.append(maps.prob_blocks[:n] / maps.blocks.block_area)
     if features.local_entropy:

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import EnvConfig
+from .config import EnvConfig, FeatureConfig
 from .features import actor_observations
 from .mission import MissionState
 
@@ -88,18 +88,22 @@ class AgentView:
     observation: np.ndarray
 
 
-def agent_views(state: MissionState, with_observations: bool = True) -> list[AgentView]:
+def agent_views(state: MissionState, with_observations: bool = True,
+                features: FeatureConfig | None = None) -> list[AgentView]:
     """One read-only :class:`AgentView` per agent of a mission.
 
     Args:
         state: the mission at a decision point.
         with_observations: build the (C, G, G) actor planes too (skip for planners that
             do not read them: an empty (0, G, G) array is given instead).
+        features: which planes to build (default: the mission config's); a learned planner
+            observes with the features it was trained on (``Planner.observation_features``).
     """
     n = state.n_agents
     masks = state.masks()
     g = state.geometry.grid_points
-    planes = (actor_observations(state, state.config.features) if with_observations
+    features = state.config.features if features is None else features
+    planes = (actor_observations(state, features) if with_observations
               else np.zeros((n, 0, g, g), dtype=np.float32))
     views = []
     for k in range(n):
@@ -133,6 +137,9 @@ class Planner(abc.ABC):
 
     name: str = "planner"
     needs_observations: bool = True
+    #: The feature planes ``AgentView.observation`` carries for this planner; ``None``: those
+    #: of the mission config. Learned planners set the features they were trained on.
+    observation_features: FeatureConfig | None = None
 
     def reset(self, config: EnvConfig, seed: int) -> None:  # noqa: B027 - optional hook
         """Prepare for a new mission of ``config``; ``seed`` seeds any randomness."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -280,9 +281,15 @@ def test_transfer_to_other_team_sizes_and_feature_mismatch(trained_policy):
         result = run_mission(config, planner, seed=1, mission=0)
         assert len(result["rows"]) == config.team.budget + 1
         assert f"team.n_agents: trained 4, running {n_agents}" in planner.transfer_notes
-    other = small_config(features={"footprints": False})
-    with pytest.raises(CheckpointError, match="features.footprints: trained True, requested"):
-        planner.reset(other, 0)
+    # The policy observes with its own planes whatever the mission config switches off.
+    other = small_config(n_agents=4, resolution=1.0, features={"footprints": False})
+    result = run_mission(other, planner, seed=1, mission=0)
+    assert len(result["rows"]) == other.team.budget + 1
+    assert any("footprints False -> True" in note for note in planner.transfer_notes)
+    with pytest.raises(CheckpointError, match="9-waypoint grid|trained on a 11-waypoint"):
+        planner.reset(small_config(world={"area_size": 40.0}), 0)
+    with pytest.raises(CheckpointError, match="agent_id_scale = 8; requested 9 agents"):
+        planner.reset(small_config(n_agents=9), 0)
     assert check_transfer(planner.trained_config, planner.trained_config) == []
 
 
@@ -300,4 +307,6 @@ def test_variants_are_all_distinct_in_what_the_critic_sees():
     counts = {v: critic_channels(v, features) for v in VARIANTS}
     assert counts["coma"] == counts["central_qv"] == counts["actor_independent"] + 6
     assert counts["decentralised"] == 7
+    with_own = dataclasses.replace(features, own_position=True)
+    assert critic_channels("decentralised", with_own) == 8
     assert len(set(itertools.chain(counts.values()))) == 3

@@ -155,6 +155,21 @@ def test_feature_switches_change_channels():
     assert env.critic_observations(np.zeros(4, int)).shape == (4, 5 + 3, 11, 11)
 
 
+def test_own_position_plane_marks_only_the_agent_in_the_absolute_frame():
+    config = small_config().replace(features={"own_position": True})
+    env = IPPEnv(config)
+    obs, _ = env.reset(seed=0)
+    names = actor_plane_names(config.features)
+    assert names.index("own_position") == names.index("position") + 1
+    assert obs["uav_1"]["observation"].shape == (8, 11, 11)
+    for k, agent in enumerate(env.agents):
+        plane = obs[agent]["observation"][names.index("own_position")]
+        x, y, _ = env.mission.positions[k]
+        assert plane[y, x] == pytest.approx(1.0)  # 15 m: the top altitude code
+        assert np.count_nonzero(plane) == 1
+    assert "own_position" not in actor_plane_names(small_config().features)  # off by default
+
+
 def test_render_rgb_array():
     env = IPPEnv(small_config(), render_mode="rgb_array")
     env.reset(seed=0)
