@@ -33,9 +33,11 @@ from torch import nn
 from tqdm import tqdm
 
 from ipp_toolkit.config import EnvConfig, config_to_dict, load_config
+from ipp_toolkit.evaluation import planner_seed
 from ipp_toolkit.features import actor_observations
 from ipp_toolkit.io import CheckpointError, atomic_write, write_json
 from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
+from ipp_toolkit.planners import Planner, agent_views
 from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
@@ -43,6 +45,7 @@ from .checkpoints import COMANetworks, build_networks, load_policy, load_state_i
 from .config import PRESETS, VARIANTS, COMAConfig, preset
 from .inputs import critic_input, value_input
 from .networks import bounded_softmax, epsilon_at
+from .warm_start import WarmStartConfig
 
 __all__ = ["TrainingDiverged", "TrainResult", "Rollout", "collect_rollout", "greedy_actions",
            "evaluate_greedy", "train", "main", "training_env_config"]
@@ -93,27 +96,45 @@ def _stack_time(frames: list[np.ndarray]) -> torch.Tensor:
 
 def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: MissionGeometry,
                     seed: int, first_mission: int, n_missions: int, eps: float,
-                    generator: torch.Generator, namespace: str = "train") -> Rollout:
+                    generator: torch.Generator, namespace: str = "train",
+                    demonstrators: Sequence[Planner] | None = None) -> Rollout:
     """Play ``n_missions`` missions in lock-step with the bounded-softmax policy.
 
     Missions ``first_mission ... first_mission + n_missions - 1`` of run ``seed`` are used, so
     consecutive updates see fresh terrains. The actor runs once per step for all agents of all
     missions; the critic inputs are built with the joint action just sampled.
+
+    Args:
+        demonstrators: one planner per mission that acts instead of the actor (demonstrations
+            for a warm start, see ``coma.warm_start``); ``eps`` is then unused.
     """
     variant = networks.coma_config.variant
     features = env_config.features
     states = [reset_mission(env_config, seed, first_mission + e, namespace, geometry)
               for e in range(n_missions)]
+    if demonstrators is not None:
+        if len(demonstrators) != n_missions:
+            raise ValueError(f"need one demonstrator per mission ({n_missions}), got "
+                             f"{len(demonstrators)}")
+        for e, planner in enumerate(demonstrators):
+            planner.reset(env_config, planner_seed(seed, first_mission + e, namespace))
     actor_frames, critic_frames, value_frames, mask_frames, action_frames, reward_frames = \
         [], [], [], [], [], []
     returns = np.zeros(n_missions)
     for _ in range(env_config.team.budget):
         obs = np.stack([actor_observations(s, features) for s in states])  # (E, N, C, G, G)
         masks = np.stack([s.masks() for s in states]).astype(bool)  # (E, N, 6)
-        with torch.no_grad():
-            logits = networks.actor(torch.from_numpy(obs).flatten(0, 1))
-            probs = bounded_softmax(logits, torch.from_numpy(masks).flatten(0, 1), eps)
-        actions = torch.multinomial(probs, 1, generator=generator).view(n_missions, -1).numpy()
+        if demonstrators is None:
+            with torch.no_grad():
+                logits = networks.actor(torch.from_numpy(obs).flatten(0, 1))
+                probs = bounded_softmax(logits, torch.from_numpy(masks).flatten(0, 1), eps)
+            actions = torch.multinomial(probs, 1, generator=generator).view(n_missions, -1)
+            actions = actions.numpy()
+        else:
+            actions = np.stack([np.asarray(planner.act(agent_views(s, planner.needs_observations,
+                                                                   planner.observation_features)),
+                                           dtype=np.int64)
+                                for planner, s in zip(demonstrators, states, strict=True)])
         critic_frames.append(np.stack([critic_input(s, features, variant, actions[e], obs[e])
                                        for e, s in enumerate(states)]))
         if networks.value is not None:
@@ -334,7 +355,8 @@ def _comparable(config: COMAConfig) -> dict[str, Any]:
 
 def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
           resume: bool = False, progress: bool = True, tensorboard: bool = True,
-          max_updates: int | None = None) -> TrainResult:
+          max_updates: int | None = None,
+          warm_start: WarmStartConfig | None = None) -> TrainResult:
     """Train COMA (or a variant) and write its run folder.
 
     The folder gets ``config.json`` (both configs), ``progress.csv`` (one row per update),
@@ -351,6 +373,9 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         progress: show a tqdm bar.
         tensorboard: write TensorBoard event files.
         max_updates: stop after this many updates in this call (for tests and time slices).
+        warm_start: on a fresh run, first imitate a planner (``coma.warm_start``); the
+            imitated networks are saved as ``warm_start.pt`` and scored on validation
+            missions (update 0).
 
     Raises:
         TrainingDiverged: a loss became non-finite; ``last.pt`` and ``best.pt`` keep the last
@@ -401,12 +426,31 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     else:
         torch.manual_seed(coma_config.seed)
         networks = build_networks(coma_config, env_config)
-        target_critic = copy.deepcopy(networks.critic)
-        optimisers = _make_optimisers(networks)
         state = {"update": 0, "missions": 0, "transitions": 0, "since_target": 0,
                  "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
-        write_json(out / "config.json", {"coma": coma_config.to_dict(),
-                                         "env": config_to_dict(env_config)})
+        run_info: dict[str, Any] = {"coma": coma_config.to_dict(),
+                                    "env": config_to_dict(env_config)}
+        if warm_start is not None:
+            from .warm_start import warm_start as imitate
+
+            tick = time.perf_counter()
+            scores = imitate(networks, env_config, warm_start, coma_config.seed, generator,
+                             progress)
+            scores["seconds"] = time.perf_counter() - tick
+            networks.actor.eval()
+            validation = evaluate_greedy(networks.actor, env_config, geometry,
+                                         coma_config.seed, coma_config.eval_missions)
+            networks.actor.train()
+            budget = env_config.team.budget
+            scores["validation_entropy"] = validation[f"entropy_{budget}"]
+            scores["validation_f1"] = validation[f"f1_{budget}"]
+            state["best_entropy"] = scores["validation_entropy"]
+            save_policy(out / "warm_start.pt", networks, {"warm_start": scores})
+            save_policy(best_path, networks, {"validation": validation, "update": 0})
+            run_info["warm_start"] = {**warm_start.to_dict(), "result": scores}
+        target_critic = copy.deepcopy(networks.critic)
+        optimisers = _make_optimisers(networks)
+        write_json(out / "config.json", run_info)
 
     def save_checkpoint() -> None:
         save_policy(last_path, networks, {
@@ -536,6 +580,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--resolution", type=float, default=0.5,
                         help="map resolution for training in metres (default 0.5; evaluation "
                              "runs at the mission config's own resolution)")
+    parser.add_argument("--warm-start", metavar="PLANNER",
+                        help="first imitate this registered planner (e.g. ig); not in the paper")
+    parser.add_argument("--warm-start-missions", type=int, default=1500,
+                        help="demonstration missions for --warm-start (default 1500)")
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
                         help="switch a feature plane of the mission config, e.g. "
                              "--feature own_position=true (repeatable)")
@@ -592,12 +640,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         coma_config, env_config = configs_from_args(args)
+        warm = None
+        if args.warm_start:
+            from ipp_toolkit.planners import planner_factory
+
+            planner_factory(args.warm_start)  # an unknown name fails here, before training
+            warm = WarmStartConfig(planner=args.warm_start, missions=args.warm_start_missions)
     except ValueError as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
     try:
         result = train(coma_config, env_config, args.out, resume=args.resume,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, warm_start=warm)
     except (FileExistsError, CheckpointError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2

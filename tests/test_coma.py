@@ -310,3 +310,29 @@ def test_variants_are_all_distinct_in_what_the_critic_sees():
     with_own = dataclasses.replace(features, own_position=True)
     assert critic_channels("decentralised", with_own) == 8
     assert len(set(itertools.chain(counts.values()))) == 3
+
+
+# ---------------------------------------------------------------------------- warm start
+
+
+def test_warm_start_imitates_the_demonstrator(tmp_path):
+    from coma.warm_start import WarmStartConfig
+
+    env = tiny_env()
+    warm = WarmStartConfig(planner="coverage", missions=6, missions_per_batch=3, epochs=30,
+                           minibatch_size=40, lr=3e-3, holdout=0.34)
+    result = train(tiny_coma(missions=2), env, tmp_path, progress=False, tensorboard=False,
+                   warm_start=warm)
+    import json
+
+    info = json.loads((tmp_path / "config.json").read_text())["warm_start"]
+    assert info["planner"] == "coverage"
+    # Coverage is a fixed path: an imitating actor reproduces most of its held-out choices.
+    assert info["result"]["imitation_accuracy"] > 0.5
+    networks, data = load_policy(tmp_path / "warm_start.pt")
+    assert data["warm_start"]["demo_return"] == pytest.approx(info["result"]["demo_return"])
+    assert result.updates == 1
+    with pytest.raises(ValueError, match="missions = 0"):
+        WarmStartConfig(missions=0)
+    code = train_main(["coma", "--out", str(tmp_path / "bad"), "--warm-start", "nosuch"])
+    assert code == 2
