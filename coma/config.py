@@ -51,6 +51,9 @@ class COMAConfig:
         eval_missions: missions per evaluation.
         checkpoint_every: updates between checkpoints (the last one is always written).
         seed: seed of the run: terrains, sensor noise, network initialisation and sampling.
+        warm_start: registered planner to imitate before COMA training (``coma.warm_start``;
+            not in the paper), or ``""`` to start from random networks.
+        warm_start_missions: demonstration missions of the warm start.
     """
 
     variant: str = "coma"
@@ -73,13 +76,15 @@ class COMAConfig:
     eval_missions: int = 50
     checkpoint_every: int = 10
     seed: int = 0
+    warm_start: str = ""
+    warm_start_missions: int = 1_500
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             _fail("variant", self.variant, f"choose from {list(VARIANTS)}")
         for name in ("width", "hidden", "missions", "missions_per_update", "minibatch_size",
                      "epochs", "target_update_transitions", "eval_every", "eval_missions",
-                     "checkpoint_every"):
+                     "checkpoint_every", "warm_start_missions"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 _fail(name, value, "must be an integer >= 1")
@@ -97,6 +102,8 @@ class COMAConfig:
             value = getattr(self, name)
             if not _is_number(value) or not 0 <= value < 1:
                 _fail(name, value, "must lie in [0, 1)")
+        if not isinstance(self.warm_start, str) or any(c in self.warm_start for c in " ,="):
+            _fail("warm_start", self.warm_start, "must be a planner name or ''")
         if isinstance(self.eps_anneal_missions, bool) or not isinstance(
                 self.eps_anneal_missions, int) or self.eps_anneal_missions < 0:
             _fail("eps_anneal_missions", self.eps_anneal_missions,

@@ -373,9 +373,9 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         progress: show a tqdm bar.
         tensorboard: write TensorBoard event files.
         max_updates: stop after this many updates in this call (for tests and time slices).
-        warm_start: on a fresh run, first imitate a planner (``coma.warm_start``); the
-            imitated networks are saved as ``warm_start.pt`` and scored on validation
-            missions (update 0).
+        warm_start: on a fresh run, first imitate a planner (``coma.warm_start``; default:
+            built from ``coma_config.warm_start``); the imitated networks are saved as
+            ``warm_start.pt`` and scored on validation missions (update 0).
 
     Raises:
         TrainingDiverged: a loss became non-finite; ``last.pt`` and ``best.pt`` keep the last
@@ -430,6 +430,9 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                  "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
         run_info: dict[str, Any] = {"coma": coma_config.to_dict(),
                                     "env": config_to_dict(env_config)}
+        if warm_start is None and coma_config.warm_start:
+            warm_start = WarmStartConfig(planner=coma_config.warm_start,
+                                         missions=coma_config.warm_start_missions)
         if warm_start is not None:
             from .warm_start import warm_start as imitate
 
@@ -581,9 +584,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="map resolution for training in metres (default 0.5; evaluation "
                              "runs at the mission config's own resolution)")
     parser.add_argument("--warm-start", metavar="PLANNER",
-                        help="first imitate this registered planner (e.g. ig); not in the paper")
-    parser.add_argument("--warm-start-missions", type=int, default=1500,
-                        help="demonstration missions for --warm-start (default 1500)")
+                        help="first imitate this registered planner (e.g. ig; 'none' to "
+                             "switch the preset's off); not in the paper")
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
                         help="switch a feature plane of the mission config, e.g. "
                              "--feature own_position=true (repeatable)")
@@ -613,6 +615,8 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
     for name in ("variant", "seed", "missions", "width"):
         if getattr(args, name) is not None:
             changes[name] = getattr(args, name)
+    if args.warm_start is not None:
+        changes["warm_start"] = "" if args.warm_start == "none" else args.warm_start
     coma_config = preset(args.preset, **changes)
     env_config = load_config(args.config) if args.config else EnvConfig()
     team: dict[str, Any] = {}
@@ -640,18 +644,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         coma_config, env_config = configs_from_args(args)
-        warm = None
-        if args.warm_start:
+        if coma_config.warm_start:
             from ipp_toolkit.planners import planner_factory
 
-            planner_factory(args.warm_start)  # an unknown name fails here, before training
-            warm = WarmStartConfig(planner=args.warm_start, missions=args.warm_start_missions)
+            planner_factory(coma_config.warm_start)  # an unknown name fails before training
     except ValueError as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
     try:
         result = train(coma_config, env_config, args.out, resume=args.resume,
-                       progress=not args.no_progress, warm_start=warm)
+                       progress=not args.no_progress)
     except (FileExistsError, CheckpointError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2

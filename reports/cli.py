@@ -261,6 +261,24 @@ def train_main(argv: list[str] | None = None) -> int:
         return 2
     module = importlib.import_module(TRAINERS[argv[0]])
     try:
-        return int(module.main(argv[1:]))
+        code = int(module.main(argv[1:]))
     except SystemExit as exit_:  # argparse: --help (0) or a usage error (2, already printed)
         return exit_.code if isinstance(exit_.code, int) else 2
+    out = _flag_value(argv, "--out")
+    if argv[0] == "coma" and code in (0, 1) and out and (Path(out) / "progress.csv").is_file():
+        from .training import plot_training
+
+        paths = plot_training(out)
+        print(f"training curves: {paths[0]}")
+    return code
+
+
+def _flag_value(argv: list[str], flag: str) -> str | None:
+    """The value of ``--flag VALUE`` or ``--flag=VALUE`` in ``argv`` (last one wins)."""
+    value = None
+    for k, item in enumerate(argv):
+        if item == flag and k + 1 < len(argv):
+            value = argv[k + 1]
+        elif item.startswith(flag + "="):
+            value = item.split("=", 1)[1]
+    return value

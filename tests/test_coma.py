@@ -201,6 +201,7 @@ def test_tensorboard_and_cli(tmp_path):
                        "--set", "eval_missions=1", "--set", "minibatch_size=60"])
     assert code == 0
     assert any((out / "tb").iterdir())
+    assert (out / "training.png").stat().st_size > 5_000 and (out / "training.pdf").exists()
     # A folder that holds a run is never overwritten without --resume.
     assert train_main(["coma", "--out", str(out), "--missions", "2"]) == 2
     assert train_main(["coma", "--out", str(tmp_path / "x"), "--variant", "comma"]) == 2
