@@ -282,3 +282,42 @@ def _flag_value(argv: list[str], flag: str) -> str | None:
         elif item.startswith(flag + "="):
             value = item.split("=", 1)[1]
     return value
+
+
+def study_main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ipp-study robustness ...``; 0 ok, 2 bad input.
+
+    Writes one ``ipp-compare`` folder per setting plus the study's table and figure.
+    """
+    parser = argparse.ArgumentParser(
+        prog="ipp-study", description="Regenerate the paper's studies into a folder.")
+    parser.add_argument("study", choices=["robustness"],
+                        help="robustness: paper Table I (team sizes x communication ranges)")
+    parser.add_argument("--planners", default="coma,ig,coverage",
+                        help="planners, comma-separated (coma=PATH for your own policy)")
+    parser.add_argument("--agents", default="2,4,8", help="team sizes, comma-separated")
+    parser.add_argument("--comm", default="0,25,inf", help="ranges in metres, comma-separated")
+    parser.add_argument("--trials", type=_positive_int("--trials"), default=50)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--workers", type=_positive_int("--workers"), default=1)
+    parser.add_argument("--resolution", type=_positive_float, default=None)
+    parser.add_argument("--out", default="results/robustness")
+    parser.add_argument("--no-progress", action="store_true")
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:
+        return exit_.code if isinstance(exit_.code, int) else 2
+    from .studies import robustness_study
+
+    try:
+        agents = [int(a) for a in args.agents.split(",")]
+        comms = [_comm_range(c) for c in args.comm.split(",")]
+        study = robustness_study(args.planners, agents, comms, trials=args.trials,
+                                 seed=args.seed, out=args.out, workers=args.workers,
+                                 resolution=args.resolution, progress=not args.no_progress)
+    except (ValueError, OSError, argparse.ArgumentTypeError) as err:
+        print(f"ipp-study: error: {err}", file=sys.stderr)
+        return 2
+    print(study.table)
+    print(f"written: {args.out}/robustness.md, .csv, .png, .pdf")
+    return 0
