@@ -25,7 +25,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from .tables import METRIC_NAMES, atomic_write
+from ipp_toolkit.io import atomic_write
+
+from .tables import METRIC_NAMES
 
 __all__ = ["plot_curves", "plot_trajectories", "curves_from_rows", "save_figure", "FORMATS"]
 
@@ -50,8 +52,9 @@ def save_figure(figure: Figure, stem: str | os.PathLike[str],
     paths = []
     for fmt in formats:
         target = Path(f"{os.fspath(stem)}.{fmt}")
-        paths.append(atomic_write(target, lambda tmp, fmt=fmt: figure.savefig(
-            tmp, format=fmt, dpi=dpi, bbox_inches="tight")))
+        atomic_write(target, lambda handle, fmt=fmt: figure.savefig(
+            handle, format=fmt, dpi=dpi, bbox_inches="tight"))
+        paths.append(target)
     return paths
 
 

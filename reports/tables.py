@@ -18,13 +18,14 @@ import csv
 import io
 import math
 import os
-import threading
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from ipp_toolkit.io import atomic_write
 
 __all__ = [
     "Stat",
@@ -35,7 +36,6 @@ __all__ = [
     "to_csv",
     "to_latex",
     "write_tables",
-    "atomic_write",
     "atomic_write_text",
     "LOWER_IS_BETTER",
     "METRIC_NAMES",
@@ -359,33 +359,11 @@ def to_latex(summary: Summary, label: str = "tab:compare") -> str:
     return "\n".join(lines) + "\n"
 
 
-def temporary_path(path: str | os.PathLike[str]) -> Path:
-    """A unique hidden temporary name next to ``path`` (same folder, so a rename is atomic)."""
-    path = Path(path)
-    return path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-
-
-def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
-    """Create ``path`` atomically: ``write(tmp)`` fills a temporary file, then it is renamed.
-
-    The folder is created if needed; the temporary file is removed if ``write`` fails, so
-    ``path`` is either untouched or complete.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = temporary_path(path)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
-
-
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically."""
-    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    """Write ``text`` (UTF-8) to ``path`` atomically (``ipp_toolkit.io.atomic_write``)."""
+    data = text.encode("utf-8")
+    atomic_write(path, lambda handle: handle.write(data))
+    return Path(path)
 
 
 def write_tables(summary: Summary, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
