@@ -572,7 +572,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
                         help="hyper-parameter preset (default: cpu)")
     parser.add_argument("--variant", choices=VARIANTS, help="credit-assignment variant")
-    parser.add_argument("--config", help="YAML mission config (world, team, features, ...)")
+    parser.add_argument("--config", help="YAML mission config (world, team, features, ...); "
+                             "default: the paper's mission with features.own_position on")
     parser.add_argument("--seed", type=int, help="run seed")
     parser.add_argument("--out", required=True, help="run folder")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -618,7 +619,9 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
     if args.warm_start is not None:
         changes["warm_start"] = "" if args.warm_start == "none" else args.warm_start
     coma_config = preset(args.preset, **changes)
-    env_config = load_config(args.config) if args.config else EnvConfig()
+    # Without --config: the paper's mission with the own-position plane (docs/departures.md).
+    env_config = (load_config(args.config) if args.config
+                  else EnvConfig().replace(features={"own_position": True}))
     team: dict[str, Any] = {}
     if args.agents is not None:
         team["n_agents"] = args.agents

@@ -57,7 +57,7 @@ def main() -> None:
                             missions_per_update=20, minibatch_size=80, epochs=2,
                             eps_anneal_missions=missions // 2, eval_every=10_000,
                             eval_missions=1, target_update_transitions=1_000,
-                            seed=args.seed)
+                            eps_start=0.5, warm_start="", seed=args.seed)
         start = time.perf_counter()
         with tempfile.TemporaryDirectory() as folder:
             result = train(config, env, folder, progress=False, tensorboard=False)

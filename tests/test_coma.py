@@ -159,6 +159,8 @@ def test_config_validation_names_field_and_value():
     with pytest.raises(ValueError, match=r"unknown key\(s\) \['lr'\]"):
         COMAConfig().replace(lr=1.0)
     assert preset("paper").width == 256 and preset("paper").lr_actor == 1e-5
+    assert preset("paper").eps_start == 0.5 and preset("paper").warm_start == ""
+    assert preset("cpu") == COMAConfig() and COMAConfig().warm_start == "ig"
     with pytest.raises(ValueError, match="unknown COMA preset"):
         preset("gpu")
 
@@ -169,7 +171,7 @@ def test_config_validation_names_field_and_value():
 def tiny_coma(**changes) -> COMAConfig:
     values = dict(width=8, hidden=16, missions=4, missions_per_update=2, minibatch_size=40,
                   epochs=1, eval_every=1, eval_missions=2, checkpoint_every=1,
-                  target_update_transitions=100)
+                  target_update_transitions=100, warm_start="")
     values.update(changes)
     return COMAConfig(**values)
 
@@ -198,7 +200,8 @@ def test_tensorboard_and_cli(tmp_path):
     code = train_main(["coma", "--out", str(out), "--missions", "2", "--agents", "2",
                        "--resolution", "1.0", "--no-progress", "--set", "width=8",
                        "--set", "hidden=16", "--set", "missions_per_update=2",
-                       "--set", "eval_missions=1", "--set", "minibatch_size=60"])
+                       "--set", "eval_missions=1", "--set", "minibatch_size=60",
+                       "--warm-start", "none"])
     assert code == 0
     assert any((out / "tb").iterdir())
     assert (out / "training.png").stat().st_size > 5_000 and (out / "training.pdf").exists()

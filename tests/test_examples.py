@@ -34,7 +34,7 @@ def test_uav_advantages_prints_and_draws(tmp_path, monkeypatch, capsys):
     from tests.conftest import small_config
 
     run = train(COMAConfig(width=8, hidden=16, missions=2, missions_per_update=2,
-                           minibatch_size=60, eval_missions=1),
+                           minibatch_size=60, eval_missions=1, warm_start=""),
                 small_config(n_agents=2, resolution=1.0), tmp_path / "run", progress=False,
                 tensorboard=False)
     figure = tmp_path / "adv.png"
