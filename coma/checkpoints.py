@@ -14,7 +14,6 @@ match (see :func:`check_transfer`).
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from dataclasses import dataclass
 from importlib import resources
@@ -26,6 +25,7 @@ import torch
 from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
 from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
+from ipp_toolkit.planners import check_policy_transfer as check_transfer
 from ipp_toolkit.team import N_ACTIONS
 
 from .config import COMAConfig, from_dict
@@ -114,45 +114,6 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, A
                                   f"its configs ({str(error).splitlines()[0][:200]})") from None
         module.eval()
     return networks, data
-
-
-def check_transfer(trained: EnvConfig, requested: EnvConfig, path: str = "") -> list[str]:
-    """Check that a policy trained on ``trained`` can fly missions of ``requested``.
-
-    The policy always observes with the feature planes it was trained on (its planner sets
-    ``observation_features``), so only what those planes cannot express is an error: another
-    planning grid, or more agents than the id plane can number. Team size, communication
-    range, budget, map resolution, terrain, sensor, reward and the mission's own feature
-    switches may differ: the documented transfer of the paper's robustness study.
-
-    Returns:
-        human-readable notes of the transferred settings (empty if none differ).
-
-    Raises:
-        CheckpointError: naming the setting and both values.
-    """
-    where = f"checkpoint {path!r}" if path else "the policy"
-    if trained.world.grid_points != requested.world.grid_points:
-        raise CheckpointError(f"{where} was trained on a {trained.world.grid_points}-waypoint "
-                              f"grid, requested {requested.world.grid_points}")
-    features = trained.features
-    if features.agent_id and requested.team.n_agents > features.agent_id_scale:
-        raise CheckpointError(f"{where} numbers agents up to features.agent_id_scale = "
-                              f"{features.agent_id_scale}; requested "
-                              f"{requested.team.n_agents} agents")
-    notes = []
-    for section, name in (("team", "n_agents"), ("team", "comm_range"), ("team", "budget"),
-                          ("world", "resolution")):
-        old = getattr(getattr(trained, section), name)
-        new = getattr(getattr(requested, section), name)
-        if old != new:
-            notes.append(f"{section}.{name}: trained {old}, running {new}")
-    if trained.features != requested.features:
-        old = dataclasses.asdict(trained.features)
-        new = dataclasses.asdict(requested.features)
-        diffs = ", ".join(f"{k} {new[k]!r} -> {old[k]!r}" for k in old if old[k] != new[k])
-        notes.append(f"features: the policy observes with its own ({diffs})")
-    return notes
 
 
 def shipped_policy() -> Path:

@@ -21,6 +21,7 @@ or, from another package, with an entry point in the group ``ipp_toolkit.planner
 from __future__ import annotations
 
 import abc
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
@@ -30,6 +31,7 @@ import numpy as np
 
 from .config import EnvConfig, FeatureConfig
 from .features import actor_observations
+from .io import CheckpointError
 from .mission import MissionState
 
 __all__ = [
@@ -41,6 +43,7 @@ __all__ = [
     "make_planner",
     "available_planners",
     "planner_factory",
+    "check_policy_transfer",
     "ENTRY_POINT_GROUP",
 ]
 
@@ -205,3 +208,42 @@ def make_planner(name: str, **kwargs: Any) -> Planner:
         raise TypeError(f"planner factory {name!r} returned {type(planner).__name__}, "
                         "not a Planner")
     return planner
+
+
+def check_policy_transfer(trained: EnvConfig, requested: EnvConfig, path: str = "") -> list[str]:
+    """Check that a policy trained on ``trained`` can fly missions of ``requested``.
+
+    A learned planner always observes with the feature planes it was trained on (it sets
+    :attr:`Planner.observation_features`), so only what those planes cannot express is an
+    error: another planning grid, or more agents than the id plane can number. Team size,
+    communication range, budget, map resolution, terrain, sensor, reward and the mission's own
+    feature switches may differ: the documented transfer of the paper's robustness study.
+
+    Returns:
+        human-readable notes of the transferred settings (empty if none differ).
+
+    Raises:
+        CheckpointError: naming the setting and both values.
+    """
+    where = f"checkpoint {path!r}" if path else "the policy"
+    if trained.world.grid_points != requested.world.grid_points:
+        raise CheckpointError(f"{where} was trained on a {trained.world.grid_points}-waypoint "
+                              f"grid, requested {requested.world.grid_points}")
+    features = trained.features
+    if features.agent_id and requested.team.n_agents > features.agent_id_scale:
+        raise CheckpointError(f"{where} numbers agents up to features.agent_id_scale = "
+                              f"{features.agent_id_scale}; requested "
+                              f"{requested.team.n_agents} agents")
+    notes = []
+    for section, name in (("team", "n_agents"), ("team", "comm_range"), ("team", "budget"),
+                          ("world", "resolution")):
+        old = getattr(getattr(trained, section), name)
+        new = getattr(getattr(requested, section), name)
+        if old != new:
+            notes.append(f"{section}.{name}: trained {old}, running {new}")
+    if trained.features != requested.features:
+        old = dataclasses.asdict(trained.features)
+        new = dataclasses.asdict(requested.features)
+        diffs = ", ".join(f"{k} {new[k]!r} -> {old[k]!r}" for k in old if old[k] != new[k])
+        notes.append(f"features: the policy observes with its own ({diffs})")
+    return notes

@@ -1,0 +1,210 @@
+"""PPO with parameter sharing: training, checkpoints, the planner and the command line."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+from conftest import small_config
+from sb3_contrib import MaskablePPO
+from stable_baselines3.common.vec_env import VecMonitor
+
+import baselines.ppo as ppo
+from baselines.ppo import (
+    PPOPlanner,
+    PPOTrainConfig,
+    load_policy,
+    main,
+    masked_greedy_actions,
+    save_policy,
+    train_ppo,
+    training_env_config,
+)
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.io import CheckpointError, save_torch
+from ipp_toolkit.mission import reset_mission
+from ipp_toolkit.planners import agent_views
+from ipp_toolkit.vec import make_sb3_vec_env
+
+torch.set_num_threads(1)
+
+TINY = dict(n_envs=1, n_steps=64, batch_size=128, n_epochs=1, checkpoint_every=128)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A MaskablePPO run of 512 agent-transitions at 0.5 m (about 1 s)."""
+    out = tmp_path_factory.mktemp("ppo")
+    config = PPOTrainConfig(total_timesteps=512, **TINY)
+    path = train_ppo(config, EnvConfig(), out, progress=False)
+    return config, out, path
+
+
+def test_training_writes_policy_config_and_checkpoint(trained):
+    config, out, path = trained
+    assert path == out / "policy.pt"
+    assert path.stat().st_size < 2_000_000
+    meta = json.loads((out / "policy.json").read_text())
+    assert meta["format"] == "ipp-toolkit/ppo"
+    assert meta["obs_shape"] == [7, 11, 11]
+    assert meta["num_timesteps"] == 512
+    assert meta["ppo_config"] == config.to_dict()
+    assert meta["env_config"]["world"]["resolution"] == 0.5
+    assert (out / "checkpoint.pt").is_file() and (out / "checkpoint.json").is_file()
+    assert any((out / "tb").rglob("events.out.tfevents.*"))
+
+
+def test_planner_flies_valid_missions(trained):
+    _, out, path = trained
+    planner = PPOPlanner(str(path))
+    assert planner.name == "ppo"
+    env_config = training_env_config(PPOTrainConfig(), EnvConfig())
+    result = run_mission(env_config, planner, seed=0, mission=0)  # raises on a masked action
+    assert len(result["rows"]) == env_config.team.budget + 1
+    # The same policy flies other team sizes (the planes do not depend on N).
+    run_mission(small_config(n_agents=2), planner, seed=0, mission=1)
+
+
+def test_save_load_round_trip_gives_identical_actions(tmp_path):
+    config = PPOTrainConfig(**TINY)
+    env_config = training_env_config(config, EnvConfig())
+    vec = make_sb3_vec_env(env_config, n_envs=1, seed=0)
+    try:
+        model = MaskablePPO("MlpPolicy", VecMonitor(vec), n_steps=64, batch_size=128,
+                            policy_kwargs=ppo._policy_kwargs(config), seed=1)
+        model.learn(256)
+        batches, mask_batches = [vec.reset()], [vec.action_masks()]
+        rng = np.random.default_rng(0)
+        for _ in range(5):  # more varied inputs: a few random valid steps
+            now = mask_batches[-1]
+            batches.append(vec.step((rng.random(now.shape) * now).argmax(1))[0])
+            mask_batches.append(vec.action_masks())
+        obs, masks = np.concatenate(batches), np.concatenate(mask_batches)
+    finally:
+        vec.close()
+    expected, _ = model.predict(obs, deterministic=True, action_masks=masks)
+    path = save_policy(tmp_path / "p.pt", model, config, env_config)
+    policy, meta = load_policy(path)
+    assert meta["obs_shape"] == (7, 11, 11) and meta["ppo_config"] == config
+    np.testing.assert_array_equal(masked_greedy_actions(policy, obs, masks), expected)
+    # The planner (one batched forward over the team) agrees too.
+    state = reset_mission(env_config, seed=0, mission=0, namespace="test")
+    views = agent_views(state)
+    planner = PPOPlanner(path)
+    planner.reset(env_config, seed=0)
+    team_obs = np.stack([v.observation for v in views])
+    team_masks = np.stack([v.mask for v in views]).astype(bool)
+    np.testing.assert_array_equal(planner.act(views),
+                                  model.predict(team_obs, deterministic=True,
+                                                action_masks=team_masks)[0])
+
+
+def test_unmasked_ppo_trains_without_invalid_actions(tmp_path):
+    config = PPOTrainConfig(total_timesteps=256, masked=False, **TINY)
+    path = train_ppo(config, EnvConfig(), tmp_path, progress=False)
+    policy, meta = load_policy(path)
+    assert meta["algo"] == "ppo"
+    run_mission(training_env_config(config, EnvConfig()), PPOPlanner(path), seed=0, mission=0)
+
+
+def test_resume_continues_from_the_checkpoint(tmp_path):
+    config = PPOTrainConfig(total_timesteps=256, **TINY)
+    train_ppo(config, EnvConfig(), tmp_path, progress=False)
+    with pytest.raises(ValueError, match="already holds a PPO run"):
+        train_ppo(config, EnvConfig(), tmp_path, progress=False)
+    longer = PPOTrainConfig(total_timesteps=512, **TINY)
+    train_ppo(longer, EnvConfig(), tmp_path, progress=False, resume=True)
+    assert json.loads((tmp_path / "policy.json").read_text())["num_timesteps"] == 512
+    other = PPOTrainConfig(total_timesteps=768, **{**TINY, "n_epochs": 2})
+    with pytest.raises(ValueError, match="cannot resume"):
+        train_ppo(other, EnvConfig(), tmp_path, progress=False, resume=True)
+
+
+def test_planner_refuses_corrupt_and_foreign_files(tmp_path, trained):
+    corrupt = tmp_path / "corrupt.pt"
+    corrupt.write_bytes(trained[2].read_bytes()[:1000])
+    with pytest.raises(CheckpointError, match="corrupt"):
+        PPOPlanner(corrupt)
+    foreign = tmp_path / "coma.pt"
+    save_torch(foreign, {"actor": {}}, "ipp-toolkit/coma")
+    with pytest.raises(CheckpointError, match="ipp-toolkit/coma"):
+        PPOPlanner(foreign)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        PPOPlanner(tmp_path / "missing.pt")
+    payload = torch.load(trained[2], weights_only=True)
+    payload["policy"] = {k: v[..., :1] for k, v in payload["policy"].items()}
+    bad = tmp_path / "bad_weights.pt"
+    torch.save(payload, bad)
+    with pytest.raises(CheckpointError, match="do not fit"):
+        PPOPlanner(bad)
+
+
+def test_planner_refuses_a_model_of_another_observation_shape(tmp_path):
+    config = PPOTrainConfig(**TINY)
+    six_planes = training_env_config(config, EnvConfig().replace(features={"budget": False}))
+    vec = make_sb3_vec_env(six_planes, n_envs=1, seed=0)
+    try:
+        model = MaskablePPO("MlpPolicy", VecMonitor(vec), n_steps=64, batch_size=128,
+                            policy_kwargs=ppo._policy_kwargs(config))
+    finally:
+        vec.close()
+    path = save_policy(tmp_path / "six.pt", model, config, six_planes)
+    planner = PPOPlanner(path)
+    # Views built with the mission's own 7 planes do not fit the 6-plane model: refused.
+    with pytest.raises(CheckpointError, match=r"\(6, 11, 11\).*\(7, 11, 11\)"):
+        planner.act(agent_views(reset_mission(small_config(), seed=0, mission=0)))
+    # Through the evaluation runner the policy observes with its own planes and flies.
+    result = run_mission(small_config(), planner, seed=0, mission=0)
+    assert len(result["rows"]) == small_config().team.budget + 1
+    assert any("features" in note for note in planner.transfer_notes)
+    with pytest.raises(CheckpointError, match="grid"):
+        planner.reset(small_config(world={"area_size": 40.0}), seed=0)
+
+
+def test_missing_default_checkpoint_says_how_to_train(tmp_path, monkeypatch):
+    monkeypatch.setattr(ppo, "DEFAULT_CHECKPOINT", tmp_path / "none.pt")
+    with pytest.raises(CheckpointError, match="ipp-train ppo"):
+        PPOPlanner()
+
+
+def test_config_validation_and_round_trip():
+    with pytest.raises(ValueError, match="n_envs must be an integer >= 1, got 0"):
+        PPOTrainConfig(n_envs=0)
+    with pytest.raises(ValueError, match="batch_size 4096 is larger than a rollout"):
+        PPOTrainConfig(batch_size=4096, n_steps=64, n_envs=1)
+    with pytest.raises(ValueError, match="gamma must lie in"):
+        PPOTrainConfig(gamma=1.5)
+    config = PPOTrainConfig(comm_range=math.inf, masked=False)
+    assert PPOTrainConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
+    with pytest.raises(ValueError, match="unknown key"):
+        PPOTrainConfig.from_dict({"lr": 1e-3, "bogus": 1})
+
+
+def test_command_line(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["--timesteps", "128", "--n-envs", "1", "--n-steps", "32", "--batch-size", "64",
+                 "--agents", "2", "--comm", "inf", "--no-masked", "--out", str(out),
+                 "--no-progress"]) == 0
+    meta = json.loads((out / "policy.json").read_text())
+    assert meta["env_config"]["team"]["n_agents"] == 2
+    assert meta["env_config"]["team"]["comm_range"] == "inf" and meta["algo"] == "ppo"
+    assert main(["--timesteps", "0", "--out", str(tmp_path / "x")]) == 2
+    assert "total_timesteps must be an integer >= 1, got 0" in capsys.readouterr().err
+    assert main(["--config", str(tmp_path / "missing.yaml"), "--out", str(tmp_path / "y")]) == 2
+    assert "missing.yaml" in capsys.readouterr().err
+    assert main(["--agents", "0", "--out", str(tmp_path / "z")]) == 2
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--timesteps", "many"])
+    assert exit_info.value.code == 2
+
+
+@pytest.mark.skipif(not ppo.DEFAULT_CHECKPOINT.is_file(), reason="no shipped PPO checkpoint")
+def test_shipped_checkpoint_loads_and_flies():
+    planner = PPOPlanner()
+    assert planner.obs_shape == (7, 11, 11)
+    assert ppo.DEFAULT_CHECKPOINT.stat().st_size < 2_000_000
+    run_mission(small_config(), planner, seed=0, mission=0)
