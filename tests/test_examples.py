@@ -53,3 +53,11 @@ def test_credit_assignment_study_runs_every_variant(monkeypatch, capsys):
     for values in rows.values():
         entropy, f1 = float(values[1]), float(values[2])
         assert 0 <= entropy <= 1 and 0 <= f1 <= 1
+
+
+def test_real_terrain_example(tmp_path, monkeypatch, capsys):
+    out = run_example("04_real_terrain.py", ["--quick", "--planners", "ig,coverage",
+                                             "--out", str(tmp_path)], monkeypatch, capsys)
+    assert "of the area lies above 550 m" in out
+    assert "| ig |" in out and "| coverage |" in out
+    assert (tmp_path / "compare" / "summary.md").exists()
