@@ -381,6 +381,9 @@ class PPOPlanner(Planner):
     needs_observations = True
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
+        # Batches of N observations: extra intra-op threads only spin (80x slower when the
+        # cores are busy, measured), and evaluation runs one worker process per core.
+        torch.set_num_threads(1)
         if checkpoint is None:
             if not DEFAULT_CHECKPOINT.is_file():
                 raise CheckpointError(
