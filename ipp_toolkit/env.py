@@ -228,20 +228,9 @@ class IPPEnv(ParallelEnv):
             return None
         if self.mission is None:
             raise RuntimeError("call reset() before render()")
-        from .rendering import render_mission
+        from .rendering import render_state
 
-        m = self.mission
-        return render_mission(
-            ground_truth=m.ground_truth,
-            global_prob=m.maps.prob[m.global_index],
-            local_probs=m.maps.prob[: m.n_agents],
-            positions=m.positions_m(),
-            footprints=m.footprints,
-            area_size=self.config.world.area_size,
-            altitudes=self.config.world.altitudes,
-            step=m.step,
-            budget=m.budget,
-        )
+        return render_state(self.mission)
 
     def close(self) -> None:
         """Nothing to release; present for the PettingZoo API."""

@@ -47,7 +47,7 @@ from tqdm import tqdm
 
 from .config import EnvConfig, config_from_dict, config_to_dict
 from .io import atomic_write, write_json
-from .mission import MissionGeometry, reset_mission, step_mission
+from .mission import MissionGeometry, MissionState, reset_mission, step_mission
 from .planners import (
     ENTRY_POINT_GROUP,
     Planner,
@@ -205,7 +205,8 @@ def _terrain_name(config: EnvConfig) -> str:
 
 def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
                 namespace: str = "test", geometry: MissionGeometry | None = None,
-                record_trajectory: bool = False, label: str | None = None) -> dict[str, Any]:
+                record_trajectory: bool = False, label: str | None = None,
+                observer: Callable[[MissionState], None] | None = None) -> dict[str, Any]:
     """Fly mission ``mission`` of run ``seed`` with ``planner``.
 
     The planner is reset with :func:`planner_seed` ``(seed, mission, namespace)``; then, per
@@ -221,6 +222,8 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
         geometry: a prebuilt :class:`MissionGeometry` of ``config`` (built when omitted).
         record_trajectory: also return the path, the ground truth and the final global map.
         label: value of the ``planner`` column; defaults to ``planner.name``.
+        observer: called with the mission state after the reset and after every step (e.g.
+            to render frames); it must not modify the state.
 
     Returns:
         ``{"rows": [...], "trajectory": None | {...}}``. ``rows`` holds B + 1 dicts with the
@@ -232,6 +235,8 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
     """
     state = reset_mission(config, seed, mission, namespace, geometry)
     planner.reset(config, seed=planner_seed(seed, mission, namespace))
+    if observer is not None:
+        observer(state)
     base = {
         "planner": label if label is not None else str(getattr(planner, "name", "planner")),
         "agents": int(config.team.n_agents),
@@ -251,6 +256,8 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
         actions = planner.act(views)
         times.append((time.perf_counter() - start) * 1000.0)
         rewards.append(float(step_mission(state, actions)))
+        if observer is not None:
+            observer(state)
         if record_trajectory:
             positions.append(state.positions_m().astype(np.float64))
             footprints.append(state.footprints.astype(np.int64))

@@ -24,10 +24,14 @@ import math
 import os
 import tempfile
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["PALETTE", "render_mission", "save_png", "prob_to_rgb"]
+if TYPE_CHECKING:
+    from .mission import MissionState
+
+__all__ = ["PALETTE", "render_mission", "render_state", "save_png", "prob_to_rgb"]
 
 PALETTE = np.array(
     [
@@ -364,3 +368,19 @@ def save_png(rgb: np.ndarray, path: str | os.PathLike[str]) -> None:
         if os.path.exists(tmp):
             os.remove(tmp)
         raise
+
+
+def render_state(state: MissionState, panel_px: int = 240) -> np.ndarray:
+    """:func:`render_mission` of a mission state: (h, w, 3) uint8 RGB."""
+    return render_mission(
+        ground_truth=state.ground_truth,
+        global_prob=state.maps.prob[state.global_index],
+        local_probs=state.maps.prob[: state.n_agents],
+        positions=state.positions_m(),
+        footprints=state.footprints,
+        area_size=state.config.world.area_size,
+        altitudes=state.config.world.altitudes,
+        panel_px=panel_px,
+        step=state.step,
+        budget=state.budget,
+    )

@@ -187,6 +187,8 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="number of steps B (None: the config's, 15)")
     parser.add_argument("--area-size", type=_positive_float, default=None, metavar="METRES",
                         help="side of the square area in metres (None: the config's, 50)")
+    parser.add_argument("--animate", action="store_true", default=False,
+                        help="also write animations/<planner>.gif of mission 0 per planner")
     parser.add_argument("--no-progress", action="store_true", default=False,
                         help="hide the progress bar")
     return parser
@@ -221,7 +223,8 @@ def compare_main(argv: list[str] | None = None) -> int:
             agents=args.agents, comm=args.comm, planners=args.planners, trials=args.trials,
             seed=args.seed, terrain=args.terrain, threshold=args.threshold,
             workers=args.workers, out=out_dir, config=args.config, resolution=args.resolution,
-            budget=args.budget, area_size=args.area_size, progress=not args.no_progress)
+            budget=args.budget, area_size=args.area_size, progress=not args.no_progress,
+            animate=args.animate)
     except (ValueError, OSError) as err:
         return error(err)
     print(comparison.table)
@@ -231,12 +234,10 @@ def compare_main(argv: list[str] | None = None) -> int:
         print(f"  {label:<{width}}  {ms:10.3f} ms" if math.isfinite(ms)
               else f"  {label:<{width}}  {'-':>10}")
     print(f"\nwrote {out_dir}: summary.md, summary.csv, summary.tex, curves.png, curves.pdf, "
-          f"trajectories/*.png/.pdf, results.csv")
+          f"trajectories/*.png/.pdf, results.csv" + (", animations/*.gif" if args.animate
+                                                     else ""))
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(simulate_main())
 
 
 TRAINERS = {"coma": "coma.learner", "ppo": "baselines.ppo"}

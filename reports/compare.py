@@ -302,7 +302,7 @@ def compare(agents: int | None = 4, comm: float | None = 25.0,
             config: EnvConfig | str | os.PathLike[str] | None = None,
             resolution: float | None = None, budget: int | None = None,
             progress: bool = True, area_size: float | None = None,
-            note: Callable[[str], None] | None = None) -> Comparison:
+            note: Callable[[str], None] | None = None, animate: bool = False) -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
@@ -317,6 +317,7 @@ def compare(agents: int | None = 4, comm: float | None = 25.0,
             memory.
         progress: show a progress bar.
         note: receives notes about skipped default planners (default: stderr).
+        animate: with ``out``, also write ``animations/<planner>.gif`` of mission 0.
 
     Returns:
         the :class:`Comparison`; its ``table`` is the Markdown table.
@@ -342,5 +343,14 @@ def compare(agents: int | None = 4, comm: float | None = 25.0,
     comparison = Comparison(result=result, summary=summarise(result.rows))
     if out is not None:
         comparison.write(out)
+        if animate:
+            from .animation import animate_mission
+
+            for spec in specs:
+                planner = make_planner(spec.name, **spec.options)
+                label = spec.effective_label
+                animate_mission(env_config, planner,
+                                Path(out) / "animations" / f"{safe_name(str(label))}.gif",
+                                seed=int(seed), mission=0)
     return comparison
 

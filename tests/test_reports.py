@@ -310,3 +310,15 @@ def test_compare_in_memory_then_plot(tmp_path):
         compare(trials=0)
     with pytest.raises(ValueError, match="unknown planner 'astar'"):
         compare(planners="random,astar", trials=1)
+
+
+def test_compare_animate_writes_one_gif_per_planner(tmp_path):
+    from PIL import Image
+
+    from reports.compare import compare
+
+    compare(agents=2, comm=0.0, planners="random,coverage", trials=1, resolution=1.0,
+            out=tmp_path, progress=False, animate=True)
+    for label in ("random", "coverage"):
+        gif = Image.open(tmp_path / "animations" / f"{label}.gif")
+        assert gif.n_frames == 16  # s = 0..15
