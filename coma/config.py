@@ -49,6 +49,13 @@ class COMAConfig:
         eps_end: its final value.
         eps_anneal_missions: missions over which eps falls linearly (paper: 10,000).
         max_grad_norm: gradient clipping (global L2 norm) of every network.
+        normalise_advantage: scale each mini-batch's advantages to zero mean and unit
+            standard deviation before the actor step (not in the paper).
+        clip_ratio: 0 for the paper's actor loss ``-log pi(u) A``; > 0 for PPO's clipped
+            surrogate with ratios ``pi(u) / pi_behaviour(u)`` clipped to 1 +- clip_ratio, which
+            keeps several epochs on one batch from moving the policy too far (not in the
+            paper).
+        entropy_coef: weight of an entropy bonus in the actor loss (not in the paper: 0).
         eval_every: updates between greedy evaluations on held-out (``validation``) terrains.
         eval_missions: missions per evaluation.
         checkpoint_every: updates between checkpoints (the last one is always written).
@@ -74,6 +81,9 @@ class COMAConfig:
     eps_end: float = 0.02
     eps_anneal_missions: int = 2_000
     max_grad_norm: float = 10.0
+    normalise_advantage: bool = False
+    clip_ratio: float = 0.0
+    entropy_coef: float = 0.0
     eval_every: int = 20
     eval_missions: int = 50
     checkpoint_every: int = 10
@@ -96,6 +106,12 @@ class COMAConfig:
             value = getattr(self, name)
             if not _is_number(value) or value <= 0:
                 _fail(name, value, "must be a positive finite number")
+        if not isinstance(self.normalise_advantage, bool):
+            _fail("normalise_advantage", self.normalise_advantage, "must be true or false")
+        for name in ("clip_ratio", "entropy_coef"):
+            value = getattr(self, name)
+            if not _is_number(value) or value < 0:
+                _fail(name, value, "must be a non-negative finite number")
         for name in ("gamma", "td_lambda"):
             value = getattr(self, name)
             if not _is_number(value) or not 0 <= value <= 1:
@@ -149,6 +165,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "minibatch_size": 600, "epochs": 5, "lr_actor": 1e-5, "lr_critic": 1e-4,
         "target_update_transitions": 30_000, "eps_start": 0.5, "eps_end": 0.02,
         "eps_anneal_missions": 10_000, "eval_every": 50, "warm_start": "",
+        "normalise_advantage": False, "clip_ratio": 0.0, "entropy_coef": 0.0,
     },
 }
 

@@ -69,6 +69,8 @@ class Rollout:
         value_obs: (E, N, T, C_value, G, G) float32, or None unless ``central_qv``.
         masks: (E, N, T, 6) bool valid actions.
         actions: (E, N, T) int64.
+        behaviour_probs: (E, N, T) probability of each action under the policy that chose
+            it (1 for a demonstrator's actions).
         rewards: (E, T) float32 team rewards.
         returns: (E,) undiscounted return of each mission.
         final_entropy: (E,) entropy metric at the end of each mission.
@@ -79,6 +81,7 @@ class Rollout:
     value_obs: torch.Tensor | None
     masks: torch.Tensor
     actions: torch.Tensor
+    behaviour_probs: torch.Tensor
     rewards: torch.Tensor
     returns: np.ndarray
     final_entropy: np.ndarray
@@ -120,6 +123,7 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
             planner.reset(env_config, planner_seed(seed, first_mission + e, namespace))
     actor_frames, critic_frames, value_frames, mask_frames, action_frames, reward_frames = \
         [], [], [], [], [], []
+    behaviour_frames: list[np.ndarray] = []
     returns = np.zeros(n_missions)
     for _ in range(env_config.team.budget):
         obs = np.stack([actor_observations(s, features) for s in states])  # (E, N, C, G, G)
@@ -128,13 +132,15 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
             with torch.no_grad():
                 logits = networks.actor(torch.from_numpy(obs).flatten(0, 1))
                 probs = bounded_softmax(logits, torch.from_numpy(masks).flatten(0, 1), eps)
-            actions = torch.multinomial(probs, 1, generator=generator).view(n_missions, -1)
-            actions = actions.numpy()
+            chosen = torch.multinomial(probs, 1, generator=generator)
+            behaviour = probs.gather(-1, chosen).view(n_missions, -1).numpy()
+            actions = chosen.view(n_missions, -1).numpy()
         else:
             actions = np.stack([np.asarray(planner.act(agent_views(s, planner.needs_observations,
                                                                    planner.observation_features)),
                                            dtype=np.int64)
                                 for planner, s in zip(demonstrators, states, strict=True)])
+            behaviour = np.ones(actions.shape, dtype=np.float32)
         critic_frames.append(np.stack([critic_input(s, features, variant, actions[e], obs[e])
                                        for e, s in enumerate(states)]))
         if networks.value is not None:
@@ -145,6 +151,7 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
         actor_frames.append(obs)
         mask_frames.append(masks)
         action_frames.append(actions)
+        behaviour_frames.append(behaviour)
         reward_frames.append(rewards)
     return Rollout(
         actor_obs=_stack_time(actor_frames),
@@ -152,6 +159,7 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
         value_obs=_stack_time(value_frames) if value_frames else None,
         masks=_stack_time(mask_frames),
         actions=_stack_time(action_frames).long(),
+        behaviour_probs=_stack_time(behaviour_frames).float(),
         rewards=torch.from_numpy(np.stack(reward_frames, axis=1)).float(),
         returns=returns,
         final_entropy=np.array([s.history[-1].entropy for s in states]),
@@ -236,6 +244,7 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
     value_obs = rollout.value_obs.flatten(0, 2) if rollout.value_obs is not None else None
     masks = rollout.masks.flatten(0, 2)
     actions = rollout.actions.flatten()
+    behaviour = rollout.behaviour_probs.flatten()
     targets = targets.flatten()
     samples = len(actions)
     logs: dict[str, list[float]] = {k: [] for k in (
@@ -269,13 +278,24 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
                 else:
                     advantage = counterfactual_advantage(q, actions[batch], probs.detach(),
                                                          masks[batch])
+            raw_std = float(advantage.std()) if len(batch) > 1 else 0.0
+            if cfg.normalise_advantage and len(batch) > 1:
+                advantage = (advantage - advantage.mean()) / (advantage.std() + 1e-8)
             taken = probs.gather(-1, actions[batch].unsqueeze(-1)).squeeze(-1)
-            actor_loss = -torch.mean(torch.log(taken.clamp_min(1e-12)) * advantage)
+            if cfg.clip_ratio > 0:
+                ratio = taken / behaviour[batch].clamp_min(1e-12)
+                clipped = ratio.clamp(1.0 - cfg.clip_ratio, 1.0 + cfg.clip_ratio)
+                actor_loss = -torch.mean(torch.min(ratio * advantage, clipped * advantage))
+            else:
+                actor_loss = -torch.mean(torch.log(taken.clamp_min(1e-12)) * advantage)
+            if cfg.entropy_coef > 0:
+                entropy = -(probs * torch.log(probs.clamp_min(1e-12))).sum(-1).mean()
+                actor_loss = actor_loss - cfg.entropy_coef * entropy
             _check_finite("actor loss", actor_loss)
             logs["actor_grad_norm"].append(_clip_step(optimisers["actor"], networks.actor,
                                                       actor_loss, cfg.max_grad_norm))
             logs["actor_loss"].append(actor_loss.item())
-            logs["advantage_std"].append(float(advantage.std()) if len(batch) > 1 else 0.0)
+            logs["advantage_std"].append(raw_std)
             with torch.no_grad():
                 p = probs.clamp_min(1e-12)
                 logs["policy_entropy"].append(float(-(probs * torch.log(p)).sum(-1).mean()))
@@ -597,6 +617,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _coerce(text: str) -> Any:
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
     for kind in (int, float):
         try:
             return kind(text)

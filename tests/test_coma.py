@@ -195,6 +195,29 @@ def test_each_variant_trains_and_its_policy_plays(variant, tmp_path):
     assert len(outcome["rows"]) == tiny_env().team.budget + 1
 
 
+def test_clipped_normalised_actor_update_trains(tmp_path):
+    config = tiny_coma(clip_ratio=0.2, normalise_advantage=True, entropy_coef=0.01, epochs=3)
+    result = train(config, tiny_env(), tmp_path, progress=False, tensorboard=False)
+    for row in result.history:
+        assert math.isfinite(row["actor_loss"]) and math.isfinite(row["critic_loss"])
+    with pytest.raises(ValueError, match="clip_ratio = -0.1"):
+        tiny_coma(clip_ratio=-0.1)
+
+
+def test_rollout_records_behaviour_probabilities():
+    from coma.checkpoints import build_networks
+
+    env = tiny_env()
+    torch.manual_seed(0)
+    networks = build_networks(tiny_coma(), env)
+    rollout = collect_rollout(networks, env, MissionGeometry(env), 0, 0, 2, 0.5,
+                              torch.Generator().manual_seed(1))
+    probs = rollout.behaviour_probs
+    assert probs.shape == rollout.actions.shape
+    # Bounded softmax with eps = 0.5 over at most 6 valid actions: each is >= 0.5 / 6.
+    assert (probs >= 0.5 / 6 - 1e-6).all() and (probs <= 1).all()
+
+
 def test_tensorboard_and_cli(tmp_path):
     out = tmp_path / "run"
     code = train_main(["coma", "--out", str(out), "--missions", "2", "--agents", "2",
