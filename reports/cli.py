@@ -292,8 +292,10 @@ def study_main(argv: list[str] | None = None) -> int:
     """
     parser = argparse.ArgumentParser(
         prog="ipp-study", description="Regenerate the paper's studies into a folder.")
-    parser.add_argument("study", choices=["robustness"],
-                        help="robustness: paper Table I (team sizes x communication ranges)")
+    parser.add_argument("study", choices=["robustness", "credit"],
+                        help="robustness: paper Table I (team sizes x communication ranges); "
+                             "credit: COMA against its credit-assignment variants, each "
+                             "trained alike then compared")
     parser.add_argument("--planners", default="coma,ig,coverage",
                         help="planners, comma-separated (coma=PATH for your own policy)")
     parser.add_argument("--agents", default="2,4,8", help="team sizes, comma-separated")
@@ -302,23 +304,51 @@ def study_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=_positive_int("--workers"), default=1)
     parser.add_argument("--resolution", type=_positive_float, default=None)
-    parser.add_argument("--out", default="results/robustness")
+    parser.add_argument("--out", default=None, help="study folder (default results/STUDY)")
+    parser.add_argument("--variants", default="coma,central_qv,actor_independent,decentralised",
+                        help="credit: variants to train")
+    parser.add_argument("--missions", type=_positive_int("--missions"), default=5000,
+                        help="credit: training missions per variant")
+    parser.add_argument("--train-resolution", type=_positive_float, default=0.5,
+                        help="credit: map resolution of the training missions")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="credit: a COMAConfig field for every variant (repeatable)")
     parser.add_argument("--no-progress", action="store_true")
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:
         return exit_.code if isinstance(exit_.code, int) else 2
-    from .studies import robustness_study
+    from .studies import credit_assignment_study, robustness_study
 
+    out = args.out or f"results/{args.study}"
     try:
-        agents = [int(a) for a in args.agents.split(",")]
-        comms = [_comm_range(c) for c in args.comm.split(",")]
-        study = robustness_study(args.planners, agents, comms, trials=args.trials,
-                                 seed=args.seed, out=args.out, workers=args.workers,
-                                 resolution=args.resolution, progress=not args.no_progress)
+        if args.study == "robustness":
+            agents = [int(a) for a in args.agents.split(",")]
+            comms = [_comm_range(c) for c in args.comm.split(",")]
+            study = robustness_study(args.planners, agents, comms, trials=args.trials,
+                                     seed=args.seed, out=out, workers=args.workers,
+                                     resolution=args.resolution,
+                                     progress=not args.no_progress)
+            print(study.table)
+            print(f"written: {out}/robustness.md, .csv, .png, .pdf")
+        else:
+            from coma.learner import _coerce
+
+            overrides = {}
+            for item in args.set:
+                name, sep, value = item.partition("=")
+                if not sep:
+                    raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
+                overrides[name.strip()] = _coerce(value.strip())
+            credit = credit_assignment_study(
+                [v for v in args.variants.split(",") if v], missions=args.missions,
+                overrides=overrides, train_resolution=args.train_resolution,
+                trials=args.trials, seed=args.seed, out=out, workers=args.workers,
+                eval_resolution=args.resolution, progress=not args.no_progress)
+            print(credit.table)
+            print(f"written: {out}/credit.md, {out}/compare/ (curves.png: entropy and F1 "
+                  "per step)")
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
         print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2
-    print(study.table)
-    print(f"written: {args.out}/robustness.md, .csv, .png, .pdf")
     return 0

@@ -126,3 +126,102 @@ def robustness_study(planners: str | Sequence[str] = "coma,ig,coverage",
     atomic_write_text(out / "robustness.csv", csv_text)
     _figure(settings, labels, summaries, out / "robustness")
     return RobustnessStudy(settings, labels, summaries, caption + markdown)
+
+
+# --------------------------------------------------------------------------------------------
+# Credit assignment: COMA against its variants
+
+
+@dataclass
+class CreditStudy:
+    """Outcome of :func:`credit_assignment_study`.
+
+    Attributes:
+        policies: variant -> path of its ``best.pt``.
+        table: the Markdown table of the test comparison (one row per variant).
+        out: the study folder (``runs/<variant>/`` training runs, ``compare/`` the test).
+    """
+
+    policies: dict[str, Path]
+    table: str
+    out: Path
+
+
+def _train_variant(task: tuple[str, dict, dict, str, bool]) -> str:
+    """Worker: train one variant into its run folder (resuming it if it exists)."""
+    import torch
+
+    from coma.config import preset
+    from coma.learner import train
+    from ipp_toolkit.config import config_from_dict
+
+    variant, overrides, env_values, folder, progress = task
+    torch.set_num_threads(1)
+    config = preset("cpu", **{**overrides, "variant": variant})
+    env = config_from_dict(env_values)
+    run = Path(folder)
+    train(config, env, run, resume=(run / "last.pt").exists(), progress=progress,
+          tensorboard=False)
+    return str(run / "best.pt")
+
+
+def credit_assignment_study(variants: Sequence[str] | None = None, missions: int = 5_000,
+                            overrides: dict | None = None, train_resolution: float = 0.5,
+                            trials: int = 50, seed: int = 0,
+                            out: str | os.PathLike[str] = "results/credit",
+                            workers: int = 1, eval_resolution: float | None = None,
+                            progress: bool = True) -> CreditStudy:
+    """Train COMA and its credit-assignment variants alike, then compare them on test missions.
+
+    Every variant gets the ``cpu`` preset with ``overrides`` and ``missions`` training
+    missions on the default mission (4 UAVs, D = 25 m, the ``own_position`` plane) at map
+    resolution ``train_resolution``; the greedy policies (``best.pt``, chosen on validation
+    missions) then fly the same ``trials`` test missions. Runs resume if interrupted.
+
+    Args:
+        variants: subset of ``coma.config.VARIANTS`` (default: all four).
+        missions: training missions per variant.
+        overrides: COMAConfig fields for every variant (e.g. ``{"seed": 1}``).
+        train_resolution: r_M of the training missions.
+        trials: test missions.
+        seed: run seed of the test missions.
+        out: the study folder.
+        workers: variants trained in parallel processes (and evaluation workers).
+        eval_resolution: r_M of the test missions (default: the protocol's 0.1 m).
+        progress: show progress bars.
+    """
+    import concurrent.futures
+    import multiprocessing
+
+    from coma.config import VARIANTS
+    from ipp_toolkit.config import EnvConfig, config_to_dict
+    from ipp_toolkit.evaluation import PlannerSpec
+
+    variants = list(VARIANTS if variants is None else variants)
+    unknown = sorted(set(variants) - set(VARIANTS))
+    if unknown:
+        raise ValueError(f"unknown variant(s) {unknown}; choose from {list(VARIANTS)}")
+    out = Path(out)
+    env = EnvConfig().replace(world={"resolution": train_resolution},
+                              features={"own_position": True})
+    values = {**(overrides or {}), "missions": int(missions)}
+    tasks = [(v, values, config_to_dict(env), str(out / "runs" / v), progress and workers == 1)
+             for v in variants]
+    if workers > 1:
+        context = multiprocessing.get_context("spawn")
+        with concurrent.futures.ProcessPoolExecutor(min(workers, len(tasks)),
+                                                    mp_context=context) as pool:
+            paths = list(pool.map(_train_variant, tasks))
+    else:
+        paths = [_train_variant(task) for task in tasks]
+    policies = {v: Path(p) for v, p in zip(variants, paths, strict=True)}
+    specs = [PlannerSpec("coma", {"checkpoint": str(path)}, label=variant)
+             for variant, path in policies.items()]
+    comparison = compare(agents=4, comm=25.0, planners=specs, trials=trials, seed=seed,
+                         workers=workers, out=out / "compare", resolution=eval_resolution,
+                         progress=progress)
+    caption = (f"Credit-assignment study: each variant trained for {missions} missions "
+               f"(cpu preset, overrides {overrides or {}}), one training seed; test: "
+               f"{trials} missions.\n\n")
+    atomic_write_text(out / "credit.md", caption + comparison.table + "\n")
+    return CreditStudy(policies, caption + comparison.table, out)

@@ -26,3 +26,19 @@ def test_ipp_study_cli_bad_input(tmp_path, capsys):
     assert "far" in capsys.readouterr().err
     assert study_main(["robustness", "--planners", "nosuch", "--trials", "1",
                        "--out", str(tmp_path / "x"), "--no-progress"]) == 2
+
+
+def test_credit_assignment_study_end_to_end(tmp_path):
+    from reports.studies import credit_assignment_study
+
+    tiny = {"width": 8, "hidden": 16, "missions_per_update": 2, "minibatch_size": 60,
+            "eval_missions": 1, "warm_start": ""}
+    study = credit_assignment_study(["coma", "decentralised"], missions=2, overrides=tiny,
+                                    train_resolution=1.0, trials=1, eval_resolution=1.0,
+                                    out=tmp_path, progress=False)
+    assert set(study.policies) == {"coma", "decentralised"}
+    assert all(path.exists() for path in study.policies.values())
+    table = (tmp_path / "credit.md").read_text()
+    assert "| coma |" in table and "| decentralised |" in table
+    assert (tmp_path / "compare" / "curves.png").exists()
+    assert study_main(["credit", "--variants", "comma", "--out", str(tmp_path / "x")]) == 2
