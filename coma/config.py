@@ -1,9 +1,10 @@
 """Hyper-parameters of COMA training, in one dataclass (SPEC §5).
 
 Two presets: ``paper`` (the paper's network size and schedule, from random networks) and
-``cpu`` (the default, measured to train on one CPU core in about an hour: a narrower network,
-two epochs per update, and a warm start that imitates the ``ig`` planner before COMA improves
-on it, so exploration starts at eps = 0.1; see the README for what each choice measured).
+``cpu`` (the default, measured to train on one CPU core in under an hour: a narrower
+network, a warm start that imitates the ``ig`` planner before COMA improves on it, so
+exploration starts at eps = 0.1, and PPO's clipped surrogate with normalised counterfactual
+advantages for the actor; see the README for what each choice measured).
 The mission itself (team, world, features) is an
 :class:`~ipp_toolkit.config.EnvConfig`, kept separately and stored beside this in checkpoints.
 """
@@ -71,8 +72,8 @@ class COMAConfig:
     missions: int = 20_000
     missions_per_update: int = 50
     minibatch_size: int = 600
-    epochs: int = 2
-    lr_actor: float = 3e-5
+    epochs: int = 4
+    lr_actor: float = 1e-4
     lr_critic: float = 5e-4
     gamma: float = 0.99
     td_lambda: float = 0.8
@@ -81,8 +82,8 @@ class COMAConfig:
     eps_end: float = 0.02
     eps_anneal_missions: int = 2_000
     max_grad_norm: float = 10.0
-    normalise_advantage: bool = False
-    clip_ratio: float = 0.0
+    normalise_advantage: bool = True
+    clip_ratio: float = 0.2
     entropy_coef: float = 0.0
     eval_every: int = 20
     eval_missions: int = 50
