@@ -4,7 +4,7 @@ SuperSuit's ``pettingzoo_env_to_vec_env_v1`` turns one :class:`~ipp_toolkit.env.
 a vector of N single-agent envs (one per UAV) and ``concat_vec_envs_v1`` stacks ``n_envs``
 copies of it, so SB3 sees ``n_envs * N`` envs driven by one shared policy. SuperSuit's own SB3
 wrapper is not used: it loses seeds, attribute access (so MaskablePPO crashes), the
-termination/truncation split and per-env infos (see ``notes/sb3-supersuit-pettingzoo.md``).
+termination/truncation split and per-env infos.
 :class:`IPPVecEnv` is the project's own SB3 ``VecEnv`` over SuperSuit's gymnasium vector env:
 
 * slot ``c * N + k`` is agent ``k`` of copy ``c``;
