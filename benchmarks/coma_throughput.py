@@ -20,9 +20,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import torch  # noqa: E402
 
-from coma.checkpoints import build_networks  # noqa: E402
 from coma.config import preset  # noqa: E402
 from coma.learner import _make_optimisers, collect_rollout, update  # noqa: E402
+from coma.persistence import build_networks  # noqa: E402
 from ipp_toolkit.config import EnvConfig  # noqa: E402
 from ipp_toolkit.mission import MissionGeometry  # noqa: E402
 

@@ -41,10 +41,10 @@ from ipp_toolkit.planners import Planner, agent_views
 from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
-from .checkpoints import COMANetworks, build_networks, load_policy, load_state_into, save_policy
 from .config import PRESETS, VARIANTS, COMAConfig, preset
 from .inputs import critic_input, value_input
 from .networks import bounded_softmax, epsilon_at
+from .persistence import COMANetworks, build_networks, load_policy, load_state_into, save_policy
 from .warm_start import WarmStartConfig
 
 __all__ = ["TrainingDiverged", "TrainResult", "Rollout", "collect_rollout", "greedy_actions",

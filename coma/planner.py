@@ -18,8 +18,8 @@ import torch
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
 
-from .checkpoints import check_transfer, load_policy, shipped_policy
 from .learner import greedy_actions
+from .persistence import check_transfer, load_policy, shipped_policy
 
 __all__ = ["COMAPlanner"]
 

@@ -31,7 +31,7 @@ from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.planners import make_planner
 
 from .advantages import td_lambda_targets
-from .checkpoints import COMANetworks
+from .persistence import COMANetworks
 
 __all__ = ["DEMO_MISSION_OFFSET", "WarmStartConfig", "warm_start"]
 

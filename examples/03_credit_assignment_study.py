@@ -27,9 +27,9 @@ import time
 
 import torch
 
-from coma.checkpoints import load_policy
 from coma.config import VARIANTS, COMAConfig
 from coma.learner import evaluate_greedy, train
+from coma.persistence import load_policy
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.mission import MissionGeometry
 

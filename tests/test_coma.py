@@ -11,10 +11,10 @@ import pytest
 import torch
 
 from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
-from coma.checkpoints import check_transfer, load_policy
 from coma.config import VARIANTS, COMAConfig, preset
 from coma.learner import TrainingDiverged, collect_rollout, train
 from coma.networks import bounded_softmax, epsilon_at
+from coma.persistence import check_transfer, load_policy
 from coma.planner import COMAPlanner
 from ipp_toolkit.evaluation import run_mission
 from ipp_toolkit.io import CheckpointError
@@ -134,7 +134,7 @@ def test_epsilon_schedule_paper_values():
 def test_rollout_never_samples_masked_actions():
     env = small_config(n_agents=4)
     config = tiny_coma()
-    from coma.checkpoints import build_networks
+    from coma.persistence import build_networks
 
     torch.manual_seed(0)
     networks = build_networks(config, env)
@@ -205,7 +205,7 @@ def test_clipped_normalised_actor_update_trains(tmp_path):
 
 
 def test_rollout_records_behaviour_probabilities():
-    from coma.checkpoints import build_networks
+    from coma.persistence import build_networks
 
     env = tiny_env()
     torch.manual_seed(0)
