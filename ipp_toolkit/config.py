@@ -31,10 +31,19 @@ __all__ = [
     "save_config",
     "config_from_dict",
     "config_to_dict",
+    "check_int",
 ]
 
 TERRAIN_KINDS = ("split", "split-axis", "blobs", "raster")
 NAN_POLICIES = ("raise", "min", "max", "mean")
+
+
+def check_int(name: str, value: Any, minimum: int) -> int:
+    """``value`` as an int if it is an integer >= ``minimum`` (not a bool); else a ValueError
+    naming ``name`` and the value."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
 
 
 def _fail(section: str, name: str, value: Any, why: str) -> None:

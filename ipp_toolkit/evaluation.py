@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from .config import EnvConfig, config_from_dict, config_to_dict
+from .config import EnvConfig, check_int, config_from_dict, config_to_dict
 from .io import atomic_write, write_json
 from .mission import MissionGeometry, MissionState, reset_mission, step_mission
 from .planners import (
@@ -733,12 +733,6 @@ def load_results(out_dir: str | os.PathLike[str]) -> EvaluationResult:
 # The runner
 
 
-def _check_int(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
 def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], missions: int = 50,
              seed: int = 0, workers: int = 1, out_dir: str | os.PathLike[str] | None = None,
              progress: bool = True, namespace: str = "test",
@@ -776,14 +770,14 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     """
     if not isinstance(config, EnvConfig):
         raise ValueError(f"config must be an EnvConfig, got {type(config).__name__}")
-    missions = _check_int("missions", missions, 1)
-    workers = _check_int("workers", workers, 1)
-    seed = _check_int("seed", seed, 0)
+    missions = check_int("missions", missions, 1)
+    workers = check_int("workers", workers, 1)
+    seed = check_int("seed", seed, 0)
     if not isinstance(namespace, str) or not namespace:
         raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
     if isinstance(record_missions, int | np.integer):
         record_missions = (int(record_missions),)
-    record = frozenset(_check_int("record_missions", k, 0) for k in record_missions)
+    record = frozenset(check_int("record_missions", k, 0) for k in record_missions)
     record = frozenset(k for k in record if k < missions)
     specs = _as_specs(planners)
     for spec in specs:

@@ -37,17 +37,11 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from .config import EnvConfig
+from .config import EnvConfig, check_int
 from .env import IPPEnv
 from .team import N_ACTIONS
 
 __all__ = ["IPPVecEnv", "make_sb3_vec_env"]
-
-
-def _check_int(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
 
 
 class IPPVecEnv(VecEnv):
@@ -64,8 +58,8 @@ class IPPVecEnv(VecEnv):
     """
 
     def __init__(self, venv: Any, n_agents: int, n_copies: int):
-        n_agents = _check_int("n_agents", n_agents, 1)
-        n_copies = _check_int("n_copies", n_copies, 1)
+        n_agents = check_int("n_agents", n_agents, 1)
+        n_copies = check_int("n_copies", n_copies, 1)
         if venv.num_envs != n_agents * n_copies:
             raise ValueError(f"the vector env holds {venv.num_envs} agent slots, not "
                              f"{n_copies} copies x {n_agents} agents; one vec env must hold "
@@ -153,7 +147,7 @@ class IPPVecEnv(VecEnv):
         """Seed the next reset: copy c starts run ``seed + c`` (a random seed if None)."""
         if seed is None:
             seed = int(np.random.default_rng().integers(0, 2**31 - 1))
-        seed = _check_int("seed", seed, 0)
+        seed = check_int("seed", seed, 0)
         # SB3 convention: one seed per env slot; the slots of copy c share seed + c.
         self._seeds = [seed + slot // self.n_agents for slot in range(self.num_envs)]
         return self._seeds
@@ -275,9 +269,9 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
                          f"{len(config)} configs with n_agents {sizes}")
     if not isinstance(config, EnvConfig):
         raise ValueError(f"config must be an EnvConfig, got {type(config).__name__}")
-    n_envs = _check_int("n_envs", n_envs, 1)
-    seed = _check_int("seed", seed, 0)
-    num_cpus = _check_int("num_cpus", num_cpus, 0)
+    n_envs = check_int("n_envs", n_envs, 1)
+    seed = check_int("seed", seed, 0)
+    num_cpus = check_int("num_cpus", num_cpus, 0)
     if not isinstance(namespace, str) or not namespace:
         raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
     env = IPPEnv(config, namespace=namespace)
