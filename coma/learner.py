@@ -36,7 +36,7 @@ from ipp_toolkit.config import EnvConfig, config_to_dict, load_config
 from ipp_toolkit.evaluation import planner_seed
 from ipp_toolkit.features import actor_observations
 from ipp_toolkit.io import CheckpointError, atomic_write, write_json
-from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
+from ipp_toolkit.mission import MissionGeometry, MissionState, reset_mission, step_mission
 from ipp_toolkit.planners import Planner, agent_views
 from ipp_toolkit.team import N_ACTIONS
 
@@ -97,6 +97,14 @@ def _stack_time(frames: list[np.ndarray]) -> torch.Tensor:
     return torch.from_numpy(np.stack(frames, axis=2))
 
 
+def _learning_masks(state: MissionState) -> np.ndarray:
+    """(N, 6) bool masks the learner uses: the valid actions, or all actions in the no-mask
+    ablation (``team.invalid_action = "hold"``: a masked choice holds the UAV in place)."""
+    if state.config.team.invalid_action == "hold":
+        return np.ones((state.n_agents, N_ACTIONS), dtype=bool)
+    return state.masks().astype(bool)
+
+
 def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: MissionGeometry,
                     seed: int, first_mission: int, n_missions: int, eps: float,
                     generator: torch.Generator, namespace: str = "train",
@@ -127,7 +135,7 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
     returns = np.zeros(n_missions)
     for _ in range(env_config.team.budget):
         obs = np.stack([actor_observations(s, features) for s in states])  # (E, N, C, G, G)
-        masks = np.stack([s.masks() for s in states]).astype(bool)  # (E, N, 6)
+        masks = np.stack([_learning_masks(s) for s in states])  # (E, N, 6)
         if demonstrators is None:
             with torch.no_grad():
                 logits = networks.actor(torch.from_numpy(obs).flatten(0, 1))

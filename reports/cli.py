@@ -292,10 +292,11 @@ def study_main(argv: list[str] | None = None) -> int:
     """
     parser = argparse.ArgumentParser(
         prog="ipp-study", description="Regenerate the paper's studies into a folder.")
-    parser.add_argument("study", choices=["robustness", "credit"],
+    parser.add_argument("study", choices=["robustness", "credit", "ablation"],
                         help="robustness: paper Table I (team sizes x communication ranges); "
-                             "credit: COMA against its credit-assignment variants, each "
-                             "trained alike then compared")
+                             "credit: COMA against its credit-assignment variants; ablation: "
+                             "COMA with one input plane, the masking or the centring toggled; "
+                             "each run trained alike, then compared on test missions")
     parser.add_argument("--planners", default="coma,ig,coverage",
                         help="planners, comma-separated (coma=PATH for your own policy)")
     parser.add_argument("--agents", default="2,4,8", help="team sizes, comma-separated")
@@ -307,8 +308,11 @@ def study_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=None, help="study folder (default results/STUDY)")
     parser.add_argument("--variants", default="coma,central_qv,actor_independent,decentralised",
                         help="credit: variants to train")
+    parser.add_argument("--ablations",
+                        default="own_position,centred,masking,other_actions,footprints",
+                        help="ablation: feature switches to toggle, or masking / centred")
     parser.add_argument("--missions", type=_positive_int("--missions"), default=5000,
-                        help="credit: training missions per variant")
+                        help="credit, ablation: training missions per run")
     parser.add_argument("--train-resolution", type=_positive_float, default=0.5,
                         help="credit: map resolution of the training missions")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -334,20 +338,26 @@ def study_main(argv: list[str] | None = None) -> int:
         else:
             from coma.learner import _coerce
 
+            from .studies import ablation_study
+
             overrides = {}
             for item in args.set:
                 name, sep, value = item.partition("=")
                 if not sep:
                     raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
                 overrides[name.strip()] = _coerce(value.strip())
-            credit = credit_assignment_study(
-                [v for v in args.variants.split(",") if v], missions=args.missions,
-                overrides=overrides, train_resolution=args.train_resolution,
-                trials=args.trials, seed=args.seed, out=out, workers=args.workers,
-                eval_resolution=args.resolution, progress=not args.no_progress)
-            print(credit.table)
-            print(f"written: {out}/credit.md, {out}/compare/ (curves.png: entropy and F1 "
-                  "per step)")
+            common = dict(missions=args.missions, overrides=overrides,
+                          train_resolution=args.train_resolution, trials=args.trials,
+                          seed=args.seed, out=out, workers=args.workers,
+                          eval_resolution=args.resolution, progress=not args.no_progress)
+            if args.study == "credit":
+                result = credit_assignment_study([v for v in args.variants.split(",") if v],
+                                                 **common)
+            else:
+                result = ablation_study([a for a in args.ablations.split(",") if a], **common)
+            print(result.table)
+            print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
+                  "F1 per step)")
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
         print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2

@@ -16,11 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ipp_toolkit.config import EnvConfig, config_to_dict
+
 from .compare import compare
 from .plots import _colour, _new_figure, save_figure
 from .tables import Summary, atomic_write_text
 
-__all__ = ["RobustnessStudy", "robustness_study"]
+__all__ = ["RobustnessStudy", "robustness_study", "CreditStudy", "credit_assignment_study",
+           "ablation_study", "ABLATIONS"]
 
 
 @dataclass
@@ -147,22 +150,59 @@ class CreditStudy:
     out: Path
 
 
-def _train_variant(task: tuple[str, dict, dict, str, bool]) -> str:
-    """Worker: train one variant into its run folder (resuming it if it exists)."""
+def _train_run(task: tuple[str, dict, dict, str, bool]) -> str:
+    """Worker: train one COMA run into its folder (resuming it if it exists); its best.pt."""
     import torch
 
     from coma.config import preset
     from coma.learner import train
     from ipp_toolkit.config import config_from_dict
 
-    variant, overrides, env_values, folder, progress = task
+    _label, coma_values, env_values, folder, progress = task
     torch.set_num_threads(1)
-    config = preset("cpu", **{**overrides, "variant": variant})
+    config = preset("cpu", **coma_values)
     env = config_from_dict(env_values)
     run = Path(folder)
     train(config, env, run, resume=(run / "last.pt").exists(), progress=progress,
           tensorboard=False)
     return str(run / "best.pt")
+
+
+def _train_runs(tasks: list[tuple[str, dict, dict, str, bool]], workers: int) -> dict[str, Path]:
+    """Train every task (in ``workers`` spawned processes when > 1); label -> best.pt."""
+    import concurrent.futures
+    import multiprocessing
+
+    if workers > 1 and len(tasks) > 1:
+        context = multiprocessing.get_context("spawn")
+        with concurrent.futures.ProcessPoolExecutor(min(workers, len(tasks)),
+                                                    mp_context=context) as pool:
+            paths = list(pool.map(_train_run, tasks))
+    else:
+        paths = [_train_run(task) for task in tasks]
+    return {task[0]: Path(path) for task, path in zip(tasks, paths, strict=True)}
+
+
+def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str, trials: int,
+                  seed: int, workers: int, eval_resolution: float | None,
+                  progress: bool) -> CreditStudy:
+    """Fly the trained policies on the test missions; write ``out/name`` and ``out/compare``."""
+    from ipp_toolkit.evaluation import PlannerSpec
+
+    specs = [PlannerSpec("coma", {"checkpoint": str(path)}, label=label)
+             for label, path in policies.items()]
+    comparison = compare(agents=4, comm=25.0, planners=specs, trials=trials, seed=seed,
+                         workers=workers, out=out / "compare", resolution=eval_resolution,
+                         progress=progress)
+    text = caption + "\n\n" + comparison.table + "\n"
+    atomic_write_text(out / name, text)
+    return CreditStudy(policies, text, out)
+
+
+def _training_mission(train_resolution: float) -> EnvConfig:
+    """The default training mission of ``ipp-train coma`` at ``train_resolution``."""
+    return EnvConfig().replace(world={"resolution": train_resolution},
+                               features={"own_position": True})
 
 
 def credit_assignment_study(variants: Sequence[str] | None = None, missions: int = 5_000,
@@ -190,38 +230,75 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
         eval_resolution: r_M of the test missions (default: the protocol's 0.1 m).
         progress: show progress bars.
     """
-    import concurrent.futures
-    import multiprocessing
-
     from coma.config import VARIANTS
-    from ipp_toolkit.config import EnvConfig, config_to_dict
-    from ipp_toolkit.evaluation import PlannerSpec
 
     variants = list(VARIANTS if variants is None else variants)
     unknown = sorted(set(variants) - set(VARIANTS))
     if unknown:
         raise ValueError(f"unknown variant(s) {unknown}; choose from {list(VARIANTS)}")
     out = Path(out)
-    env = EnvConfig().replace(world={"resolution": train_resolution},
-                              features={"own_position": True})
+    env = config_to_dict(_training_mission(train_resolution))
     values = {**(overrides or {}), "missions": int(missions)}
-    tasks = [(v, values, config_to_dict(env), str(out / "runs" / v), progress and workers == 1)
-             for v in variants]
-    if workers > 1:
-        context = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(min(workers, len(tasks)),
-                                                    mp_context=context) as pool:
-            paths = list(pool.map(_train_variant, tasks))
-    else:
-        paths = [_train_variant(task) for task in tasks]
-    policies = {v: Path(p) for v, p in zip(variants, paths, strict=True)}
-    specs = [PlannerSpec("coma", {"checkpoint": str(path)}, label=variant)
-             for variant, path in policies.items()]
-    comparison = compare(agents=4, comm=25.0, planners=specs, trials=trials, seed=seed,
-                         workers=workers, out=out / "compare", resolution=eval_resolution,
-                         progress=progress)
+    tasks = [(v, {**values, "variant": v}, env, str(out / "runs" / v),
+              progress and workers == 1) for v in variants]
+    policies = _train_runs(tasks, workers)
     caption = (f"Credit-assignment study: each variant trained for {missions} missions "
                f"(cpu preset, overrides {overrides or {}}), one training seed; test: "
-               f"{trials} missions.\n\n")
-    atomic_write_text(out / "credit.md", caption + comparison.table + "\n")
-    return CreditStudy(policies, caption + comparison.table, out)
+               f"{trials} missions.")
+    return _compare_runs(policies, out, "credit.md", caption, trials, seed, workers,
+                         eval_resolution, progress)
+
+
+# --------------------------------------------------------------------------------------------
+# Feature ablation
+
+
+#: Ablations besides switching a feature plane: training without action masks, and the
+#: position plane (a) on the absolute grid instead of centred on the agent.
+ABLATIONS = ("masking", "centred")
+
+
+def ablation_study(ablations: Sequence[str], missions: int = 3_000,
+                   overrides: dict | None = None, train_resolution: float = 0.5,
+                   trials: int = 50, seed: int = 0,
+                   out: str | os.PathLike[str] = "results/ablation", workers: int = 1,
+                   eval_resolution: float | None = None, progress: bool = True) -> CreditStudy:
+    """Train COMA on the default mission and on variants of it with one setting toggled.
+
+    Each name in ``ablations`` is a ``FeatureConfig`` switch (toggled: a plane that is on is
+    removed, ``own_position`` is removed since it is on in the training mission), or
+    ``masking`` (train without action masks: masked choices hold the UAV; the deployed policy
+    is still masked), or ``centred`` (the absolute position plane). The run ``full`` is the
+    unchanged mission. Every run gets the same ``cpu``-preset training (``missions``, plus
+    ``overrides``); the greedy policies then fly the same ``trials`` test missions.
+
+    Returns:
+        a :class:`CreditStudy` whose ``policies`` are keyed ``full`` and ``-<name>``.
+    """
+    from dataclasses import fields
+
+    from ipp_toolkit.config import FeatureConfig
+
+    switches = {f.name for f in fields(FeatureConfig) if f.type in (bool, "bool")}
+    unknown = sorted(set(ablations) - switches - set(ABLATIONS))
+    if unknown:
+        raise ValueError(f"unknown ablation(s) {unknown}; choose from "
+                         f"{sorted(switches | set(ABLATIONS))}")
+    out = Path(out)
+    base = _training_mission(train_resolution)
+    values = {**(overrides or {}), "missions": int(missions)}
+    tasks = [("full", values, config_to_dict(base), str(out / "runs" / "full"),
+              progress and workers == 1)]
+    for name in ablations:
+        if name == "masking":
+            env = base.replace(team={"invalid_action": "hold"})
+        else:
+            env = base.replace(features={name: not getattr(base.features, name)})
+        tasks.append((f"-{name}", values, config_to_dict(env), str(out / "runs" / name),
+                      progress and workers == 1))
+    policies = _train_runs(tasks, workers)
+    caption = (f"Feature ablation: COMA trained for {missions} missions per run (cpu preset, "
+               f"overrides {overrides or {}}), one training seed; '-x' = x toggled; "
+               f"test: {trials} missions.")
+    return _compare_runs(policies, out, "ablation.md", caption, trials, seed, workers,
+                         eval_resolution, progress)

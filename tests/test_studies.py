@@ -42,3 +42,22 @@ def test_credit_assignment_study_end_to_end(tmp_path):
     assert "| coma |" in table and "| decentralised |" in table
     assert (tmp_path / "compare" / "curves.png").exists()
     assert study_main(["credit", "--variants", "comma", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_ablation_study_end_to_end(tmp_path):
+    from reports.studies import ablation_study
+
+    tiny = {"width": 8, "hidden": 16, "missions_per_update": 2, "minibatch_size": 60,
+            "eval_missions": 1, "warm_start": ""}
+    study = ablation_study(["masking", "own_position"], missions=2, overrides=tiny,
+                           train_resolution=1.0, trials=1, eval_resolution=1.0,
+                           out=tmp_path, progress=False)
+    assert set(study.policies) == {"full", "-masking", "-own_position"}
+    from coma.persistence import load_policy
+
+    masked_off, _ = load_policy(study.policies["-masking"])
+    assert masked_off.env_config.team.invalid_action == "hold"
+    no_own, _ = load_policy(study.policies["-own_position"])
+    assert not no_own.env_config.features.own_position
+    assert "| -masking |" in (tmp_path / "ablation.md").read_text()
+    assert study_main(["ablation", "--ablations", "nosuch", "--out", str(tmp_path / "x")]) == 2
