@@ -2,10 +2,12 @@
 
 Read in order: the rollout (missions in lock-step, a shared actor sampling from the bounded
 softmax), the critic update (TD(lambda) targets per episode from a target critic refreshed
-every ``target_update_transitions``), the advantage (``coma.advantages``), the actor update,
-then logging, evaluation and checkpoints. Hyper-parameters live in :class:`COMAConfig`; the
-mission in an :class:`EnvConfig`. ``train`` is the Python entry point, ``main`` the
-``ipp-train coma`` command.
+every ``target_update_transitions``), the advantage (``coma.advantages``), the actor update
+(the paper's ``-log pi(u) A``, or with ``clip_ratio > 0`` PPO's clipped surrogate), then
+logging, evaluation and checkpoints. An optional warm start (``coma.warm_start``) imitates a
+planner first. Hyper-parameters live in :class:`COMAConfig`; the mission in an
+:class:`EnvConfig`. ``train`` is the Python entry point, ``main`` the ``ipp-train coma``
+command.
 
 Reproducibility: mission k of a run always has the same terrain and sensor noise
 (``ipp_toolkit.seeding``); action sampling and mini-batch shuffling draw from one torch
