@@ -127,8 +127,10 @@ def main() -> None:
     best = np.nanargmax(table, axis=1)
     pushes = ", ".join(f"uav_{i} {ACTION_NAMES[b]}" for i, b in enumerate(best)
                        if b != actions[i])
-    print("The greedy actor picks its largest logit, not necessarily the largest advantage;\n"
-          f"where they differ, the critic pushes the actor towards: {pushes or 'none'}")
+    print("With a near-deterministic policy the baseline is about the chosen action's Q, so the\n"
+          "chosen action scores about 0 and every other entry says how much better or worse\n"
+          "the team would do had only this UAV chosen it. Where an alternative scores above 0,\n"
+          f"the critic pushes the actor towards it: {pushes or 'none'}")
     draw(state, actions, table, args.out)
     print(f"figure: {args.out}")
 
