@@ -64,6 +64,15 @@ class COMAConfig:
         warm_start: registered planner to imitate before COMA training (``coma.warm_start``;
             not in the paper), or ``""`` to start from random networks.
         warm_start_missions: demonstration missions of the warm start.
+        team_sizes: train on these team sizes, one drawn per update (domain randomisation,
+            not in the paper; ``()``: the mission config's own ``n_agents``).
+        comm_ranges: train on these communication ranges in metres (``inf`` allowed), one
+            drawn per update like ``team_sizes`` (``()``: the mission config's own range).
+            With several settings, validation scores the mean final entropy over all of
+            them, ``eval_missions`` missions each.
+        init_policy: a COMA policy file (``best.pt``, ``last.pt`` or a shipped policy) whose
+            actor and critic start this run instead of random networks or a warm start
+            (fine-tuning, not in the paper); its variant, size and feature planes must match.
     """
 
     variant: str = "coma"
@@ -91,8 +100,34 @@ class COMAConfig:
     seed: int = 0
     warm_start: str = "ig"
     warm_start_missions: int = 1_500
+    team_sizes: tuple[int, ...] = ()
+    comm_ranges: tuple[float, ...] = ()
+    init_policy: str = ""
 
     def __post_init__(self) -> None:
+        # JSON and YAML hand back lists: keep tuples so configs compare and hash alike.
+        for name in ("team_sizes", "comm_ranges"):
+            value = getattr(self, name)
+            if isinstance(value, list | tuple):
+                object.__setattr__(self, name, tuple(
+                    math.inf if isinstance(v, str) and v.strip().lower() == "inf" else v
+                    for v in value))
+            else:
+                _fail(name, value, "must be a list of values")
+        for size in self.team_sizes:
+            if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+                _fail("team_sizes", self.team_sizes, f"{size!r} is not an integer >= 1")
+        if len(set(self.team_sizes)) != len(self.team_sizes):
+            _fail("team_sizes", self.team_sizes, "repeats a value")
+        for radius in self.comm_ranges:
+            if isinstance(radius, bool) or not isinstance(radius, int | float) \
+                    or math.isnan(radius) or radius < 0:
+                _fail("comm_ranges", self.comm_ranges,
+                      f"{radius!r} is not a range >= 0 (inf allowed)")
+        if len(set(self.comm_ranges)) != len(self.comm_ranges):
+            _fail("comm_ranges", self.comm_ranges, "repeats a value")
+        if not isinstance(self.init_policy, str):
+            _fail("init_policy", self.init_policy, "must be a file path or ''")
         if self.variant not in VARIANTS:
             _fail("variant", self.variant, f"choose from {list(VARIANTS)}")
         for name in ("width", "hidden", "missions", "missions_per_update", "minibatch_size",
@@ -133,8 +168,11 @@ class COMAConfig:
         return from_dict({**dataclasses.asdict(self), **changes})
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-safe dict of the fields."""
-        return dataclasses.asdict(self)
+        """Plain JSON-safe dict of the fields (tuples as lists, inf as the string 'inf')."""
+        values = dataclasses.asdict(self)
+        values["team_sizes"] = list(self.team_sizes)
+        values["comm_ranges"] = ["inf" if math.isinf(r) else r for r in self.comm_ranges]
+        return values
 
 
 def _is_number(value: Any) -> bool:

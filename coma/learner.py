@@ -34,9 +34,9 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ipp_toolkit.config import EnvConfig, config_to_dict, load_config
+from ipp_toolkit.config import START_POSITIONS, EnvConfig, config_to_dict, load_config
 from ipp_toolkit.evaluation import planner_seed
-from ipp_toolkit.features import actor_observations
+from ipp_toolkit.features import actor_observations, actor_plane_names
 from ipp_toolkit.io import CheckpointError, atomic_write, write_json
 from ipp_toolkit.mission import MissionGeometry, MissionState, reset_mission, step_mission
 from ipp_toolkit.planners import Planner, agent_views
@@ -46,11 +46,19 @@ from .advantages import central_value_advantage, counterfactual_advantage, td_la
 from .config import PRESETS, VARIANTS, COMAConfig, preset
 from .inputs import critic_input, value_input
 from .networks import bounded_softmax, epsilon_at
-from .persistence import COMANetworks, build_networks, load_policy, load_state_into, save_policy
+from .persistence import (
+    COMANetworks,
+    build_networks,
+    load_policy,
+    load_state_into,
+    save_policy,
+    shipped_policy,
+)
 from .warm_start import WarmStartConfig
 
 __all__ = ["TrainingDiverged", "TrainResult", "Rollout", "collect_rollout", "greedy_actions",
-           "evaluate_greedy", "train", "main", "training_env_config"]
+           "evaluate_greedy", "validate", "mission_settings", "setting_of_update", "train",
+           "main", "training_env_config"]
 
 
 class TrainingDiverged(RuntimeError):
@@ -324,7 +332,7 @@ def _check_finite(what: str, value: torch.Tensor) -> None:
 CSV_COLUMNS = ["update", "missions", "transitions", "eps", "return_mean", "final_entropy_mean",
                "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
                "critic_grad_norm", "actor_grad_norm", "transitions_per_s", "wall_s",
-               "eval_return", "eval_entropy_final", "eval_f1_final"]
+               "eval_return", "eval_entropy_final", "eval_f1_final", "n_agents", "comm_range"]
 
 
 @dataclass
@@ -355,6 +363,68 @@ def training_env_config(env_config: EnvConfig, resolution: float | None) -> EnvC
     if resolution is None:
         return env_config
     return env_config.replace(world={"resolution": resolution})
+
+
+def mission_settings(coma_config: COMAConfig, env_config: EnvConfig) -> list[EnvConfig]:
+    """The mission configs a run trains on: ``env_config`` for every (team size, range) pair.
+
+    Without ``team_sizes`` / ``comm_ranges`` this is ``[env_config]``. A team size without
+    documented fixed starts gets random ones. Raises ValueError (naming the value) where a
+    pair is not a valid mission, e.g. more agents than ``features.agent_id_scale``.
+    """
+    if not coma_config.team_sizes and not coma_config.comm_ranges:
+        return [env_config]
+    team = env_config.team
+    sizes = coma_config.team_sizes or (team.n_agents,)
+    ranges = coma_config.comm_ranges or (team.comm_range,)
+    settings = []
+    for n_agents in sizes:
+        start = team.start if team.start == "random" or n_agents in START_POSITIONS else "random"
+        for comm_range in ranges:
+            settings.append(env_config.replace(team={"n_agents": n_agents, "start": start,
+                                                     "comm_range": comm_range}))
+    return settings
+
+
+def setting_of_update(n_settings: int, seed: int, update: int) -> int:
+    """Index of the mission setting that update ``update`` (0-based) trains on.
+
+    Each block of ``n_settings`` consecutive updates visits every setting once, in an order
+    drawn from ``(seed, block)``: balanced, reproducible and the same after a resume.
+    """
+    if n_settings == 1:
+        return 0
+    block, offset = divmod(update, n_settings)
+    order = np.random.default_rng([seed, block, 0x5E77]).permutation(n_settings)
+    return int(order[offset])
+
+
+def validate(actor: nn.Module, settings: Sequence[EnvConfig],
+             geometries: Sequence[MissionGeometry], seed: int, n_missions: int
+             ) -> dict[str, float]:
+    """:func:`evaluate_greedy` on every setting, averaged key by key over the settings."""
+    scores = [evaluate_greedy(actor, config, geometry, seed, n_missions)
+              for config, geometry in zip(settings, geometries, strict=True)]
+    return {key: float(np.mean([s[key] for s in scores])) for key in scores[0]}
+
+
+def _initialise_from(networks: COMANetworks, path: str) -> None:
+    """Copy the actor and critic(s) of the policy file ``path`` into ``networks``."""
+    source, _ = load_policy(path)
+    if source.coma_config.variant != networks.coma_config.variant:
+        raise CheckpointError(f"init_policy {path!r} is a {source.coma_config.variant!r} "
+                              f"policy, this run trains {networks.coma_config.variant!r}")
+    planes = actor_plane_names(source.env_config.features)
+    wanted = actor_plane_names(networks.env_config.features)
+    if planes != wanted or source.env_config.world.grid_points != \
+            networks.env_config.world.grid_points:
+        raise CheckpointError(f"init_policy {path!r} observes {planes} on a "
+                              f"{source.env_config.world.grid_points}-point grid; this run's "
+                              f"mission has {wanted} on {networks.env_config.world.grid_points}")
+    for name in ("actor", "critic", "value"):
+        module = getattr(networks, name)
+        if module is not None:
+            load_state_into(module, getattr(source, name).state_dict(), f"the {name}", path)
 
 
 def _make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
@@ -405,7 +475,13 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         max_updates: stop after this many updates in this call (for tests and time slices).
         warm_start: on a fresh run, first imitate a planner (``coma.warm_start``; default:
             built from ``coma_config.warm_start``); the imitated networks are saved as
-            ``warm_start.pt`` and scored on validation missions (update 0).
+            ``warm_start.pt`` and scored on validation missions (update 0). A run with
+            ``coma_config.init_policy`` starts from that policy's networks instead (no warm
+            start); they are scored and saved as ``best.pt`` at update 0 alike.
+
+    With ``coma_config.team_sizes`` / ``comm_ranges``, each update trains on one setting of
+    :func:`mission_settings` (:func:`setting_of_update`), and validation averages over all of
+    them; ``progress.csv`` records each update's ``n_agents`` and ``comm_range``.
 
     Raises:
         TrainingDiverged: a loss became non-finite; ``last.pt`` and ``best.pt`` keep the last
@@ -416,8 +492,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     torch.set_num_threads(1)
     out = Path(out_dir)
     last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
-    geometry = MissionGeometry(env_config)
-    eval_geometry = geometry
+    settings = mission_settings(coma_config, env_config)
+    geometries = [MissionGeometry(config) for config in settings]
 
     if last_path.exists() and not resume:
         raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
@@ -460,10 +536,22 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                  "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
         run_info: dict[str, Any] = {"coma": coma_config.to_dict(),
                                     "env": config_to_dict(env_config)}
-        if warm_start is None and coma_config.warm_start:
+        if coma_config.init_policy:
+            _initialise_from(networks, coma_config.init_policy)
+            networks.actor.eval()
+            validation = validate(networks.actor, settings, geometries, coma_config.seed,
+                                  coma_config.eval_missions)
+            networks.actor.train()
+            state["best_entropy"] = validation[f"entropy_{env_config.team.budget}"]
+            save_policy(best_path, networks, {"validation": validation, "update": 0})
+            run_info["init_policy"] = {
+                "path": coma_config.init_policy,
+                "validation_entropy": state["best_entropy"],
+                "validation_f1": validation[f"f1_{env_config.team.budget}"]}
+        elif warm_start is None and coma_config.warm_start:
             warm_start = WarmStartConfig(planner=coma_config.warm_start,
                                          missions=coma_config.warm_start_missions)
-        if warm_start is not None:
+        if warm_start is not None and not coma_config.init_policy:
             from .warm_start import warm_start as imitate
 
             tick = time.perf_counter()
@@ -471,8 +559,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                              progress)
             scores["seconds"] = time.perf_counter() - tick
             networks.actor.eval()
-            validation = evaluate_greedy(networks.actor, env_config, geometry,
-                                         coma_config.seed, coma_config.eval_missions)
+            validation = validate(networks.actor, settings, geometries, coma_config.seed,
+                                  coma_config.eval_missions)
             networks.actor.train()
             budget = env_config.team.budget
             scores["validation_entropy"] = validation[f"entropy_{budget}"]
@@ -514,8 +602,10 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             if state["since_target"] >= coma_config.target_update_transitions:
                 target_critic.load_state_dict(networks.critic.state_dict())
                 state["since_target"] = 0
-            rollout = collect_rollout(networks, env_config, geometry, coma_config.seed,
-                                      state["missions"], per_update, eps, generator)
+            setting = setting_of_update(len(settings), coma_config.seed, state["update"])
+            rollout = collect_rollout(networks, settings[setting], geometries[setting],
+                                      coma_config.seed, state["missions"], per_update, eps,
+                                      generator)
             try:
                 losses = update(networks, target_critic, optimisers, rollout, eps, generator)
             except TrainingDiverged as error:
@@ -536,12 +626,13 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                 "return_mean": float(rollout.returns.mean()),
                 "final_entropy_mean": float(rollout.final_entropy.mean()),
                 **losses, "transitions_per_s": rollout.transitions / elapsed,
-                "wall_s": state["wall_s"]}
+                "wall_s": state["wall_s"], "n_agents": settings[setting].team.n_agents,
+                "comm_range": settings[setting].team.comm_range}
             last_update = state["update"] == total_updates
             if state["update"] % coma_config.eval_every == 0 or last_update:
                 networks.actor.eval()
-                scores = evaluate_greedy(networks.actor, env_config, eval_geometry,
-                                         coma_config.seed, coma_config.eval_missions)
+                scores = validate(networks.actor, settings, geometries, coma_config.seed,
+                                  coma_config.eval_missions)
                 networks.actor.train()
                 budget = env_config.team.budget
                 row.update(eval_return=scores["return"],
@@ -617,6 +708,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warm-start", metavar="PLANNER",
                         help="first imitate this registered planner (e.g. ig; 'none' to "
                              "switch the preset's off); not in the paper")
+    parser.add_argument("--team-sizes", metavar="N,N,...",
+                        help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
+                             "randomisation; not in the paper)")
+    parser.add_argument("--comm-ranges", metavar="D,D,...",
+                        help="train on these communication ranges in metres, e.g. 0,25,inf")
+    parser.add_argument("--init", metavar="POLICY",
+                        help="start from this COMA policy file instead of a warm start "
+                             "(fine-tuning), e.g. the shipped one: --init shipped")
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
                         help="switch a feature plane of the mission config, e.g. "
                              "--feature own_position=true (repeatable)")
@@ -637,6 +736,21 @@ def _coerce(text: str) -> Any:
     return text
 
 
+def _int_list(flag: str, text: str) -> list[int]:
+    try:
+        return [int(item) for item in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{flag} expects integers separated by commas, got {text!r}") from None
+
+
+def _float_list(flag: str, text: str) -> list[float]:
+    try:
+        return [float(item) for item in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{flag} expects numbers (or inf) separated by commas, got "
+                         f"{text!r}") from None
+
+
 def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
     """The configs a parsed ``ipp-train coma`` command asks for (ValueError on bad input)."""
     changes: dict[str, Any] = {}
@@ -650,6 +764,14 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
             changes[name] = getattr(args, name)
     if args.warm_start is not None:
         changes["warm_start"] = "" if args.warm_start == "none" else args.warm_start
+    if args.team_sizes is not None:
+        changes["team_sizes"] = _int_list("--team-sizes", args.team_sizes)
+    if args.comm_ranges is not None:
+        changes["comm_ranges"] = _float_list("--comm-ranges", args.comm_ranges)
+    if args.init is not None:
+        changes["init_policy"] = str(shipped_policy()) if args.init == "shipped" else args.init
+        if not Path(changes["init_policy"]).is_file():
+            raise ValueError(f"--init {args.init!r}: no such policy file")
     coma_config = preset(args.preset, **changes)
     # Without --config: the paper's mission with the own-position plane (docs/departures.md).
     env_config = (load_config(args.config) if args.config
@@ -679,6 +801,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         coma_config, env_config = configs_from_args(args)
+        mission_settings(coma_config, env_config)  # an invalid team or range fails here
         if coma_config.warm_start:
             from ipp_toolkit.planners import planner_factory
 

@@ -138,17 +138,22 @@ class PlannerSpec:
 
     @classmethod
     def parse(cls, text: str) -> PlannerSpec:
-        """Parse ``"NAME"`` or ``"NAME=CHECKPOINT"`` (the command line's planner syntax).
+        """Parse ``"[LABEL:]NAME[=CHECKPOINT]"`` (the command line's planner syntax).
 
         ``"ig"`` gives name ``ig`` without options; ``"coma=runs/x/ckpt.pt"`` gives name
-        ``coma`` with ``options={"checkpoint": "runs/x/ckpt.pt"}``. The label is the name.
+        ``coma`` with ``options={"checkpoint": "runs/x/ckpt.pt"}``. The label is the name
+        unless a ``LABEL:`` prefix names it, so two policies of one planner can be compared:
+        ``"coma,coma-mixed:coma=runs/mixed/best.pt"``.
         """
+        syntax = "[LABEL:]NAME or [LABEL:]NAME=CHECKPOINT"
         if not isinstance(text, str) or not text.strip():
-            raise ValueError(f"planner must be NAME or NAME=CHECKPOINT, got {text!r}")
-        name, sep, value = (part.strip() for part in text.strip().partition("="))
-        if not name or (sep and not value):
-            raise ValueError(f"planner must be NAME or NAME=CHECKPOINT, got {text!r}")
-        return cls(name=name, options={"checkpoint": value} if sep else {}, label=name)
+            raise ValueError(f"planner must be {syntax}, got {text!r}")
+        head, sep, value = (part.strip() for part in text.strip().partition("="))
+        label, colon, name = (part.strip() for part in head.rpartition(":"))
+        if not name or (sep and not value) or (colon and not label):
+            raise ValueError(f"planner must be {syntax}, got {text!r}")
+        return cls(name=name, options={"checkpoint": value} if sep else {},
+                   label=label if colon else name)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe description ``{"name", "options", "label"}`` (label resolved)."""

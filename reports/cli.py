@@ -158,7 +158,8 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="communication range D in metres, or 'inf'")
     parser.add_argument("--planners", default="all", metavar="LIST",
                         help="comma-separated planners: registered names (ig, coverage, "
-                             "random, ...) or NAME=CHECKPOINT items (coma=PATH); 'all' = every "
+                             "random, ...) or NAME=CHECKPOINT items (coma=PATH), each with "
+                             "an optional LABEL: prefix (mine:coma=PATH); 'all' = every "
                              "registered planner that can be built (learned ones only when "
                              "their checkpoint exists)")
     parser.add_argument("--trials", type=_positive_int("trials"), default=50, metavar="N",
@@ -298,7 +299,8 @@ def study_main(argv: list[str] | None = None) -> int:
                              "COMA with one input plane, the masking or the centring toggled; "
                              "each run trained alike, then compared on test missions")
     parser.add_argument("--planners", default="coma,ig,coverage",
-                        help="planners, comma-separated (coma=PATH for your own policy)")
+                        help="planners, comma-separated (coma=PATH for your own policy, "
+                             "LABEL:coma=PATH to name it)")
     parser.add_argument("--agents", default="2,4,8", help="team sizes, comma-separated")
     parser.add_argument("--comm", default="0,25,inf", help="ranges in metres, comma-separated")
     parser.add_argument("--trials", type=_positive_int("--trials"), default=50)

@@ -12,7 +12,13 @@ import torch
 
 from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from coma.config import VARIANTS, COMAConfig, preset
-from coma.learner import TrainingDiverged, collect_rollout, train
+from coma.learner import (
+    TrainingDiverged,
+    collect_rollout,
+    mission_settings,
+    setting_of_update,
+    train,
+)
 from coma.networks import bounded_softmax, epsilon_at
 from coma.persistence import check_transfer, load_policy
 from coma.planner import COMAPlanner
@@ -235,7 +241,8 @@ def test_tensorboard_and_cli(tmp_path):
 
 
 def test_resume_continues_the_same_run(tmp_path):
-    config, env = tiny_coma(missions=6), tiny_env()
+    # Domain randomisation too: the resumed run must train on the same settings in turn.
+    config, env = tiny_coma(missions=6, team_sizes=(2, 3)), tiny_env()
     straight = train(config, env, tmp_path / "a", progress=False, tensorboard=False)
     train(config, env, tmp_path / "b", progress=False, tensorboard=False, max_updates=1)
     resumed = train(config, env, tmp_path / "b", resume=True, progress=False,
@@ -255,6 +262,56 @@ def test_resume_continues_the_same_run(tmp_path):
               tensorboard=False)
     with pytest.raises(FileExistsError, match="resume"):
         train(config, env, tmp_path / "b", progress=False, tensorboard=False)
+
+
+def test_mission_settings_cover_every_pair_in_balanced_seeded_order():
+    env = tiny_env()
+    assert mission_settings(tiny_coma(), env) == [env]
+    settings = mission_settings(tiny_coma(team_sizes=(2, 3), comm_ranges=(0, "inf")), env)
+    assert [(c.team.n_agents, c.team.comm_range, c.team.start) for c in settings] == [
+        (2, 0.0, "fixed"), (2, math.inf, "fixed"), (3, 0.0, "random"), (3, math.inf, "random")]
+    assert all(c.world == env.world and c.features == env.features for c in settings)
+    order = [setting_of_update(4, 7, u) for u in range(12)]
+    for block in range(3):
+        assert sorted(order[4 * block:4 * block + 4]) == [0, 1, 2, 3]
+    assert order == [setting_of_update(4, 7, u) for u in range(12)]
+    assert order != [setting_of_update(4, 8, u) for u in range(12)]
+    with pytest.raises(ValueError, match=r"team_sizes = \(2, 0\)"):
+        tiny_coma(team_sizes=(2, 0))
+    with pytest.raises(ValueError, match=r"comm_ranges = \(25, 25\).*repeats"):
+        tiny_coma(comm_ranges=[25, 25])
+    with pytest.raises(ValueError, match="agent_id_scale"):
+        mission_settings(tiny_coma(team_sizes=(2, 9)), env)
+    config = tiny_coma(team_sizes=[2, 8], comm_ranges=[0, "inf"])
+    assert COMAConfig(**config.to_dict()) == config and config.comm_ranges == (0, math.inf)
+
+
+def test_randomised_training_and_fine_tuning_from_a_policy(tmp_path):
+    env = tiny_env()
+    first = train(tiny_coma(missions=8, team_sizes=(2, 3), comm_ranges=(0, "inf")), env,
+                  tmp_path / "mixed", progress=False, tensorboard=False)
+    trained = {(row["n_agents"], row["comm_range"]) for row in first.history}
+    assert trained == {(2, 0.0), (2, math.inf), (3, 0.0), (3, math.inf)}
+    assert all(math.isfinite(row["eval_entropy_final"]) for row in first.history)
+    source, _ = load_policy(first.last_checkpoint)
+    tuned = train(tiny_coma(missions=2, init_policy=str(first.last_checkpoint)), env,
+                  tmp_path / "tuned", progress=False, tensorboard=False, max_updates=0)
+    start, data = load_policy(tuned.best_policy)
+    assert data["update"] == 0
+    for key, value in source.actor.state_dict().items():
+        assert torch.equal(value, start.actor.state_dict()[key]), key
+    for key, value in source.critic.state_dict().items():
+        assert torch.equal(value, start.critic.state_dict()[key]), key
+    with pytest.raises(CheckpointError, match="'coma' policy, this run trains 'decentralised'"):
+        train(tiny_coma(variant="decentralised", init_policy=str(first.last_checkpoint)), env,
+              tmp_path / "other", progress=False, tensorboard=False)
+    with pytest.raises(CheckpointError, match="observes"):
+        train(tiny_coma(init_policy=str(first.last_checkpoint)),
+              env.replace(features={"footprints": False}), tmp_path / "planes",
+              progress=False, tensorboard=False)
+    assert train_main(["coma", "--out", str(tmp_path / "cli"), "--team-sizes", "2,x"]) == 2
+    assert train_main(["coma", "--out", str(tmp_path / "cli"), "--init", "nope.pt"]) == 2
+    assert train_main(["coma", "--out", str(tmp_path / "cli"), "--team-sizes", "2,16"]) == 2
 
 
 def test_nan_loss_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):

@@ -359,8 +359,12 @@ def test_planner_spec_parse_and_options():
     assert PlannerSpec("ig").effective_label == "ig"
     assert PlannerSpec("coma", {"checkpoint": Path("a/b.pt")}).options == {"checkpoint": "a/b.pt"}
     assert hash(spec) == hash(PlannerSpec.parse("coma=runs/x/ckpt.pt"))
-    for bad in ("", "=x", "coma="):
-        with pytest.raises(ValueError, match="NAME or NAME=CHECKPOINT"):
+    labelled = PlannerSpec.parse("coma-mixed:coma=C:/runs/m.pt")
+    assert (labelled.name, labelled.options, labelled.effective_label) == (
+        "coma", {"checkpoint": "C:/runs/m.pt"}, "coma-mixed")
+    assert PlannerSpec.parse("mine:ig").effective_label == "mine"
+    for bad in ("", "=x", "coma=", ":coma", "x:", "x:=a"):
+        with pytest.raises(ValueError, match=r"NAME or \[LABEL:\]NAME=CHECKPOINT"):
             PlannerSpec.parse(bad)
     with pytest.raises(ValueError, match="JSON-serialisable"):
         PlannerSpec("ig", {"f": object()})
