@@ -33,10 +33,12 @@ from .inputs import critic_channels, value_channels
 from .networks import ConvNet
 
 __all__ = ["CHECKPOINT_KIND", "COMANetworks", "build_networks", "save_policy", "load_policy",
-           "check_transfer", "shipped_policy"]
+           "check_transfer", "shipped_policy", "SHIPPED_POLICY", "SHIPPED_MIXED_POLICY"]
 
 CHECKPOINT_KIND = "ipp-toolkit/coma"
 SHIPPED_POLICY = "coma_4agents_d25.pt"
+#: The policy fine-tuned on 2, 4 and 8 UAVs at D in {0, 25 m, inf} (planner ``coma_mixed``).
+SHIPPED_MIXED_POLICY = "coma_mixed.pt"
 
 
 @dataclass
@@ -116,9 +118,9 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, A
     return networks, data
 
 
-def shipped_policy() -> Path:
-    """Path of the policy shipped with the package (4 agents, D = 25 m)."""
-    return Path(str(resources.files("coma") / "checkpoints" / SHIPPED_POLICY))
+def shipped_policy(name: str = SHIPPED_POLICY) -> Path:
+    """Path of a policy shipped with the package (default: 4 agents, D = 25 m)."""
+    return Path(str(resources.files("coma") / "checkpoints" / name))
 
 
 def load_state_into(module: torch.nn.Module, state: Any, what: str, path: str) -> None:

@@ -18,10 +18,16 @@ import torch
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
 
-from .learner import greedy_actions
-from .persistence import check_transfer, load_policy, shipped_policy
+from .learner import greedy_actions, mission_settings
+from .persistence import (
+    SHIPPED_MIXED_POLICY,
+    SHIPPED_POLICY,
+    check_transfer,
+    load_policy,
+    shipped_policy,
+)
 
-__all__ = ["COMAPlanner"]
+__all__ = ["COMAPlanner", "COMAMixedPlanner"]
 
 
 class COMAPlanner(Planner):
@@ -34,10 +40,12 @@ class COMAPlanner(Planner):
 
     name = "coma"
     needs_observations = True
+    #: File name of the packaged policy used when no checkpoint is given.
+    shipped = SHIPPED_POLICY
 
     def __init__(self, checkpoint: str | os.PathLike[str] | None = None):
         torch.set_num_threads(1)
-        path = shipped_policy() if checkpoint is None else checkpoint
+        path = shipped_policy(self.shipped) if checkpoint is None else checkpoint
         if checkpoint is None and not os.path.exists(path):
             raise FileNotFoundError(f"no shipped COMA policy at {str(path)!r}; train one with "
                                     "`ipp-train coma --out RUN` and pass coma=RUN/best.pt")
@@ -47,12 +55,34 @@ class COMAPlanner(Planner):
         self.trained_config = networks.env_config
         self.observation_features = networks.env_config.features
         self.variant = networks.coma_config.variant
+        # Every (team size, range) the policy trained on, not only its base config's.
+        self.trained_settings = mission_settings(networks.coma_config, networks.env_config)
         self.transfer_notes: list[str] = []
 
     def reset(self, config: EnvConfig, seed: int) -> None:
-        self.transfer_notes = check_transfer(self.trained_config, config, self.checkpoint)
+        # The trained setting closest to this mission: a team size or range that was trained
+        # on is not a transfer.
+        def mismatches(trained: EnvConfig) -> int:
+            return (int(trained.team.n_agents != config.team.n_agents)
+                    + int(trained.team.comm_range != config.team.comm_range))
+
+        trained = min(self.trained_settings, key=mismatches)
+        self.transfer_notes = check_transfer(trained, config, self.checkpoint)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         observations = np.stack([view.observation for view in views])
         masks = np.stack([view.mask for view in views]).astype(bool)
         return greedy_actions(self.actor, observations, masks)
+
+
+class COMAMixedPlanner(COMAPlanner):
+    """The greedy COMA actor of the packaged policy fine-tuned on mixed teams.
+
+    The shipped ``coma`` policy, fine-tuned with one (team size, range) pair per update from
+    2, 4, 8 UAVs x D in {0, 25 m, inf} (``ipp-train coma --init shipped --team-sizes 2,4,8
+    --comm-ranges 0,25,inf``; not in the paper, whose robustness study applies the 4-UAV
+    policy without retraining). ``checkpoint`` overrides the packaged file like ``coma``'s.
+    """
+
+    name = "coma_mixed"
+    shipped = SHIPPED_MIXED_POLICY

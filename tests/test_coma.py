@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -293,6 +294,11 @@ def test_randomised_training_and_fine_tuning_from_a_policy(tmp_path):
     trained = {(row["n_agents"], row["comm_range"]) for row in first.history}
     assert trained == {(2, 0.0), (2, math.inf), (3, 0.0), (3, math.inf)}
     assert all(math.isfinite(row["eval_entropy_final"]) for row in first.history)
+    planner = COMAPlanner(first.best_policy)
+    planner.reset(env.replace(team={"n_agents": 3, "start": "random", "comm_range": "inf"}), 0)
+    assert not any(note.startswith("team.") for note in planner.transfer_notes)
+    planner.reset(env.replace(team={"n_agents": 4, "comm_range": 0}), 0)
+    assert planner.transfer_notes == ["team.n_agents: trained 2, running 4"]
     source, _ = load_policy(first.last_checkpoint)
     tuned = train(tiny_coma(missions=2, init_policy=str(first.last_checkpoint)), env,
                   tmp_path / "tuned", progress=False, tensorboard=False, max_updates=0)
@@ -420,3 +426,21 @@ def test_warm_start_imitates_the_demonstrator(tmp_path):
         WarmStartConfig(missions=0)
     code = train_main(["coma", "--out", str(tmp_path / "bad"), "--warm-start", "nosuch"])
     assert code == 2
+
+
+@pytest.mark.parametrize("name", ["coma", "coma_mixed"])
+def test_shipped_policies_load_register_and_fly(name):
+    from ipp_toolkit.planners import make_planner
+
+    planner = make_planner(name)
+    assert Path(planner.checkpoint).stat().st_size < 2_000_000
+    config = small_config(n_agents=8, comm_range=math.inf, resolution=1.0)
+    result = run_mission(config, planner, seed=0, mission=0)
+    assert len(result["rows"]) == config.team.budget + 1
+    # The mixed policy trained on 8 UAVs at infinite range: no transfer to note there.
+    transferred = [note for note in planner.transfer_notes if note.startswith("team.")]
+    if name == "coma_mixed":
+        assert len(planner.trained_settings) == 9 and transferred == []
+    else:
+        assert transferred == ["team.n_agents: trained 4, running 8",
+                               "team.comm_range: trained 25.0, running inf"]
