@@ -318,7 +318,11 @@ def study_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--train-resolution", type=_positive_float, default=0.5,
                         help="credit: map resolution of the training missions")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="credit: a COMAConfig field for every variant (repeatable)")
+                        help="credit, ablation: a COMAConfig field for every run (repeatable)")
+    parser.add_argument("--seeds", default=None, metavar="S,S,...",
+                        help="credit, ablation: training seeds; with several, each run is "
+                             "trained once per seed and the table gives mean and spread over "
+                             "seeds (default: one seed, 0)")
     parser.add_argument("--no-progress", action="store_true")
     try:
         args = parser.parse_args(argv)
@@ -348,7 +352,14 @@ def study_main(argv: list[str] | None = None) -> int:
                 if not sep:
                     raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
                 overrides[name.strip()] = _coerce(value.strip())
-            common = dict(missions=args.missions, overrides=overrides,
+            seeds = None
+            if args.seeds is not None:
+                try:
+                    seeds = [int(item) for item in args.seeds.split(",")]
+                except ValueError:
+                    raise ValueError(f"--seeds expects integers separated by commas, got "
+                                     f"{args.seeds!r}") from None
+            common = dict(missions=args.missions, overrides=overrides, seeds=seeds,
                           train_resolution=args.train_resolution, trials=args.trials,
                           seed=args.seed, out=out, workers=args.workers,
                           eval_resolution=args.resolution, progress=not args.no_progress)

@@ -23,7 +23,7 @@ from .plots import _colour, _new_figure, save_figure
 from .tables import Summary, atomic_write_text
 
 __all__ = ["RobustnessStudy", "robustness_study", "CreditStudy", "credit_assignment_study",
-           "ablation_study", "ABLATIONS"]
+           "ablation_study", "seed_table", "ABLATIONS"]
 
 
 @dataclass
@@ -183,10 +183,72 @@ def _train_runs(tasks: list[tuple[str, dict, dict, str, bool]], workers: int) ->
     return {task[0]: Path(path) for task, path in zip(tasks, paths, strict=True)}
 
 
+def _training_seeds(seeds: Sequence[int] | None, overrides: dict | None) -> list[int]:
+    """The training seeds of a study: ``seeds``, or the one in ``overrides`` (default 0)."""
+    if seeds is None:
+        return [int((overrides or {}).get("seed", 0))]
+    seeds = list(seeds)
+    if "seed" in (overrides or {}):
+        raise ValueError(f"give the training seed either in seeds ({seeds}) or in overrides "
+                         f"(seed = {overrides['seed']!r}), not both")
+    if not seeds or len(set(seeds)) != len(seeds) or any(
+            isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+        raise ValueError(f"seeds must be distinct non-negative integers, got {seeds}")
+    return seeds
+
+
+def _seeded_tasks(runs: list[tuple[str, dict, dict, Path]], seeds: list[int],
+                  progress: bool) -> list[tuple[str, dict, dict, str, bool]]:
+    """One training task per run and seed: with one seed the run's own label and folder,
+    with several ``LABEL@sK`` in ``FOLDER-sK``."""
+    tasks = []
+    for label, values, env, folder in runs:
+        for seed in seeds:
+            several = len(seeds) > 1
+            tasks.append((f"{label}@s{seed}" if several else label, {**values, "seed": seed},
+                          env, str(folder) + (f"-s{seed}" if several else ""), progress))
+    return tasks
+
+
+def seed_table(summary: Summary, runs: Sequence[str], seeds: Sequence[int]) -> str:
+    """Markdown table of each run over its training seeds (policies labelled ``RUN@sK``).
+
+    Each cell is the mean over seeds of the per-seed mean over test missions, +- the standard
+    deviation over seeds (ddof = 1), for the entropy at 33/67/100 % of the budget and the final
+    F1. Best mean per column in bold.
+    """
+    steps = list(summary.steps)
+    columns = [("entropy", step) for step in steps] + [("f1", summary.budget)]
+    values: dict[tuple[str, str, int], tuple[float, float]] = {}
+    for run in runs:
+        for metric, step in columns:
+            means = np.array([summary.stat(f"{run}@s{seed}", metric, step).mean
+                              for seed in seeds])
+            spread = float(means.std(ddof=1)) if len(means) > 1 else 0.0
+            values[(run, metric, step)] = (float(means.mean()), spread)
+    header = ["Run", "seeds"] + [f"{'Entropy' if m == 'entropy' else 'F1'} "
+                                 f"{summary.fraction(step)}" for m, step in columns]
+    lines = ["| " + " | ".join(header) + " |", "|:---|" + "---:|" * (len(header) - 1)]
+    for run in runs:
+        cells = [run, str(len(seeds))]
+        for metric, step in columns:
+            column = [values[(r, metric, step)][0] for r in runs]
+            best = min(column) if metric == "entropy" else max(column)
+            mean, spread = values[(run, metric, step)]
+            text = f"{mean:.3f} ± {spread:.3f}"
+            cells.append(f"**{text}**" if round(mean, 3) == round(best, 3) else text)
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str, trials: int,
                   seed: int, workers: int, eval_resolution: float | None,
-                  progress: bool) -> CreditStudy:
-    """Fly the trained policies on the test missions; write ``out/name`` and ``out/compare``."""
+                  progress: bool, runs: Sequence[str] = (),
+                  seeds: Sequence[int] = ()) -> CreditStudy:
+    """Fly the trained policies on the test missions; write ``out/name`` and ``out/compare``.
+
+    With several training ``seeds``, the text starts with :func:`seed_table` over ``runs``.
+    """
     from ipp_toolkit.evaluation import PlannerSpec
 
     specs = [PlannerSpec("coma", {"checkpoint": str(path)}, label=label)
@@ -194,7 +256,12 @@ def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str,
     comparison = compare(agents=4, comm=25.0, planners=specs, trials=trials, seed=seed,
                          workers=workers, out=out / "compare", resolution=eval_resolution,
                          progress=progress)
-    text = caption + "\n\n" + comparison.table + "\n"
+    text = caption + "\n\n"
+    if len(seeds) > 1:
+        text += ("Over training seeds (mean ± std over seeds of each seed's mean over the test "
+                 "missions):\n\n" + seed_table(comparison.summary, runs, seeds)
+                 + "\n\nEvery trained policy:\n\n")
+    text += comparison.table + "\n"
     atomic_write_text(out / name, text)
     return CreditStudy(policies, text, out)
 
@@ -210,7 +277,8 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
                             trials: int = 50, seed: int = 0,
                             out: str | os.PathLike[str] = "results/credit",
                             workers: int = 1, eval_resolution: float | None = None,
-                            progress: bool = True) -> CreditStudy:
+                            progress: bool = True,
+                            seeds: Sequence[int] | None = None) -> CreditStudy:
     """Train COMA and its credit-assignment variants alike, then compare them on test missions.
 
     Every variant gets the ``cpu`` preset with ``overrides`` and ``missions`` training
@@ -229,6 +297,9 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
         workers: variants trained in parallel processes (and evaluation workers).
         eval_resolution: r_M of the test missions (default: the protocol's 0.1 m).
         progress: show progress bars.
+        seeds: training seeds; with several, every variant is trained once per seed (policies
+            ``VARIANT@sK``) and the table starts with the mean and spread over seeds (default:
+            one seed, ``overrides["seed"]`` or 0).
     """
     from coma.config import VARIANTS
 
@@ -236,17 +307,23 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
     unknown = sorted(set(variants) - set(VARIANTS))
     if unknown:
         raise ValueError(f"unknown variant(s) {unknown}; choose from {list(VARIANTS)}")
+    training_seeds = _training_seeds(seeds, overrides)
     out = Path(out)
     env = config_to_dict(_training_mission(train_resolution))
     values = {**(overrides or {}), "missions": int(missions)}
-    tasks = [(v, {**values, "variant": v}, env, str(out / "runs" / v),
-              progress and workers == 1) for v in variants]
+    tasks = _seeded_tasks([(v, {**values, "variant": v}, env, out / "runs" / v)
+                           for v in variants], training_seeds, progress and workers == 1)
     policies = _train_runs(tasks, workers)
     caption = (f"Credit-assignment study: each variant trained for {missions} missions "
-               f"(cpu preset, overrides {overrides or {}}), one training seed; test: "
-               f"{trials} missions.")
+               f"(cpu preset, overrides {overrides or {}}), {_seeds_text(training_seeds)}; "
+               f"test: {trials} missions.")
     return _compare_runs(policies, out, "credit.md", caption, trials, seed, workers,
-                         eval_resolution, progress)
+                         eval_resolution, progress, variants, training_seeds)
+
+
+def _seeds_text(seeds: Sequence[int]) -> str:
+    return (f"training seed {seeds[0]}" if len(seeds) == 1
+            else f"training seeds {', '.join(map(str, seeds))}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -262,7 +339,8 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
                    overrides: dict | None = None, train_resolution: float = 0.5,
                    trials: int = 50, seed: int = 0,
                    out: str | os.PathLike[str] = "results/ablation", workers: int = 1,
-                   eval_resolution: float | None = None, progress: bool = True) -> CreditStudy:
+                   eval_resolution: float | None = None, progress: bool = True,
+                   seeds: Sequence[int] | None = None) -> CreditStudy:
     """Train COMA on the default mission and on variants of it with one setting toggled.
 
     Each name in ``ablations`` is a ``FeatureConfig`` switch (toggled: a plane that is on is
@@ -272,8 +350,11 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
     unchanged mission. Every run gets the same ``cpu``-preset training (``missions``, plus
     ``overrides``); the greedy policies then fly the same ``trials`` test missions.
 
+    ``seeds`` works as in :func:`credit_assignment_study`.
+
     Returns:
-        a :class:`CreditStudy` whose ``policies`` are keyed ``full`` and ``-<name>``.
+        a :class:`CreditStudy` whose ``policies`` are keyed ``full`` and ``-<name>`` (with
+        ``@sK`` appended per seed when there are several).
     """
     from dataclasses import fields
 
@@ -284,21 +365,21 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
     if unknown:
         raise ValueError(f"unknown ablation(s) {unknown}; choose from "
                          f"{sorted(switches | set(ABLATIONS))}")
+    training_seeds = _training_seeds(seeds, overrides)
     out = Path(out)
     base = _training_mission(train_resolution)
     values = {**(overrides or {}), "missions": int(missions)}
-    tasks = [("full", values, config_to_dict(base), str(out / "runs" / "full"),
-              progress and workers == 1)]
+    runs = [("full", values, config_to_dict(base), out / "runs" / "full")]
     for name in ablations:
         if name == "masking":
             env = base.replace(team={"invalid_action": "hold"})
         else:
             env = base.replace(features={name: not getattr(base.features, name)})
-        tasks.append((f"-{name}", values, config_to_dict(env), str(out / "runs" / name),
-                      progress and workers == 1))
-    policies = _train_runs(tasks, workers)
+        runs.append((f"-{name}", values, config_to_dict(env), out / "runs" / name))
+    policies = _train_runs(_seeded_tasks(runs, training_seeds, progress and workers == 1),
+                           workers)
     caption = (f"Feature ablation: COMA trained for {missions} missions per run (cpu preset, "
-               f"overrides {overrides or {}}), one training seed; '-x' = x toggled; "
-               f"test: {trials} missions.")
+               f"overrides {overrides or {}}), {_seeds_text(training_seeds)}; '-x' = x "
+               f"toggled; test: {trials} missions.")
     return _compare_runs(policies, out, "ablation.md", caption, trials, seed, workers,
-                         eval_resolution, progress)
+                         eval_resolution, progress, [run[0] for run in runs], training_seeds)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from reports.cli import study_main
 from reports.studies import robustness_study
 
@@ -61,3 +63,43 @@ def test_ablation_study_end_to_end(tmp_path):
     assert not no_own.env_config.features.own_position
     assert "| -masking |" in (tmp_path / "ablation.md").read_text()
     assert study_main(["ablation", "--ablations", "nosuch", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_studies_train_each_run_once_per_seed_and_summarise_over_seeds(tmp_path):
+    import numpy as np
+
+    from coma.persistence import load_policy
+    from reports.studies import credit_assignment_study, seed_table
+    from reports.tables import Stat, Summary
+
+    tiny = {"width": 8, "hidden": 16, "missions_per_update": 2, "minibatch_size": 60,
+            "eval_missions": 1, "warm_start": ""}
+    study = credit_assignment_study(["coma"], missions=2, overrides=tiny, train_resolution=1.0,
+                                    trials=2, eval_resolution=1.0, out=tmp_path,
+                                    progress=False, seeds=[3, 5])
+    assert set(study.policies) == {"coma@s3", "coma@s5"}
+    for seed in (3, 5):
+        networks, _ = load_policy(study.policies[f"coma@s{seed}"])
+        assert networks.coma_config.seed == seed
+    text = (tmp_path / "credit.md").read_text()
+    assert "training seeds 3, 5" in text and "Over training seeds" in text
+    assert "| coma | 2 |" in text and "| coma@s3 |" in text
+    with pytest.raises(ValueError, match="not both"):
+        credit_assignment_study(["coma"], overrides={"seed": 1}, seeds=[0, 1], out=tmp_path)
+    with pytest.raises(ValueError, match=r"distinct non-negative integers, got \[1, 1\]"):
+        credit_assignment_study(["coma"], seeds=[1, 1], out=tmp_path)
+    assert study_main(["credit", "--seeds", "0,x", "--out", str(tmp_path / "x")]) == 2
+
+    # The table's numbers: mean and sample std over seeds of the per-seed means.
+    stats = {("a@s0", "entropy", 2): Stat(0.4, 0.1, 5), ("a@s1", "entropy", 2): Stat(0.6, 0.1, 5),
+             ("b@s0", "entropy", 2): Stat(0.3, 0.1, 5), ("b@s1", "entropy", 2): Stat(0.3, 0.1, 5),
+             ("a@s0", "f1", 2): Stat(0.7, 0.1, 5), ("a@s1", "f1", 2): Stat(0.9, 0.1, 5),
+             ("b@s0", "f1", 2): Stat(0.5, 0.1, 5), ("b@s1", "f1", 2): Stat(0.5, 0.1, 5)}
+    summary = Summary(planners=("a@s0", "a@s1", "b@s0", "b@s1"), metrics=("entropy", "f1"),
+                      steps=(2,), budget=2, stats=stats, plan_ms={}, missions=5, agents=(4,),
+                      comm=(25.0,))
+    table = seed_table(summary, ["a", "b"], [0, 1])
+    spread = np.std([0.4, 0.6], ddof=1)
+    assert f"| a | 2 | 0.500 ± {spread:.3f} | **0.800 ± {np.std([0.7, 0.9], ddof=1):.3f}** |" \
+        in table
+    assert "| b | 2 | **0.300 ± 0.000** | 0.500 ± 0.000 |" in table
