@@ -191,7 +191,7 @@ def training_env_config(config: PPOTrainConfig, env_config: EnvConfig) -> EnvCon
     """``env_config`` with the training team size, range and resolution of ``config``."""
     start = env_config.team.start
     if start == "fixed" and config.n_agents not in (2, 4, 8):
-        start = "random"  # fixed starts exist for 2, 4 and 8 agents only (SPEC §8)
+        start = "random"  # fixed starts exist for 2, 4 and 8 agents only
     return env_config.replace(world={"resolution": float(config.resolution)},
                               team={"n_agents": int(config.n_agents),
                                     "comm_range": float(config.comm_range), "start": start})

@@ -1,4 +1,4 @@
-"""Hyper-parameters of COMA training, in one dataclass (SPEC §5).
+"""Hyper-parameters of COMA training, in one dataclass.
 
 Two presets: ``paper`` (the paper's network size and schedule, from random networks) and
 ``cpu`` (the default, measured to train on one CPU core in under an hour: a narrower
@@ -19,7 +19,7 @@ from typing import Any
 
 __all__ = ["VARIANTS", "PRESETS", "COMAConfig", "preset"]
 
-#: The credit-assignment variants of the paper's study (SPEC §5).
+#: The credit-assignment variants of the paper's study.
 VARIANTS = ("coma", "central_qv", "actor_independent", "decentralised")
 
 

@@ -1,4 +1,4 @@
-"""What each credit-assignment variant's critic sees (SPEC §4-§5).
+"""What each credit-assignment variant's critic sees.
 
 ``coma`` and ``central_qv``: the actor's planes, the global planes (f)-(i) and the other
 agents' actions (j). ``actor_independent``: the same without (j). ``decentralised``: the

@@ -1,4 +1,4 @@
-"""The shared actor, the centralised critic and the bounded softmax policy (SPEC §5).
+"""The shared actor, the centralised critic and the bounded softmax policy.
 
 Both networks are the paper's shape: three valid convolutions (kernels 5, 4, 4; an 11 x 11
 input shrinks to 7, 4, 1), a hidden fully connected layer, and an output head. The width is a

@@ -6,7 +6,7 @@ mission's :class:`~ipp_toolkit.config.EnvConfig` as plain dicts. Training checkp
 optimisers, the target critic, the sampling generator and the progress counters. Files are
 written atomically and read with ``torch.load(weights_only=True)``.
 
-Transfer (SPEC §8, the paper's robustness study): a policy trained with N agents and range D
+Transfer (the paper's robustness study): a policy trained with N agents and range D
 may run with other team sizes, ranges, budgets and map resolutions, because its inputs do not
 depend on them; it always observes with its own feature planes, and the planning grid must
 match (see :func:`check_transfer`).

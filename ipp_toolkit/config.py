@@ -1,6 +1,6 @@
 """Configuration of a mission: dataclasses with validation, YAML in and out.
 
-Every number of the simulator is a field here; the defaults reproduce the paper (SPEC §1-§3).
+Every number of the simulator is a field here; the defaults reproduce the paper.
 Validation happens at construction and names the bad field and value, so a typo in a YAML
 file fails at load time rather than deep inside numpy.
 """
@@ -57,7 +57,7 @@ def _positive(section: str, name: str, value: float) -> None:
 
 @dataclass(frozen=True)
 class WorldConfig:
-    """The area and its discretisations (SPEC §1).
+    """The area and its discretisations.
 
     Attributes:
         area_size: side of the square area in metres.
@@ -113,7 +113,7 @@ class WorldConfig:
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """The downward camera and its altitude-dependent noise (SPEC §1).
+    """The downward camera and its altitude-dependent noise.
 
     Attributes:
         fov_deg: full square field of view in degrees.
@@ -135,7 +135,7 @@ class SensorConfig:
 
 @dataclass(frozen=True)
 class TerrainConfig:
-    """How the ground truth of a mission is generated (SPEC §1, §8).
+    """How the ground truth of a mission is generated.
 
     Attributes:
         kind: ``split`` (straight boundary at any angle), ``split-axis`` (the authors' four
@@ -187,7 +187,7 @@ START_POSITIONS: dict[int, tuple[tuple[float, float], ...]] = {
 
 @dataclass(frozen=True)
 class TeamConfig:
-    """The UAV team, its starts, its communication and its action rules (SPEC §2, §8).
+    """The UAV team, its starts, its communication and its action rules.
 
     Attributes:
         n_agents: team size N.
@@ -237,7 +237,7 @@ class TeamConfig:
 
 @dataclass(frozen=True)
 class RewardConfig:
-    """Team reward and the class weights of the weighted entropy (SPEC §3).
+    """Team reward and the class weights of the weighted entropy.
 
     Attributes:
         alpha: scale of the relative weighted-entropy reduction (must be > 0).
@@ -263,7 +263,7 @@ class RewardConfig:
 
 @dataclass(frozen=True)
 class FeatureConfig:
-    """Which 11 x 11 feature planes the actor and the critic see (SPEC §4, §8).
+    """Which 11 x 11 feature planes the actor and the critic see.
 
     Actor planes, in this order when switched on: ``budget``, ``agent_id``, ``position`` (a),
     ``own_position`` (off by default: not in the paper),

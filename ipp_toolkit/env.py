@@ -1,4 +1,4 @@
-"""PettingZoo ``ParallelEnv`` shell over the mission core (SPEC §4).
+"""PettingZoo ``ParallelEnv`` shell over the mission core.
 
 Spaces per agent (G = 11 at the defaults, C = number of actor planes switched on, 7 by
 default):

@@ -1,4 +1,4 @@
-"""Evaluation runner: N test missions per planner, per-step metric curves, resumable (SPEC §7-§8).
+"""Evaluation runner: N test missions per planner, per-step metric curves, resumable.
 
 :func:`evaluate` flies missions ``0 .. missions - 1`` of run ``seed`` in a namespace (``test`` by
 default: terrains disjoint from ``train`` and ``validation``) with every planner. Mission k is

@@ -1,4 +1,4 @@
-"""Actor and critic feature planes on the 11 x 11 planning grid (SPEC §4, §8).
+"""Actor and critic feature planes on the 11 x 11 planning grid.
 
 Every plane is G x G (one cell per waypoint). Map planes average the map cells of each
 waypoint's 5 m x 5 m block (entropy planes average W H per cell, not H of the mean). Each

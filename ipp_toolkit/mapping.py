@@ -33,7 +33,7 @@ PROB_CLIP = 1e-4
 
 LOGODDS_CLIP = float(np.log((1 - PROB_CLIP) / PROB_CLIP))
 WEIGHT_TIE_TOLERANCE = 1e-3
-"""Cells within this distance of 0.5 are 'unknown' and get weight 0.5 (SPEC §3)."""
+"""Cells within this distance of 0.5 are 'unknown' and get weight 0.5."""
 
 Rect = tuple[int, int, int, int]
 """A half-open map-cell rectangle (row0, row1, col0, col1)."""

@@ -1,4 +1,4 @@
-"""The mission core: explicit state plus ``reset_mission`` and ``step_mission`` (SPEC §2-§3, §8).
+"""The mission core: explicit state plus ``reset_mission`` and ``step_mission``.
 
 Plain functions over a :class:`MissionState` (Gymnasium's functional-env style); the
 PettingZoo shell in :mod:`ipp_toolkit.env` only holds a state and calls them. Maps are updated
@@ -84,7 +84,7 @@ class MissionGeometry:
 
 @dataclass
 class Metrics:
-    """Evaluation metrics of the global map at one step (SPEC §3).
+    """Evaluation metrics of the global map at one step.
 
     Attributes:
         entropy: mean entropy in bits over ground-truth interesting cells (1.0 at the prior).

@@ -1,6 +1,6 @@
 """The planner interface, the per-agent read-only view, and the registry of planners by name.
 
-A planner decides a joint action from what each UAV knows (SPEC §8): its own local map at full
+A planner decides a joint action from what each UAV knows: its own local map at full
 resolution, its own pose, the teammates it hears within range and their latest footprints,
 and its action mask; never the global map or the ground truth. The views it receives are
 read-only numpy views into the mission, so a planner cannot change the mission by accident.

@@ -1,4 +1,4 @@
-"""Random streams of a mission, derived from (namespace, seed, mission index) (SPEC §8).
+"""Random streams of a mission, derived from (namespace, seed, mission index).
 
 Each mission has separate streams for terrain, start positions, sensor noise and message
 drops, so that mission k is the same for every planner and any number of workers: planners

@@ -1,6 +1,6 @@
 """The downward camera: footprint geometry per waypoint and simulated noisy readings.
 
-A reading is simulated per map cell: correct with probability p(h), else flipped (SPEC §1).
+A reading is simulated per map cell: correct with probability p(h), else flipped.
 It is stored as the likelihood of "interesting" (p(h) if it reads 1, 1 - p(h) if it reads 0)
 and enters the maps as the log-odds increment logit(z) - logit(prior).
 """

@@ -1,4 +1,4 @@
-"""Actions, action masks, the same-target rule and the communication graph (SPEC §2, §8).
+"""Actions, action masks, the same-target rule and the communication graph.
 
 Positions are integer waypoint indices ``(ix, iy, iz)``: x and y index the planning grid,
 iz the flight level. Masks are the one owner of "which action is valid" in the toolkit.
@@ -19,7 +19,7 @@ __all__ = [
 ]
 
 ACTION_NAMES = ("up", "north", "east", "south", "west", "down")
-"""Action indices 0..5 (SPEC §8): north is +y, east is +x."""
+"""Action indices 0..5: north is +y, east is +x."""
 
 ACTION_DELTAS = np.array(
     [[0, 0, 1], [0, 1, 0], [1, 0, 0], [0, -1, 0], [-1, 0, 0], [0, 0, -1]], dtype=np.int64

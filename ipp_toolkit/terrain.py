@@ -1,4 +1,4 @@
-"""Ground-truth terrains: which map cells are interesting (SPEC §1, §8).
+"""Ground-truth terrains: which map cells are interesting.
 
 A map is a 2-D array indexed ``[y, x]`` with row 0 at y = 0 (plot it with
 ``origin="lower"``); cell (row j, column i) has its centre at ((i + 0.5) r, (j + 0.5) r)

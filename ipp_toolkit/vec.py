@@ -1,4 +1,4 @@
-"""Single-policy (parameter-sharing) view of the simulator for Stable-Baselines3 (SPEC §4).
+"""Single-policy (parameter-sharing) view of the simulator for Stable-Baselines3.
 
 SuperSuit's ``pettingzoo_env_to_vec_env_v1`` turns one :class:`~ipp_toolkit.env.IPPEnv` into
 a vector of N single-agent envs (one per UAV) and ``concat_vec_envs_v1`` stacks ``n_envs``
@@ -15,7 +15,7 @@ termination/truncation split and per-env infos.
 * seeds: ``seed(s)`` (or ``PPO(seed=s)``) makes the next reset start copy ``c`` on run
   ``s + c`` (mission 0, then 1, 2, ... at every auto-reset), so copies differ and the same
   seed replays the same missions, with any ``num_cpus``;
-* the budget end is a true terminal (SPEC §8): ``dones`` is True and
+* the budget end is a true terminal: ``dones`` is True and
   ``info["TimeLimit.truncated"]`` is False, so PPO does not bootstrap past it;
 * ``close()`` stops SuperSuit's worker processes; it also runs at interpreter exit, because
   those non-daemon workers otherwise make the interpreter hang there.
@@ -177,7 +177,7 @@ class IPPVecEnv(VecEnv):
         for slot, info in enumerate(infos):
             info = self._clean_info(info)
             if dones[slot]:
-                # SPEC §8: the budget end is a true terminal, never a time-limit truncation.
+                # The budget end is a true terminal, never a time-limit truncation.
                 info["TimeLimit.truncated"] = bool(truncated[slot] and not terminated[slot])
             clean.append(info)
         return (self._split(obs), np.asarray(rewards, dtype=np.float32), dones, clean)
