@@ -43,7 +43,13 @@ from stable_baselines3.common.vec_env import VecMonitor
 from torch import nn
 from tqdm.auto import tqdm
 
-from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict, load_config
+from ipp_toolkit.config import (
+    EnvConfig,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+    start_for_team_size,
+)
 from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
 from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
@@ -189,9 +195,7 @@ class PPOTrainConfig:
 
 def training_env_config(config: PPOTrainConfig, env_config: EnvConfig) -> EnvConfig:
     """``env_config`` with the training team size, range and resolution of ``config``."""
-    start = env_config.team.start
-    if start == "fixed" and config.n_agents not in (2, 4, 8):
-        start = "random"  # fixed starts exist for 2, 4 and 8 agents only
+    start = start_for_team_size(env_config.team.start, int(config.n_agents))
     return env_config.replace(world={"resolution": float(config.resolution)},
                               team={"n_agents": int(config.n_agents),
                                     "comm_range": float(config.comm_range), "start": start})

@@ -34,7 +34,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ipp_toolkit.config import START_POSITIONS, EnvConfig, config_to_dict, load_config
+from ipp_toolkit.config import EnvConfig, config_to_dict, load_config, start_for_team_size
 from ipp_toolkit.evaluation import planner_seed
 from ipp_toolkit.features import actor_observations, actor_plane_names
 from ipp_toolkit.io import CheckpointError, atomic_write, write_json
@@ -377,13 +377,9 @@ def mission_settings(coma_config: COMAConfig, env_config: EnvConfig) -> list[Env
     team = env_config.team
     sizes = coma_config.team_sizes or (team.n_agents,)
     ranges = coma_config.comm_ranges or (team.comm_range,)
-    settings = []
-    for n_agents in sizes:
-        start = team.start if team.start == "random" or n_agents in START_POSITIONS else "random"
-        for comm_range in ranges:
-            settings.append(env_config.replace(team={"n_agents": n_agents, "start": start,
-                                                     "comm_range": comm_range}))
-    return settings
+    return [env_config.replace(team={"n_agents": n_agents, "comm_range": comm_range,
+                                     "start": start_for_team_size(team.start, n_agents)})
+            for n_agents in sizes for comm_range in ranges]
 
 
 def setting_of_update(n_settings: int, seed: int, update: int) -> int:
@@ -536,38 +532,34 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                  "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
         run_info: dict[str, Any] = {"coma": coma_config.to_dict(),
                                     "env": config_to_dict(env_config)}
-        if coma_config.init_policy:
-            _initialise_from(networks, coma_config.init_policy)
+        budget = env_config.team.budget
+
+        def score_start() -> dict[str, float]:
+            """Validate the starting networks; they are ``best.pt`` at update 0."""
             networks.actor.eval()
             validation = validate(networks.actor, settings, geometries, coma_config.seed,
                                   coma_config.eval_missions)
             networks.actor.train()
-            state["best_entropy"] = validation[f"entropy_{env_config.team.budget}"]
+            state["best_entropy"] = validation[f"entropy_{budget}"]
             save_policy(best_path, networks, {"validation": validation, "update": 0})
-            run_info["init_policy"] = {
-                "path": coma_config.init_policy,
-                "validation_entropy": state["best_entropy"],
-                "validation_f1": validation[f"f1_{env_config.team.budget}"]}
-        elif warm_start is None and coma_config.warm_start:
+            return {"validation_entropy": validation[f"entropy_{budget}"],
+                    "validation_f1": validation[f"f1_{budget}"]}
+
+        if warm_start is None and coma_config.warm_start:
             warm_start = WarmStartConfig(planner=coma_config.warm_start,
                                          missions=coma_config.warm_start_missions)
-        if warm_start is not None and not coma_config.init_policy:
+        if coma_config.init_policy:
+            _initialise_from(networks, coma_config.init_policy)
+            run_info["init_policy"] = {"path": coma_config.init_policy, **score_start()}
+        elif warm_start is not None:
             from .warm_start import warm_start as imitate
 
             tick = time.perf_counter()
             scores = imitate(networks, env_config, warm_start, coma_config.seed, generator,
                              progress)
             scores["seconds"] = time.perf_counter() - tick
-            networks.actor.eval()
-            validation = validate(networks.actor, settings, geometries, coma_config.seed,
-                                  coma_config.eval_missions)
-            networks.actor.train()
-            budget = env_config.team.budget
-            scores["validation_entropy"] = validation[f"entropy_{budget}"]
-            scores["validation_f1"] = validation[f"f1_{budget}"]
-            state["best_entropy"] = scores["validation_entropy"]
+            scores.update(score_start())
             save_policy(out / "warm_start.pt", networks, {"warm_start": scores})
-            save_policy(best_path, networks, {"validation": validation, "update": 0})
             run_info["warm_start"] = {**warm_start.to_dict(), "result": scores}
         target_critic = copy.deepcopy(networks.critic)
         optimisers = _make_optimisers(networks)

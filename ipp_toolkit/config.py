@@ -27,6 +27,7 @@ __all__ = [
     "FeatureConfig",
     "EnvConfig",
     "TERRAIN_KINDS",
+    "start_for_team_size",
     "load_config",
     "save_config",
     "config_from_dict",
@@ -183,6 +184,12 @@ START_POSITIONS: dict[int, tuple[tuple[float, float], ...]] = {
     4: ((10, 10), (40, 10), (40, 40), (10, 40)),
     8: ((10, 10), (40, 10), (40, 40), (10, 40), (25, 10), (40, 25), (25, 40), (10, 25)),
 }
+
+
+def start_for_team_size(start: str, n_agents: int) -> str:
+    """``start`` for a team of ``n_agents``: ``fixed`` falls back to ``random`` for team sizes
+    without documented fixed starts (:data:`START_POSITIONS`)."""
+    return "random" if start == "fixed" and n_agents not in START_POSITIONS else start
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig, load_config
+from ipp_toolkit.config import EnvConfig, load_config, start_for_team_size
 from ipp_toolkit.env import IPPEnv
 
 
@@ -63,8 +63,7 @@ def simulate_main(argv: list[str] | None = None) -> int:
         team: dict = {}
         if args.agents is not None:
             team["n_agents"] = args.agents
-            if args.agents not in (2, 4, 8):
-                team["start"] = "random"
+            team["start"] = start_for_team_size(config.team.start, args.agents)
         if args.comm is not None:
             team["comm_range"] = args.comm
         if team:
@@ -342,7 +341,7 @@ def study_main(argv: list[str] | None = None) -> int:
             print(study.table)
             print(f"written: {out}/robustness.md, .csv, .png, .pdf")
         else:
-            from coma.learner import _coerce
+            from coma.learner import _coerce, _int_list
 
             from .studies import ablation_study
 
@@ -352,13 +351,7 @@ def study_main(argv: list[str] | None = None) -> int:
                 if not sep:
                     raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
                 overrides[name.strip()] = _coerce(value.strip())
-            seeds = None
-            if args.seeds is not None:
-                try:
-                    seeds = [int(item) for item in args.seeds.split(",")]
-                except ValueError:
-                    raise ValueError(f"--seeds expects integers separated by commas, got "
-                                     f"{args.seeds!r}") from None
+            seeds = None if args.seeds is None else _int_list("--seeds", args.seeds)
             common = dict(missions=args.missions, overrides=overrides, seeds=seeds,
                           train_resolution=args.train_resolution, trials=args.trials,
                           seed=args.seed, out=out, workers=args.workers,

@@ -202,9 +202,9 @@ def _seeded_tasks(runs: list[tuple[str, dict, dict, Path]], seeds: list[int],
     """One training task per run and seed: with one seed the run's own label and folder,
     with several ``LABEL@sK`` in ``FOLDER-sK``."""
     tasks = []
+    several = len(seeds) > 1
     for label, values, env, folder in runs:
         for seed in seeds:
-            several = len(seeds) > 1
             tasks.append((f"{label}@s{seed}" if several else label, {**values, "seed": seed},
                           env, str(folder) + (f"-s{seed}" if several else ""), progress))
     return tasks
