@@ -70,6 +70,10 @@ class COMAConfig:
             drawn per update like ``team_sizes`` (``()``: the mission config's own range).
             With several settings, validation scores the mean final entropy over all of
             them, ``eval_missions`` missions each.
+        critic_warmup_updates: the first updates of the run fit only the critic(s), the
+            actor stays as it starts (not in the paper): for fine-tuning with ``init_policy``
+            on settings the critic has not seen, where a critic's early errors would otherwise
+            move a good actor.
         init_policy: a COMA policy file (``best.pt``, ``last.pt`` or a shipped policy) whose
             actor and critic start this run instead of random networks or a warm start
             (fine-tuning, not in the paper); its variant, size and feature planes must match.
@@ -103,6 +107,7 @@ class COMAConfig:
     team_sizes: tuple[int, ...] = ()
     comm_ranges: tuple[float, ...] = ()
     init_policy: str = ""
+    critic_warmup_updates: int = 0
 
     def __post_init__(self) -> None:
         # JSON and YAML hand back lists: keep tuples so configs compare and hash alike.
@@ -158,10 +163,10 @@ class COMAConfig:
                 _fail(name, value, "must lie in [0, 1)")
         if not isinstance(self.warm_start, str) or any(c in self.warm_start for c in " ,="):
             _fail("warm_start", self.warm_start, "must be a planner name or ''")
-        if isinstance(self.eps_anneal_missions, bool) or not isinstance(
-                self.eps_anneal_missions, int) or self.eps_anneal_missions < 0:
-            _fail("eps_anneal_missions", self.eps_anneal_missions,
-                  "must be a non-negative integer")
+        for name in ("eps_anneal_missions", "critic_warmup_updates"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                _fail(name, value, "must be a non-negative integer")
 
     def replace(self, **changes: Any) -> COMAConfig:
         """Copy with some fields changed (validated; unknown names are refused)."""

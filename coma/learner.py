@@ -239,8 +239,12 @@ def _clip_step(optimiser: torch.optim.Optimizer, module: nn.Module, loss: torch.
 
 
 def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[str, Any],
-           rollout: Rollout, eps: float, generator: torch.Generator) -> dict[str, float]:
+           rollout: Rollout, eps: float, generator: torch.Generator,
+           train_actor: bool = True) -> dict[str, float]:
     """One COMA update on a rollout; returns the mean losses and diagnostics.
+
+    ``train_actor=False`` fits only the critic(s) (a critic warm-up): the actor, its
+    optimiser and its diagnostics are left alone.
 
     Raises:
         TrainingDiverged: a loss is not finite (the networks may be damaged: do not save).
@@ -285,6 +289,8 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
                 _check_finite("value loss", value_loss)
                 _clip_step(optimisers["value"], networks.value, value_loss, cfg.max_grad_norm)
                 logs["value_loss"].append(value_loss.item())
+            if not train_actor:
+                continue
 
             probs = bounded_softmax(networks.actor(actor_obs[batch]), masks[batch], eps)
             # The critic's pre-step Q serves the actor: one forward pass fewer per mini-batch.
@@ -599,7 +605,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                                       coma_config.seed, state["missions"], per_update, eps,
                                       generator)
             try:
-                losses = update(networks, target_critic, optimisers, rollout, eps, generator)
+                losses = update(networks, target_critic, optimisers, rollout, eps, generator,
+                                train_actor=state["update"] >= coma_config.critic_warmup_updates)
             except TrainingDiverged as error:
                 raise TrainingDiverged(
                     f"{error} at update {state['update'] + 1}; training stopped. The last "
@@ -771,7 +778,8 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
     team: dict[str, Any] = {}
     if args.agents is not None:
         team["n_agents"] = args.agents
-        team["start"] = "fixed" if args.agents in (2, 4, 8) else "random"
+        # The config's own choice, with the random fallback for sizes without fixed starts.
+        team["start"] = start_for_team_size(env_config.team.start, args.agents)
     if args.comm is not None:
         team["comm_range"] = args.comm
     if team:

@@ -27,6 +27,7 @@ __all__ = [
     "FeatureConfig",
     "EnvConfig",
     "TERRAIN_KINDS",
+    "terrain_kinds",
     "start_for_team_size",
     "load_config",
     "save_config",
@@ -134,13 +135,21 @@ class SensorConfig:
                   "and a perfect sensor breaks the log-odds filter")
 
 
+def terrain_kinds() -> tuple[str, ...]:
+    """The built-in terrain kinds and every kind added with ``terrain.register_terrain``."""
+    from .terrain import TERRAIN_GENERATORS  # terrain imports this module: look up lazily
+
+    return tuple(dict.fromkeys((*TERRAIN_KINDS, *TERRAIN_GENERATORS)))
+
+
 @dataclass(frozen=True)
 class TerrainConfig:
     """How the ground truth of a mission is generated.
 
     Attributes:
         kind: ``split`` (straight boundary at any angle), ``split-axis`` (the authors' four
-            axis-aligned splits), ``blobs`` (thresholded smooth random field) or ``raster``.
+            axis-aligned splits), ``blobs`` (thresholded smooth random field), ``raster``,
+            or a kind added with :func:`ipp_toolkit.terrain.register_terrain`.
         share_min, share_max: range of the interesting share for ``split``/``blobs``.
         blob_scale: correlation length of the ``blobs`` field in metres.
         raster: path of a .npy/.png/.tif file for ``raster`` (or pass an array to the
@@ -159,9 +168,9 @@ class TerrainConfig:
     nan_policy: str = "raise"
 
     def __post_init__(self) -> None:
-        if self.kind not in TERRAIN_KINDS:
-            _fail("terrain", "kind", self.kind,
-                  f"unknown terrain kind; choose one of {TERRAIN_KINDS}")
+        kinds = terrain_kinds()
+        if self.kind not in kinds:
+            _fail("terrain", "kind", self.kind, f"unknown terrain kind; choose one of {kinds}")
         if not 0.0 < self.share_min <= self.share_max < 1.0:
             _fail("terrain", "share_min/share_max", (self.share_min, self.share_max),
                   "need 0 < share_min <= share_max < 1")
@@ -274,7 +283,8 @@ class FeatureConfig:
 
     Actor planes, in this order when switched on: ``budget``, ``agent_id``, ``position`` (a),
     ``own_position`` (off by default: not in the paper),
-    ``local_map`` (b), ``local_entropy`` (c), ``measurement_entropy`` (d), ``footprints`` (e).
+    ``local_map`` (b), ``local_entropy`` (c), ``measurement_entropy`` (d), ``footprints`` (e),
+    ``gain`` (three planes, off by default: not in the paper).
     Critic-only planes: ``all_positions`` (f), ``global_map`` (g), ``global_entropy`` (h),
     ``all_footprints`` (i), ``other_actions`` (j, six planes).
 
@@ -286,6 +296,13 @@ class FeatureConfig:
             centre, so relating it to the absolute map planes (b)-(e) must be learned from the
             out-of-area border; this plane gives it directly (a departure, see
             docs/departures.md).
+        gain: three planes ``gain_level``, ``gain_up``, ``gain_down``: at every waypoint of
+            the agent's current altitude, the one above and the one below (0 where that
+            altitude does not exist), the expected weighted-entropy reduction of the agent's
+            local map by one reading taken there, per map cell of the footprint (in [0, 1]
+            for class weights <= 1). It is the quantity the ``ig`` planner maximises, given
+            to the actor at full map resolution instead of the 5 m block means of (b)-(e)
+            (a departure, see docs/departures.md).
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
     """
@@ -298,6 +315,7 @@ class FeatureConfig:
     local_entropy: bool = True
     measurement_entropy: bool = True
     footprints: bool = True
+    gain: bool = False
     all_positions: bool = True
     global_map: bool = True
     global_entropy: bool = True
@@ -314,7 +332,7 @@ class FeatureConfig:
 
 
 ACTOR_PLANES = ("budget", "agent_id", "position", "own_position", "local_map", "local_entropy",
-                "measurement_entropy", "footprints")
+                "measurement_entropy", "footprints", "gain")
 STATE_PLANES = ("budget", "all_positions", "global_map", "global_entropy", "all_footprints")
 
 

@@ -26,6 +26,7 @@ __all__ = [
     "BeliefMaps",
     "RegionChange",
     "f1_score",
+    "expected_gain",
 ]
 
 PROB_CLIP = 1e-4
@@ -268,3 +269,55 @@ class BeliefMaps:
     def wentropy_plane(self, index: int) -> np.ndarray:
         """(G, G) mean weighted entropy W(p) H(p) of map ``index`` per block (mean of W H)."""
         return self.wentropy_blocks[index] / self.blocks.block_area
+
+
+_LOGODDS_CLIP32 = np.float32(LOGODDS_CLIP)
+
+
+def expected_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
+                  accuracy: float, delta_logodds: np.ndarray,
+                  weight_interesting: float = 1.0, weight_uninteresting: float = 0.0,
+                  ) -> np.ndarray:
+    """Expected weighted-entropy reduction per cell of one reading at one altitude.
+
+    With p the cell's probability, a the accuracy and q = P(reading = 1) = p a + (1-p)(1-a),
+    the posteriors are l1 = clip(l + d1) and l0 = clip(l + d0), and the gain is
+    ``q W(p1) (H(p) - H(p1)) + (1 - q) W(p0) (H(p) - H(p0))`` in bits, W the class weights of
+    the posterior (as in the reward).
+
+    Args:
+        logodds: (h, w) float32 log-odds l of the cells.
+        prob: (h, w) float32 sigmoid(l) (the map's cache).
+        entropy: (h, w) float32 H(p) in bits (the map's cache).
+        accuracy: probability a that a reading at this altitude is correct.
+        delta_logodds: (2,) float32 log-odds increments (d0, d1) of a reading 0 / 1.
+        weight_interesting, weight_uninteresting: the reward's class weights.
+
+    Returns:
+        (h, w) float32 expected gain per cell.
+    """
+    a = np.float32(accuracy)
+    d0, d1 = (np.float32(d) for d in delta_logodds)
+    joint1 = prob * a  # P(cell = 1, reading = 1)
+    q = prob * (a + a - np.float32(1.0))
+    q += np.float32(1.0) - a
+    # Bayes' rule gives the posterior probabilities with one division each instead of a
+    # sigmoid of l1 / l0; they only feed the weights, whose bands (p > 0.5, |p - 0.5| <= 1e-3)
+    # lie far inside the log-odds clip, so clipping cannot change them.
+    p1 = joint1 / q
+    not_q = np.float32(1.0) - q
+    p0 = prob - joint1
+    p0 /= not_q
+    # d1 > 0 > d0 (accuracy > 0.5), so each posterior can only cross one side of the clip.
+    l1 = logodds + d1
+    np.minimum(l1, _LOGODDS_CLIP32, out=l1)
+    l0 = logodds + d0
+    np.maximum(l0, -_LOGODDS_CLIP32, out=l0)
+    gain1 = entropy - entropy_from_logodds(l1)
+    gain1 *= class_weights(p1, weight_interesting, weight_uninteresting)
+    gain1 *= q
+    gain0 = entropy - entropy_from_logodds(l0)
+    gain0 *= class_weights(p0, weight_interesting, weight_uninteresting)
+    gain0 *= not_q
+    gain1 += gain0
+    return gain1

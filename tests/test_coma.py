@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import yaml
 
 from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from coma.config import VARIANTS, COMAConfig, preset
@@ -444,3 +445,42 @@ def test_shipped_policies_load_register_and_fly(name):
     else:
         assert transferred == ["team.n_agents: trained 4, running 8",
                                "team.comm_range: trained 25.0, running inf"]
+
+
+def test_cli_agents_keeps_the_configs_start_choice(tmp_path):
+    from coma.learner import build_parser, configs_from_args
+    from ipp_toolkit.config import config_to_dict
+
+    random_starts = config_to_dict(tiny_env().replace(team={"start": "random"}))
+    path = tmp_path / "mission.yaml"
+    path.write_text(yaml.safe_dump(random_starts))
+    for argv, start in ((["--config", str(path), "--agents", "4"], "random"),
+                        (["--agents", "4"], "fixed"),
+                        (["--agents", "3"], "random")):  # no documented fixed starts for 3
+        _, env = configs_from_args(build_parser().parse_args(["--out", "x", *argv]))
+        assert env.team.start == start, argv
+
+
+def test_critic_warmup_leaves_the_actor_alone(tmp_path):
+    env = tiny_env()
+    source = train(tiny_coma(missions=2), env, tmp_path / "source", progress=False,
+                   tensorboard=False).last_checkpoint
+    config = tiny_coma(missions=4, critic_warmup_updates=1, init_policy=str(source))
+    result = train(config, env, tmp_path / "run", progress=False, tensorboard=False,
+                   max_updates=1)
+    start, _ = load_policy(source)
+    warmed, _ = load_policy(result.last_checkpoint)
+    for key, value in start.actor.state_dict().items():
+        assert torch.equal(value, warmed.actor.state_dict()[key]), key
+    assert any(not torch.equal(v, warmed.critic.state_dict()[k])
+               for k, v in start.critic.state_dict().items())
+    assert "actor_loss" not in result.history[0]  # no actor step, no actor diagnostics
+    # After the warm-up the actor trains again.
+    result = train(config, env, tmp_path / "run", resume=True, progress=False,
+                   tensorboard=False)
+    assert math.isfinite(result.history[-1]["actor_loss"])
+    trained, _ = load_policy(result.last_checkpoint)
+    assert any(not torch.equal(v, trained.actor.state_dict()[k])
+               for k, v in start.actor.state_dict().items())
+    with pytest.raises(ValueError, match="critic_warmup_updates = -1"):
+        tiny_coma(critic_warmup_updates=-1)

@@ -155,6 +155,17 @@ def test_feature_switches_change_channels():
     assert env.critic_observations(np.zeros(4, int)).shape == (4, 5 + 3, 11, 11)
 
 
+def test_gain_planes_pass_the_api_test():
+    config = small_config(comm_range=math.inf).replace(features={"gain": True})
+    env = IPPEnv(config)
+    obs, _ = env.reset(seed=0)
+    assert obs["uav_0"]["observation"].shape == (len(actor_plane_names(config.features)),
+                                                 11, 11)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        parallel_api_test(IPPEnv(config), num_cycles=20)
+
+
 def test_own_position_plane_marks_only_the_agent_in_the_absolute_frame():
     config = small_config().replace(features={"own_position": True})
     env = IPPEnv(config)

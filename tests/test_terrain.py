@@ -11,7 +11,8 @@ import tifffile
 from PIL import Image
 
 from ipp_toolkit import terrain
-from ipp_toolkit.config import TerrainConfig, WorldConfig
+from ipp_toolkit.config import EnvConfig, TerrainConfig, WorldConfig, terrain_kinds
+from ipp_toolkit.mission import reset_mission
 from ipp_toolkit.terrain import (
     TERRAIN_GENERATORS,
     generate_terrain,
@@ -111,10 +112,18 @@ def test_register_terrain_and_dispatch(monkeypatch):
     with pytest.raises(ValueError, match="'stripes' is already registered"):
         register_terrain("stripes")(stripes)
     register_terrain("stripes", replace=True)(stripes)
-    # config.py only accepts its four kinds; reach a registered kind by overriding "split".
-    terrain.TERRAIN_GENERATORS["split"] = stripes
-    truth = _terrain("split", 0)
+    # A registered kind is chosen through the config like a built-in one.
+    truth = _terrain("stripes", 0)
     assert truth[:, ::2].all() and not truth[:, 1::2].any()
+    assert "stripes" in terrain_kinds()
+    state = reset_mission(EnvConfig().replace(world={"resolution": 0.5},
+                                              terrain={"kind": "stripes"}), 0, 0)
+    assert state.ground_truth[:, ::2].all()
+
+
+def test_unknown_terrain_kind_is_refused_by_name():
+    with pytest.raises(ValueError, match="'stipes'.*unknown terrain kind.*'blobs'"):
+        TerrainConfig(kind="stipes")
 
 
 def test_generator_results_are_checked(monkeypatch):
