@@ -472,6 +472,13 @@ def _check_folder(folder: Path, identity: dict[str, Any],
                                   "cannot tell which configuration they belong to")
         return False
     stored = _read_identity(folder)
+    # A folder written before a config field existed stored no value for it; the field's
+    # default keeps the old behaviour, so compare the stored config with its defaults filled.
+    try:
+        stored["config"] = json.loads(json.dumps(config_to_dict(
+            config_from_dict(stored["config"]))))
+    except (ValueError, TypeError):
+        pass  # not a valid config now: compared as stored, and reported as different
     differing = []
     for key in ("config", "seed", "namespace"):
         differing += _flat_differences(stored.get(key), identity[key], key)

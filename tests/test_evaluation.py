@@ -276,6 +276,22 @@ def test_another_configuration_is_refused_and_nothing_written(tmp_path):
         evaluate(tiny_config(), PLANNERS, missions=1, progress=False, out_dir=stray)
 
 
+def test_a_folder_from_before_a_new_config_field_is_reused(tmp_path):
+    """A field added later (with a default that keeps the old behaviour) is not a change."""
+    out = tmp_path / "out"
+    evaluate(tiny_config(), PLANNERS[:1], missions=2, progress=False, out_dir=out)
+    identity = json.loads((out / "config.json").read_text(encoding="utf-8"))
+    del identity["config"]["features"]["gain"]  # as written before the field existed
+    (out / "config.json").write_text(json.dumps(identity), encoding="utf-8")
+    FirstValid.resets = []
+    evaluate(tiny_config(), PLANNERS[:1], missions=2, progress=False, out_dir=out)
+    assert FirstValid.resets == []  # nothing flown again
+    identity["config"]["features"]["gain"] = True  # a real difference is still refused
+    (out / "config.json").write_text(json.dumps(identity), encoding="utf-8")
+    with pytest.raises(EvaluationError, match=r"config\.features\.gain"):
+        evaluate(tiny_config(), PLANNERS[:1], missions=2, progress=False, out_dir=out)
+
+
 def test_load_results_round_trip_and_refusals(tmp_path):
     out = tmp_path / "out"
     config = tiny_config(comm_range=math.inf)
