@@ -64,6 +64,7 @@ class COMAConfig:
         warm_start: registered planner to imitate before COMA training (``coma.warm_start``;
             not in the paper), or ``""`` to start from random networks.
         warm_start_missions: demonstration missions of the warm start.
+        warm_start_epochs: passes over the demonstrations when fitting each network.
         team_sizes: train on these team sizes, one drawn per update (domain randomisation,
             not in the paper; ``()``: the mission config's own ``n_agents``).
         comm_ranges: train on these communication ranges in metres (``inf`` allowed), one
@@ -104,6 +105,7 @@ class COMAConfig:
     seed: int = 0
     warm_start: str = "ig"
     warm_start_missions: int = 1_500
+    warm_start_epochs: int = 8
     team_sizes: tuple[int, ...] = ()
     comm_ranges: tuple[float, ...] = ()
     init_policy: str = ""
@@ -137,7 +139,7 @@ class COMAConfig:
             _fail("variant", self.variant, f"choose from {list(VARIANTS)}")
         for name in ("width", "hidden", "missions", "missions_per_update", "minibatch_size",
                      "epochs", "target_update_transitions", "eval_every", "eval_missions",
-                     "checkpoint_every", "warm_start_missions"):
+                     "checkpoint_every", "warm_start_missions", "warm_start_epochs"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 _fail(name, value, "must be an integer >= 1")

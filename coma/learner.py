@@ -553,7 +553,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
 
         if warm_start is None and coma_config.warm_start:
             warm_start = WarmStartConfig(planner=coma_config.warm_start,
-                                         missions=coma_config.warm_start_missions)
+                                         missions=coma_config.warm_start_missions,
+                                         epochs=coma_config.warm_start_epochs)
         if coma_config.init_policy:
             _initialise_from(networks, coma_config.init_policy)
             run_info["init_policy"] = {"path": coma_config.init_policy, **score_start()}

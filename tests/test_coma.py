@@ -429,6 +429,18 @@ def test_warm_start_imitates_the_demonstrator(tmp_path):
     assert code == 2
 
 
+def test_warm_start_settings_come_from_the_coma_config(tmp_path):
+    import json
+
+    config = tiny_coma(missions=2, warm_start="coverage", warm_start_missions=2,
+                       warm_start_epochs=3)
+    train(config, tiny_env(), tmp_path, progress=False, tensorboard=False)
+    info = json.loads((tmp_path / "config.json").read_text())["warm_start"]
+    assert (info["planner"], info["missions"], info["epochs"]) == ("coverage", 2, 3)
+    with pytest.raises(ValueError, match="warm_start_epochs = 0"):
+        tiny_coma(warm_start_epochs=0)
+
+
 @pytest.mark.parametrize("name", ["coma", "coma_mixed"])
 def test_shipped_policies_load_register_and_fly(name):
     from ipp_toolkit.planners import make_planner
