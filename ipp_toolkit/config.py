@@ -296,13 +296,15 @@ class FeatureConfig:
             centre, so relating it to the absolute map planes (b)-(e) must be learned from the
             out-of-area border; this plane gives it directly (a departure, see
             docs/departures.md).
-        gain: three planes ``gain_level``, ``gain_up``, ``gain_down``: at every waypoint of
-            the agent's current altitude, the one above and the one below (0 where that
-            altitude does not exist), the expected weighted-entropy reduction of the agent's
-            local map by one reading taken there, per map cell of the footprint (in [0, 1]
-            for class weights <= 1). It is the quantity the ``ig`` planner maximises, given
-            to the actor at full map resolution instead of the 5 m block means of (b)-(e)
-            (a departure, see docs/departures.md).
+        gain: three planes ``gain_level``, ``gain_up``, ``gain_down`` in an 11 x 11 window
+            centred on the agent: at every waypoint of the agent's current altitude, the one
+            above and the one below (0 outside the area or where that altitude does not
+            exist), the expected weighted-entropy reduction of the agent's local map by one
+            reading taken there, divided by the cell count of the largest footprint and the
+            larger class weight (so in [0, 1]). It is the quantity the ``ig`` planner
+            maximises, given to the actor at full map resolution instead of the 5 m block
+            means of (b)-(e) (a departure, see docs/departures.md;
+            :func:`ipp_toolkit.features.gain_planes`).
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
     """

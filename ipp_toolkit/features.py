@@ -153,9 +153,6 @@ def footprint_gain(state: MissionState) -> np.ndarray:
     reward = state.config.reward
     scale = max(reward.weight_interesting, reward.weight_uninteresting, 1e-12)
     g = state.geometry.grid_points
-    rects = camera.rects
-    largest = max(int(((rects[..., 1] - rects[..., 0]) * (rects[..., 3] - rects[..., 2])).max()),
-                  1)
     # Teammates that heard the same readings hold identical maps (all of them at D = inf):
     # compute each distinct map once.
     first_holder: dict[bytes, int] = {}
@@ -176,7 +173,7 @@ def footprint_gain(state: MissionState) -> np.ndarray:
         np.cumsum(table[:, 1:, 1:], axis=2, out=table[:, 1:, 1:])
         r0, r1, c0, c1 = np.moveaxis(camera.rects[iz], -1, 0)  # each (G, G)
         sums = table[:, r1, c1] - table[:, r0, c1] - table[:, r1, c0] + table[:, r0, c0]
-        out[:, iz] = sums / (largest * scale)
+        out[:, iz] = sums / (camera.largest_footprint_cells * scale)
     return out[np.searchsorted(distinct, holder)]
 
 

@@ -285,6 +285,9 @@ def expected_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
     ``q W(p1) (H(p) - H(p1)) + (1 - q) W(p0) (H(p) - H(p0))`` in bits, W the class weights of
     the posterior (as in the reward).
 
+    Element-wise: the three arrays may have any common shape, e.g. (h, w) for one map's
+    window or (K, H, W) for a stack of maps.
+
     Args:
         logodds: (h, w) float32 log-odds l of the cells.
         prob: (h, w) float32 sigmoid(l) (the map's cache).

@@ -33,6 +33,8 @@ class Camera:
         delta_logodds: (Z, 2) float32 log-odds increment of a reading 0 / 1 per altitude.
         reading_entropy: (Z,) entropy in bits of one stored reading z (p(h) or 1 - p(h)),
             the same for both values of the reading.
+        largest_footprint_cells: map cells of the largest footprint (the highest altitude,
+            away from the border).
     """
 
     def __init__(self, world: WorldConfig, sensor: SensorConfig):
@@ -58,6 +60,8 @@ class Camera:
         rects[..., 2] = lo[:, None, :]
         rects[..., 3] = hi[:, None, :]
         self.rects = rects
+        self.largest_footprint_cells = max(int(((rects[..., 1] - rects[..., 0])
+                                                * (rects[..., 3] - rects[..., 2])).max()), 1)
         prior_logodds = float(logit(world.prior))
         self.delta_logodds = np.stack([logit(1 - self.accuracy), logit(self.accuracy)],
                                       axis=1).astype(np.float32) - np.float32(prior_logodds)
