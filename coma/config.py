@@ -75,6 +75,11 @@ class COMAConfig:
             actor stays as it starts (not in the paper): for fine-tuning with ``init_policy``
             on settings the critic has not seen, where a critic's early errors would otherwise
             move a good actor.
+        gain_prior: 0 for the paper's actor; > 0 for a :class:`~coma.networks.GainPriorActor`
+            whose logits add ``beta * expected gain`` of each option (needs the ``gain``
+            feature planes) to a residual network that starts at zero: COMA then trains a
+            correction of the ``ig`` planner's choice, starting from it (not in the paper);
+            the value is beta's start. Use it with ``warm_start = ""``.
         init_policy: a COMA policy file (``best.pt``, ``last.pt`` or a shipped policy) whose
             actor and critic start this run instead of random networks or a warm start
             (fine-tuning, not in the paper); its variant, size and feature planes must match.
@@ -110,6 +115,7 @@ class COMAConfig:
     comm_ranges: tuple[float, ...] = ()
     init_policy: str = ""
     critic_warmup_updates: int = 0
+    gain_prior: float = 0.0
 
     def __post_init__(self) -> None:
         # JSON and YAML hand back lists: keep tuples so configs compare and hash alike.
@@ -151,7 +157,7 @@ class COMAConfig:
                 _fail(name, value, "must be a positive finite number")
         if not isinstance(self.normalise_advantage, bool):
             _fail("normalise_advantage", self.normalise_advantage, "must be true or false")
-        for name in ("clip_ratio", "entropy_coef"):
+        for name in ("clip_ratio", "entropy_coef", "gain_prior"):
             value = getattr(self, name)
             if not _is_number(value) or value < 0:
                 _fail(name, value, "must be a non-negative finite number")

@@ -568,6 +568,9 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             scores.update(score_start())
             save_policy(out / "warm_start.pt", networks, {"warm_start": scores})
             run_info["warm_start"] = {**warm_start.to_dict(), "result": scores}
+        elif coma_config.gain_prior > 0:
+            # The gain-prior actor starts as a planner worth scoring (ig's choice).
+            run_info["gain_prior_start"] = score_start()
         target_critic = copy.deepcopy(networks.critic)
         optimisers = _make_optimisers(networks)
         write_json(out / "config.json", run_info)

@@ -8,10 +8,15 @@ weights serves every agent.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+
 import torch
 from torch import nn
 
-__all__ = ["ConvNet", "bounded_softmax", "epsilon_at"]
+from ipp_toolkit.team import ACTION_DELTAS, N_ACTIONS
+
+__all__ = ["ConvNet", "GainPriorActor", "bounded_softmax", "epsilon_at"]
 
 _KERNELS = (5, 4, 4)
 
@@ -48,6 +53,68 @@ class ConvNet(nn.Module):
 
     def forward(self, planes: torch.Tensor) -> torch.Tensor:
         return self.head(self.encoder(planes))
+
+
+class GainPriorActor(nn.Module):
+    """Actor whose logits are a learned residual over the ``ig`` planner's objective.
+
+    ``logits(u) = ConvNet(planes)(u) + beta * gain(u) / max_u' gain(u')``, where ``gain(u)`` is
+    read from the agent-centred ``gain`` planes (:func:`ipp_toolkit.features.gain_planes`) at
+    option u's waypoint: the horizontal moves next to the centre of ``gain_level``, up and
+    down at the centre of ``gain_up`` / ``gain_down``. The ConvNet's output layer starts at
+    zero, so the starting greedy policy is the best option by expected gain (``ig``'s choice
+    up to its discount of teammates' same-step footprints) and COMA trains only the
+    correction.
+    ``beta`` is learned (as ``log_beta``); it sets how sharply the starting policy samples.
+
+    Args:
+        in_channels: C, the actor's planes (the gain planes among them).
+        grid: G, the side of the planes.
+        gain_channels: channel indices of ``gain_level``, ``gain_up``, ``gain_down``.
+        width, hidden: sizes of the residual ConvNet.
+        beta: starting weight of the gain (> 0).
+
+    Shapes: ``forward`` maps (B, C, G, G) float32 to (B, 6) logits.
+    """
+
+    def __init__(self, in_channels: int, grid: int, gain_channels: Sequence[int], width: int,
+                 hidden: int, beta: float):
+        super().__init__()
+        if not beta > 0 or not math.isfinite(beta):
+            raise ValueError(f"GainPriorActor: beta = {beta!r} must be a positive number")
+        if len(gain_channels) != 3:
+            raise ValueError(f"GainPriorActor: gain_channels = {gain_channels!r} must name "
+                             "the three planes gain_level, gain_up, gain_down")
+        self.residual = ConvNet(in_channels, grid, N_ACTIONS, width, hidden)
+        last = self.residual.head[-1]
+        assert isinstance(last, nn.Linear)
+        nn.init.zeros_(last.weight)
+        nn.init.zeros_(last.bias)
+        self.log_beta = nn.Parameter(torch.tensor(math.log(beta)))
+        level, up, down = gain_channels
+        centre = grid // 2
+        channel = [up if dz > 0 else down if dz < 0 else level for _, _, dz in ACTION_DELTAS]
+        # Window cell (v, u) shows waypoint (y + v - c, x + u - c): option (dx, dy) is at
+        # (c + dy, c + dx). Buffers, not parameters: rebuilt from the configs, not stored.
+        self.register_buffer("option_channel", torch.tensor(channel), persistent=False)
+        self.register_buffer("option_row", torch.tensor(centre + ACTION_DELTAS[:, 1]),
+                             persistent=False)
+        self.register_buffer("option_col", torch.tensor(centre + ACTION_DELTAS[:, 0]),
+                             persistent=False)
+        self.in_channels = in_channels
+        self.grid = grid
+
+    def option_gains(self, planes: torch.Tensor) -> torch.Tensor:
+        """(B, C, G, G) planes -> (B, 6) expected gain of each option over the best one's.
+
+        Relative gains keep ``beta``'s effect the same late in a mission, when every
+        option's absolute gain has shrunk. Options outside the area read 0 (and are masked).
+        """
+        gains = planes[:, self.option_channel, self.option_row, self.option_col]
+        return gains / (gains.amax(dim=1, keepdim=True) + 1e-8)
+
+    def forward(self, planes: torch.Tensor) -> torch.Tensor:
+        return self.residual(planes) + self.log_beta.exp() * self.option_gains(planes)
 
 
 def bounded_softmax(logits: torch.Tensor, mask: torch.Tensor, eps: float) -> torch.Tensor:

@@ -23,22 +23,26 @@ from typing import Any
 import torch
 
 from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
-from ipp_toolkit.features import actor_plane_names
+from ipp_toolkit.features import GAIN_PLANES, actor_plane_names
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
 from ipp_toolkit.planners import check_policy_transfer as check_transfer
 from ipp_toolkit.team import N_ACTIONS
 
 from .config import COMAConfig, from_dict
 from .inputs import critic_channels, value_channels
-from .networks import ConvNet
+from .networks import ConvNet, GainPriorActor
 
 __all__ = ["CHECKPOINT_KIND", "COMANetworks", "build_networks", "save_policy", "load_policy",
-           "check_transfer", "shipped_policy", "SHIPPED_POLICY", "SHIPPED_MIXED_POLICY"]
+           "check_transfer", "shipped_policy", "SHIPPED_POLICY", "SHIPPED_MIXED_POLICY",
+           "SHIPPED_PRIOR_POLICY"]
 
 CHECKPOINT_KIND = "ipp-toolkit/coma"
 SHIPPED_POLICY = "coma_4agents_d25.pt"
 #: The policy fine-tuned on 2, 4 and 8 UAVs at D in {0, 25 m, inf} (planner ``coma_mixed``).
 SHIPPED_MIXED_POLICY = "coma_mixed.pt"
+#: The gain-prior policy (a residual over ``ig``'s objective), 4 agents, D = 25 m
+#: (planner ``coma_prior``).
+SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 
 
 @dataclass
@@ -70,7 +74,17 @@ def build_networks(coma_config: COMAConfig, env_config: EnvConfig) -> COMANetwor
     features = env_config.features
     grid = env_config.world.grid_points
     width, hidden = coma_config.width, coma_config.hidden
-    actor = ConvNet(len(actor_plane_names(features)), grid, N_ACTIONS, width, hidden)
+    names = actor_plane_names(features)
+    if coma_config.gain_prior > 0:
+        if not features.gain:
+            raise ValueError(f"invalid COMA config: gain_prior = {coma_config.gain_prior!r} "
+                             "needs the gain planes in the actor's input "
+                             "(features.gain = true, --feature gain=true)")
+        actor: torch.nn.Module = GainPriorActor(
+            len(names), grid, [names.index(name) for name in GAIN_PLANES], width, hidden,
+            coma_config.gain_prior)
+    else:
+        actor = ConvNet(len(names), grid, N_ACTIONS, width, hidden)
     critic = ConvNet(critic_channels(coma_config.variant, features), grid, N_ACTIONS, width,
                      hidden)
     value = (ConvNet(value_channels(features), grid, 1, width, hidden)

@@ -22,12 +22,13 @@ from .learner import greedy_actions, mission_settings
 from .persistence import (
     SHIPPED_MIXED_POLICY,
     SHIPPED_POLICY,
+    SHIPPED_PRIOR_POLICY,
     check_transfer,
     load_policy,
     shipped_policy,
 )
 
-__all__ = ["COMAPlanner", "COMAMixedPlanner"]
+__all__ = ["COMAPlanner", "COMAMixedPlanner", "COMAPriorPlanner"]
 
 
 class COMAPlanner(Planner):
@@ -86,3 +87,19 @@ class COMAMixedPlanner(COMAPlanner):
 
     name = "coma_mixed"
     shipped = SHIPPED_MIXED_POLICY
+
+
+class COMAPriorPlanner(COMAPlanner):
+    """The greedy COMA actor of the packaged gain-prior policy (4 agents, D = 25 m).
+
+    Its actor is a :class:`~coma.networks.GainPriorActor`: logits = a learned residual +
+    beta x each option's expected gain (the ``ig`` planner's objective, from the ``gain``
+    feature planes). Trained by COMA from that start, the ``ig``-like policy, at 4 UAVs and
+    D = 25 m (``ipp-train coma --feature gain=true --set gain_prior=50 --set warm_start=``;
+    not in the paper) and applied to other teams without retraining, like ``coma``. It
+    observes the gain planes, which cost more per step than the paper's planes (about 50 ms
+    per distinct local map at r_M = 0.1 m). ``checkpoint`` overrides the packaged file.
+    """
+
+    name = "coma_prior"
+    shipped = SHIPPED_PRIOR_POLICY

@@ -441,7 +441,7 @@ def test_warm_start_settings_come_from_the_coma_config(tmp_path):
         tiny_coma(warm_start_epochs=0)
 
 
-@pytest.mark.parametrize("name", ["coma", "coma_mixed"])
+@pytest.mark.parametrize("name", ["coma", "coma_mixed", "coma_prior"])
 def test_shipped_policies_load_register_and_fly(name):
     from ipp_toolkit.planners import make_planner
 
@@ -496,3 +496,60 @@ def test_critic_warmup_leaves_the_actor_alone(tmp_path):
                for k, v in start.actor.state_dict().items())
     with pytest.raises(ValueError, match="critic_warmup_updates = -1"):
         tiny_coma(critic_warmup_updates=-1)
+
+
+# ---------------------------------------------------------------- gain-prior actor
+
+
+def test_gain_prior_actor_reads_each_options_waypoint():
+    from coma.networks import GainPriorActor
+    from ipp_toolkit.team import ACTION_DELTAS
+
+    actor = GainPriorActor(5, 11, (2, 3, 4), width=8, hidden=16, beta=50.0)
+    c = 5
+    for action, (dx, dy, dz) in enumerate(ACTION_DELTAS):
+        planes = torch.zeros(1, 5, 11, 11)
+        planes[0, 0] = 1.0  # other planes never count
+        channel = 3 if dz > 0 else 4 if dz < 0 else 2
+        planes[0, channel, c + dy, c + dx] = 0.2
+        with torch.no_grad():
+            logits = actor(planes)[0]
+        assert int(logits.argmax()) == action
+        assert float(logits[action]) == pytest.approx(50.0)  # relative gain 1, residual 0
+    with pytest.raises(ValueError, match="beta = 0"):
+        GainPriorActor(5, 11, (2, 3, 4), width=8, hidden=16, beta=0.0)
+
+
+def test_gain_prior_policy_starts_at_the_best_expected_gain(tmp_path):
+    import json
+
+    from coma.learner import greedy_actions
+    from coma.persistence import build_networks
+    from ipp_toolkit.features import actor_observations, footprint_gain
+    from ipp_toolkit.mission import reset_mission, step_mission
+    from ipp_toolkit.team import ACTION_DELTAS
+
+    env = tiny_env(4).replace(features={"gain": True})
+    config = tiny_coma(gain_prior=30.0, missions=2)
+    with pytest.raises(ValueError, match="gain_prior = 30.0 needs the gain planes"):
+        train(config, tiny_env(4), tmp_path / "refused", progress=False, tensorboard=False)
+    train(config, env, tmp_path / "run", progress=False, tensorboard=False)
+    start = json.loads((tmp_path / "run" / "config.json").read_text())["gain_prior_start"]
+    assert math.isfinite(start["validation_entropy"])  # the start is scored (update 0)
+    trained, _ = load_policy(tmp_path / "run" / "last.pt")
+    assert type(trained.actor).__name__ == "GainPriorActor"
+    assert float(trained.actor.log_beta.detach().exp()) != 30.0  # beta is learned
+    # Untrained, the greedy choice is the best waypoint by footprint_gain.
+    untrained = build_networks(config, env).actor
+    state = reset_mission(env, 0, 0, "validation")
+    while not state.done:
+        masks = state.masks()
+        actions = greedy_actions(untrained, actor_observations(state, env.features), masks)
+        gain = footprint_gain(state)
+        for k, (x, y, z) in enumerate(state.positions):
+            options = [gain[k, z + dz, y + dy, x + dx] if masks[k, a] else -1.0
+                       for a, (dx, dy, dz) in enumerate(ACTION_DELTAS)]
+            assert options[actions[k]] == pytest.approx(max(options), abs=1e-6)
+        step_mission(state, actions)
+    with pytest.raises(ValueError, match="gain_prior = -1"):
+        tiny_coma(gain_prior=-1)
