@@ -95,8 +95,9 @@ class COMAPriorPlanner(COMAPlanner):
     Its actor is a :class:`~coma.networks.GainPriorActor`: logits = a learned residual +
     beta x each option's expected gain (the ``ig`` planner's objective, from the ``gain``
     feature planes). Trained by COMA from that start, the ``ig``-like policy, at 4 UAVs and
-    D = 25 m (``ipp-train coma --feature gain=true --set gain_prior=50 --set warm_start=``;
-    not in the paper) and applied to other teams without retraining, like ``coma``. It
+    D = 25 m (``ipp-train coma --feature gain=true --warm-start none --set gain_prior=50
+    ...``, the whole command in ``coma/checkpoints/coma_prior_4agents_d25.json``; not in the
+    paper) and applied to other teams without retraining, like ``coma``. It
     observes the gain planes, which cost more per step than the paper's planes (about 50 ms
     per distinct local map at r_M = 0.1 m). ``checkpoint`` overrides the packaged file.
     """
