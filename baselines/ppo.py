@@ -47,12 +47,12 @@ from ipp_toolkit.config import (
     EnvConfig,
     config_from_dict,
     config_to_dict,
-    load_config,
     start_for_team_size,
 )
 from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
 from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
+from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.vec import make_sb3_vec_env
 
 __all__ = [
@@ -195,7 +195,7 @@ class PPOTrainConfig:
 
 def training_env_config(config: PPOTrainConfig, env_config: EnvConfig) -> EnvConfig:
     """``env_config`` with the training team size, range and resolution of ``config``."""
-    start = start_for_team_size(env_config.team.start, int(config.n_agents))
+    start = start_for_team_size(env_config.team.start, int(config.n_agents), env_config.world)
     return env_config.replace(world={"resolution": float(config.resolution)},
                               team={"n_agents": int(config.n_agents),
                                     "comm_range": float(config.comm_range), "start": start})
@@ -618,11 +618,15 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--width", type=int, default=defaults.width,
                         help="conv channels of the features extractor")
     parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--agents", type=int, default=defaults.n_agents, help="team size N")
-    parser.add_argument("--comm", type=float, default=defaults.comm_range,
-                        help="communication range D in metres (inf allowed)")
-    parser.add_argument("--resolution", type=float, default=defaults.resolution,
-                        help="training map resolution in metres per cell")
+    parser.add_argument("--agents", type=int, default=None,
+                        help=f"team size N (default: the --config file's, else "
+                             f"{defaults.n_agents})")
+    parser.add_argument("--comm", type=float, default=None,
+                        help=f"communication range D in metres, inf allowed (default: the "
+                             f"--config file's, else {defaults.comm_range:g})")
+    parser.add_argument("--resolution", type=float, default=None,
+                        help=f"training map resolution in metres per cell (default: the "
+                             f"--config file's, else {defaults.resolution:g})")
     parser.add_argument("--num-cpus", type=int, default=defaults.num_cpus,
                         help="SuperSuit worker processes (0: none)")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
@@ -642,12 +646,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)  # exits with status 2 on malformed options
     try:
-        env_config = load_config(args.config) if args.config else EnvConfig()
+        defaults = PPOTrainConfig()
+        env_config = build_env_config(
+            args.config, agents=args.agents, comm=args.comm, resolution=args.resolution,
+            defaults={"world": {"resolution": defaults.resolution},
+                      "team": {"n_agents": defaults.n_agents,
+                               "comm_range": defaults.comm_range}})
         config = PPOTrainConfig(
             total_timesteps=args.timesteps, n_envs=args.n_envs, n_steps=args.n_steps,
             batch_size=args.batch_size, lr=args.lr, ent_coef=args.ent_coef, width=args.width,
-            masked=args.masked, seed=args.seed, resolution=args.resolution,
-            n_agents=args.agents, comm_range=args.comm, num_cpus=args.num_cpus,
+            masked=args.masked, seed=args.seed, resolution=env_config.world.resolution,
+            n_agents=env_config.team.n_agents, comm_range=env_config.team.comm_range,
+            num_cpus=args.num_cpus,
             checkpoint_every=args.checkpoint_every)
         training_env_config(config, env_config)  # validate before any work
         path = train_ppo(config, env_config, args.out, progress=not args.no_progress,

@@ -34,12 +34,13 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ipp_toolkit.config import EnvConfig, config_to_dict, load_config, start_for_team_size
+from ipp_toolkit.config import EnvConfig, config_to_dict, start_for_team_size
 from ipp_toolkit.evaluation import planner_seed
 from ipp_toolkit.features import actor_observations, actor_plane_names
 from ipp_toolkit.io import CheckpointError, atomic_write, write_json
 from ipp_toolkit.mission import MissionGeometry, MissionState, reset_mission, step_mission
 from ipp_toolkit.planners import Planner, agent_views
+from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
@@ -58,7 +59,7 @@ from .warm_start import WarmStartConfig
 
 __all__ = ["TrainingDiverged", "TrainResult", "Rollout", "collect_rollout", "greedy_actions",
            "evaluate_greedy", "validate", "mission_settings", "setting_of_update", "train",
-           "main", "training_env_config"]
+           "main", "TRAINING_DEFAULTS"]
 
 
 class TrainingDiverged(RuntimeError):
@@ -364,13 +365,6 @@ class TrainResult:
     history: list[dict[str, Any]] = field(default_factory=list)
 
 
-def training_env_config(env_config: EnvConfig, resolution: float | None) -> EnvConfig:
-    """The mission config used for training: ``env_config`` at map resolution ``resolution``."""
-    if resolution is None:
-        return env_config
-    return env_config.replace(world={"resolution": resolution})
-
-
 def mission_settings(coma_config: COMAConfig, env_config: EnvConfig) -> list[EnvConfig]:
     """The mission configs a run trains on: ``env_config`` for every (team size, range) pair.
 
@@ -384,7 +378,8 @@ def mission_settings(coma_config: COMAConfig, env_config: EnvConfig) -> list[Env
     sizes = coma_config.team_sizes or (team.n_agents,)
     ranges = coma_config.comm_ranges or (team.comm_range,)
     return [env_config.replace(team={"n_agents": n_agents, "comm_range": comm_range,
-                                     "start": start_for_team_size(team.start, n_agents)})
+                                     "start": start_for_team_size(team.start, n_agents,
+                                                                  env_config.world)})
             for n_agents in sizes for comm_range in ranges]
 
 
@@ -689,6 +684,12 @@ def _parse(text: str) -> Any:
 # Command line: ipp-train coma
 
 
+TRAINING_DEFAULTS = {"world": {"resolution": 0.5}, "features": {"own_position": True}}
+"""``ipp-train coma``'s defaults over the paper's mission: training at r_M = 0.5 m (the policy
+flies at any resolution) with the own-position plane (docs/departures.md). A ``--config`` file
+wins over them, an explicit flag over the file."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-train coma",
@@ -696,8 +697,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
                         help="hyper-parameter preset (default: cpu)")
     parser.add_argument("--variant", choices=VARIANTS, help="credit-assignment variant")
-    parser.add_argument("--config", help="YAML mission config (world, team, features, ...); "
-                             "default: the paper's mission with features.own_position on")
+    parser.add_argument("--config", help="YAML mission config (world, team, features, ...) "
+                             "over the training defaults (the paper's mission at r_M 0.5 m "
+                             "with features.own_position on); explicit flags win over it")
     parser.add_argument("--seed", type=int, help="run seed")
     parser.add_argument("--out", required=True, help="run folder")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -705,9 +707,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--width", type=int, help="convolution channels")
     parser.add_argument("--agents", type=int, help="team size (default: from --config, 4)")
     parser.add_argument("--comm", type=float, help="communication range in metres")
-    parser.add_argument("--resolution", type=float, default=0.5,
-                        help="map resolution for training in metres (default 0.5; evaluation "
-                             "runs at the mission config's own resolution)")
+    parser.add_argument("--resolution", type=float, default=None,
+                        help="map resolution for training in metres (default: the --config "
+                             "file's, else 0.5)")
     parser.add_argument("--warm-start", metavar="PLANNER",
                         help="first imitate this registered planner (e.g. ig; 'none' to "
                              "switch the preset's off); not in the paper")
@@ -776,27 +778,16 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
         if not Path(changes["init_policy"]).is_file():
             raise ValueError(f"--init {args.init!r}: no such policy file")
     coma_config = preset(args.preset, **changes)
-    # Without --config: the paper's mission with the own-position plane (docs/departures.md).
-    env_config = (load_config(args.config) if args.config
-                  else EnvConfig().replace(features={"own_position": True}))
-    team: dict[str, Any] = {}
-    if args.agents is not None:
-        team["n_agents"] = args.agents
-        # The config's own choice, with the random fallback for sizes without fixed starts.
-        team["start"] = start_for_team_size(env_config.team.start, args.agents)
-    if args.comm is not None:
-        team["comm_range"] = args.comm
-    if team:
-        env_config = env_config.replace(team=team)
     switches: dict[str, bool] = {}
     for item in args.feature:
         name, sep, value = item.partition("=")
         if not sep or value.strip().lower() not in ("true", "false", "1", "0", "on", "off"):
             raise ValueError(f"--feature expects NAME=true|false, got {item!r}")
         switches[name.strip()] = value.strip().lower() in ("true", "1", "on")
-    if switches:
-        env_config = env_config.replace(features=switches)
-    return coma_config, training_env_config(env_config, args.resolution)
+    env_config = build_env_config(args.config, defaults=TRAINING_DEFAULTS, agents=args.agents,
+                                  comm=args.comm, resolution=args.resolution,
+                                  features=switches)
+    return coma_config, env_config
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -29,6 +29,8 @@ __all__ = [
     "TERRAIN_KINDS",
     "terrain_kinds",
     "start_for_team_size",
+    "fixed_starts_fit",
+    "read_config_file",
     "load_config",
     "save_config",
     "config_from_dict",
@@ -195,10 +197,21 @@ START_POSITIONS: dict[int, tuple[tuple[float, float], ...]] = {
 }
 
 
-def start_for_team_size(start: str, n_agents: int) -> str:
+def fixed_starts_fit(world: WorldConfig, n_agents: int) -> bool:
+    """Whether ``n_agents`` has documented fixed starts that are waypoints of ``world``."""
+    starts = START_POSITIONS.get(n_agents)
+    return starts is not None and all(
+        max(x, y) <= world.area_size and not x % world.grid_spacing
+        and not y % world.grid_spacing for x, y in starts)
+
+
+def start_for_team_size(start: str, n_agents: int, world: WorldConfig | None = None) -> str:
     """``start`` for a team of ``n_agents``: ``fixed`` falls back to ``random`` for team sizes
-    without documented fixed starts (:data:`START_POSITIONS`)."""
-    return "random" if start == "fixed" and n_agents not in START_POSITIONS else start
+    without documented fixed starts (:data:`START_POSITIONS`) or, given ``world``, whose fixed
+    starts are not waypoints of it."""
+    if start != "fixed":
+        return start
+    return "fixed" if fixed_starts_fit(world or WorldConfig(), n_agents) else "random"
 
 
 @dataclass(frozen=True)
@@ -335,7 +348,6 @@ class FeatureConfig:
 
 ACTOR_PLANES = ("budget", "agent_id", "position", "own_position", "local_map", "local_entropy",
                 "measurement_entropy", "footprints", "gain")
-STATE_PLANES = ("budget", "all_positions", "global_map", "global_entropy", "all_footprints")
 
 
 @dataclass(frozen=True)
@@ -383,6 +395,10 @@ class EnvConfig:
             if isinstance(value, Mapping):
                 value = _build(_SECTIONS[name], {**dataclasses.asdict(getattr(self, name)),
                                                   **value}, name)
+            elif not isinstance(value, _SECTIONS[name]):
+                raise ValueError(f"invalid config: section {name!r} must be a "
+                                 f"{_SECTIONS[name].__name__} or a dict of its fields, "
+                                 f"got {value!r}")
             updates[name] = value
         return dataclasses.replace(self, **updates)
 
@@ -408,13 +424,27 @@ def _build(cls: type, values: Mapping[str, Any], section: str) -> Any:
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
-def config_from_dict(values: Mapping[str, Any] | None) -> EnvConfig:
-    """Build an :class:`EnvConfig` from nested dicts; unknown sections or keys are rejected."""
-    values = dict(values or {})
+def _check_keys(values: Mapping[str, Any]) -> None:
+    """Refuse unknown sections, sections that are not mappings and unknown keys."""
     unknown = sorted(set(values) - set(_SECTIONS))
     if unknown:
         raise ValueError(f"invalid config: unknown section(s) {unknown}; "
                          f"known sections: {sorted(_SECTIONS)}")
+    for name, section in values.items():
+        if not isinstance(section, Mapping):
+            raise ValueError(f"invalid config: section {name!r} must be a mapping, "
+                             f"got {section!r}")
+        known = {f.name for f in fields(_SECTIONS[name])}
+        unknown = sorted(set(section) - known)
+        if unknown:
+            raise ValueError(f"invalid config: unknown key(s) {unknown} in section {name!r}; "
+                             f"known keys: {sorted(known)}")
+
+
+def config_from_dict(values: Mapping[str, Any] | None) -> EnvConfig:
+    """Build an :class:`EnvConfig` from nested dicts; unknown sections or keys are rejected."""
+    values = dict(values or {})
+    _check_keys(values)
     return EnvConfig(**{name: _build(cls, values[name], name)
                         for name, cls in _SECTIONS.items() if name in values})
 
@@ -433,20 +463,59 @@ def config_to_dict(config: EnvConfig) -> dict[str, Any]:
             for name in _SECTIONS}
 
 
-def load_config(path: str | os.PathLike[str]) -> EnvConfig:
-    """Read a YAML config; missing sections and keys take their defaults."""
+class _StrictLoader(yaml.SafeLoader):
+    """A safe YAML loader that refuses a key written twice in one mapping."""
+
+
+def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    seen: set[Any] = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark)
+        seen.add(key)
+    return loader.construct_mapping(node)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _strict_mapping)
+
+
+def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The sections a YAML config file writes, as nested dicts, checked but not filled.
+
+    Raises:
+        ValueError: the file cannot be read, is not YAML, writes a key twice, is not a mapping
+            of sections, or has an unknown section or key (the message names the file).
+    """
     path = Path(path)
     try:
         text = path.read_text()
-    except OSError as err:
-        raise ValueError(f"cannot read config file {str(path)!r}: {err.strerror}") from err
+    except (OSError, UnicodeDecodeError) as err:
+        why = err.strerror if isinstance(err, OSError) else "not a text file"
+        raise ValueError(f"cannot read config file {str(path)!r}: {why}") from err
     try:
-        values = yaml.safe_load(text)
+        values = yaml.load(text, Loader=_StrictLoader)
     except yaml.YAMLError as err:
         raise ValueError(f"config file {str(path)!r} is not valid YAML: {err}") from err
-    if values is not None and not isinstance(values, Mapping):
+    if values is None:
+        return {}
+    if not isinstance(values, Mapping):
         raise ValueError(f"config file {str(path)!r} must hold a mapping of sections")
-    return config_from_dict(values)
+    try:
+        _check_keys(values)
+    except ValueError as err:
+        raise ValueError(f"{err} (in config file {str(path)!r})") from None
+    return {name: dict(section) for name, section in values.items()}
+
+
+def load_config(path: str | os.PathLike[str]) -> EnvConfig:
+    """Read a YAML config; missing sections and keys take their defaults."""
+    values = read_config_file(path)
+    try:
+        return config_from_dict(values)
+    except ValueError as err:
+        raise ValueError(f"{err} (in config file {os.fspath(path)!r})") from None
 
 
 def save_config(config: EnvConfig, path: str | os.PathLike[str]) -> None:

@@ -32,7 +32,6 @@ import math
 import multiprocessing
 import os
 import pickle
-import re
 import sys
 import time
 import warnings
@@ -57,6 +56,7 @@ from .planners import (
     planner_factory,
 )
 from .seeding import mission_streams
+from .settings import safe_name
 
 __all__ = [
     "RESULT_COLUMNS",
@@ -177,11 +177,6 @@ def _as_specs(planners: str | Sequence[str | PlannerSpec]) -> list[PlannerSpec]:
         else:
             raise ValueError(f"a planner must be a name or a PlannerSpec, got {item!r}")
     return specs
-
-
-def _file_stem(label: str) -> str:
-    """``label`` as a file-name-safe word (the same rule as ``reports.safe_name``)."""
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("._") or "planner"
 
 
 def planner_seed(seed: int, mission: int, namespace: str = "test") -> int:
@@ -491,7 +486,7 @@ def _check_folder(folder: Path, identity: dict[str, Any],
                       f"this is {identity['version']}: stored missions are reused",
                       stacklevel=3)
     for spec in specs:
-        path = folder / "shards" / _file_stem(spec.effective_label) / "planner.json"
+        path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
         if not path.exists():
             continue
         try:
@@ -507,11 +502,11 @@ def _check_folder(folder: Path, identity: dict[str, Any],
 
 
 def _shard_path(folder: Path, label: str, mission: int) -> Path:
-    return folder / "shards" / _file_stem(label) / f"mission_{mission:05d}.json"
+    return folder / "shards" / safe_name(label) / f"mission_{mission:05d}.json"
 
 
 def _trajectory_path(folder: Path, label: str, mission: int) -> Path:
-    return folder / "trajectories" / f"{_file_stem(label)}_mission{mission}.npz"
+    return folder / "trajectories" / f"{safe_name(label)}_mission{mission}.npz"
 
 
 def _check_rows(rows: Any, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
@@ -799,11 +794,11 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     for label in labels:
         if label in stems.values():
             raise ValueError(f"planner label {label!r} is given twice; give one a label")
-        other = stems.get(_file_stem(label))
+        other = stems.get(safe_name(label))
         if other is not None:
             raise ValueError(f"planner labels {other!r} and {label!r} map to the same file "
-                             f"name {_file_stem(label)!r}; rename one")
-        stems[_file_stem(label)] = label
+                             f"name {safe_name(label)!r}; rename one")
+        stems[safe_name(label)] = label
     folder = Path(out_dir) if out_dir is not None else None
     identity = _identity(config, seed, namespace)
     has_identity = _check_folder(folder, identity, specs) if folder is not None else False
@@ -854,7 +849,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         if not has_identity:
             write_json(folder / "config.json", identity)
         for spec in specs:
-            path = folder / "shards" / _file_stem(spec.effective_label) / "planner.json"
+            path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
             if not path.exists():
                 write_json(path, spec.to_dict())
 

@@ -22,18 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig, load_config, start_for_team_size
 from ipp_toolkit.env import IPPEnv
+from ipp_toolkit.settings import build_env_config, comm_label, describe_config, parse_comm
 
 
 def _comm_range(text: str) -> float:
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--comm must be metres or 'inf', got {text!r}") from None
-    if math.isnan(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"--comm must be >= 0, got {text!r}")
-    return value
+        return parse_comm(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _simulate_parser() -> argparse.ArgumentParser:
@@ -43,10 +40,11 @@ def _simulate_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--config", type=Path, help="YAML config (defaults: the paper's)")
-    parser.add_argument("--agents", type=int, help="team size (overrides the config)")
+    parser.add_argument("--agents", type=_positive_int("agents"),
+                        help="team size (overrides the config)")
     parser.add_argument("--comm", type=_comm_range,
                         help="communication range in metres or 'inf' (overrides the config)")
-    parser.add_argument("--resolution", type=float, help="map resolution r_M in metres")
+    parser.add_argument("--resolution", type=_positive_float, help="map resolution r_M in metres")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED", help="run seed")
     parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
     parser.add_argument("--out", type=Path, default=Path("results/simulate"),
@@ -59,21 +57,17 @@ def simulate_main(argv: list[str] | None = None) -> int:
     parser = _simulate_parser()
     args = parser.parse_args(argv)
     try:
-        config = load_config(args.config) if args.config else EnvConfig()
-        team: dict = {}
-        if args.agents is not None:
-            team["n_agents"] = args.agents
-            team["start"] = start_for_team_size(config.team.start, args.agents)
-        if args.comm is not None:
-            team["comm_range"] = args.comm
-        if team:
-            config = config.replace(team=team)
-        if args.resolution is not None:
-            config = config.replace(world={"resolution": args.resolution})
+        config = build_env_config(args.config, agents=args.agents, comm=args.comm,
+                                  resolution=args.resolution)
+        args.out.mkdir(parents=True, exist_ok=True)
         env = IPPEnv(config, render_mode="rgb_array", namespace="test")
         observations, infos = env.reset(seed=args.seed, options={"mission": args.mission})
     except ValueError as err:
         print(f"ipp-simulate: error: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:
+        print(f"ipp-simulate: error: cannot write --out {str(args.out)!r}: {err.strerror}",
+              file=sys.stderr)
         return 2
     rng = np.random.default_rng(args.seed)
     rows = [{"step": 0, "reward": "", **infos[env.possible_agents[0]]["metrics"]}]
@@ -90,7 +84,6 @@ def simulate_main(argv: list[str] | None = None) -> int:
         rows.append({"step": env.mission.step, "reward": reward, **metrics})
         print(f"{env.mission.step:>4} {reward:8.3f} {metrics['entropy']:8.3f} "
               f"{metrics['f1']:6.3f} {metrics['rmse']:6.3f}")
-    args.out.mkdir(parents=True, exist_ok=True)
     from ipp_toolkit.rendering import save_png
 
     save_png(env.render(), args.out / "final.png")
@@ -151,10 +144,12 @@ def _compare_parser() -> argparse.ArgumentParser:
                     "results (results.csv, config.json, shards/) to --out.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("--agents", type=_positive_int("agents"), default=4, metavar="N",
-                        help="team size N (teams without fixed starts start at random cells)")
-    parser.add_argument("--comm", type=_comm_range, default="25", metavar="METRES|inf",
-                        help="communication range D in metres, or 'inf'")
+    parser.add_argument("--agents", type=_positive_int("agents"), default=None, metavar="N",
+                        help="team size N (default: the --config file's, else 4; teams "
+                             "without fixed starts start at random cells)")
+    parser.add_argument("--comm", type=_comm_range, default=None, metavar="METRES|inf",
+                        help="communication range D in metres, or 'inf' (default: the "
+                             "--config file's, else 25)")
     parser.add_argument("--planners", default="all", metavar="LIST",
                         help="comma-separated planners: registered names (ig, coverage, "
                              "random, ...) or NAME=CHECKPOINT items (coma=PATH), each with "
@@ -165,12 +160,13 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="number of test missions (the same missions for every planner)")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED",
                         help="run seed of the test missions")
-    parser.add_argument("--terrain", default="split", metavar="KIND|FILE",
-                        help="terrain kind (split, split-axis, blobs) or a raster FILE "
-                             "(.npy/.png/.tif; needs --threshold)")
+    parser.add_argument("--terrain", default=None, metavar="KIND|FILE",
+                        help="terrain kind (split, split-axis, blobs, ...) or a raster FILE "
+                             "(.npy/.png/.tif; needs --threshold); default: the --config "
+                             "file's, else split")
     parser.add_argument("--threshold", type=_finite_float, default=None, metavar="T",
-                        help="raster threshold: cells whose mean value is >= T are interesting "
-                             "(required with a terrain FILE)")
+                        help="raster threshold in the raster's units: cells whose mean value "
+                             "is >= T are interesting (required with a terrain FILE)")
     parser.add_argument("--workers", type=_positive_int("workers"),
                         default=min(2, os.cpu_count() or 1),
                         metavar="N", help="parallel evaluation processes; min(2, CPU count)")
@@ -178,8 +174,8 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="output folder; rerunning into it resumes the same configuration "
                              "and refuses another one")
     parser.add_argument("--config", type=Path, default=None, metavar="YAML",
-                        help="base YAML config (None: the paper's); the flags above and below "
-                             "override it")
+                        help="YAML config: it wins over the defaults, and every flag given "
+                             "explicitly wins over it (None: the paper's configuration)")
     parser.add_argument("--resolution", type=_positive_float, default=None,
                         metavar="METRES",
                         help="map resolution r_M in metres (None: the config's, 0.1)")
@@ -208,22 +204,28 @@ def compare_main(argv: list[str] | None = None) -> int:
         return exit_.code if isinstance(exit_.code, int) else 2
     from .compare import compare
 
-    out = args.out
-    if out == DEFAULT_COMPARE_OUT:
-        out = out.format(agents=args.agents,
-                         comm="inf" if math.isinf(args.comm) else f"{args.comm:g}")
-    out_dir = Path(out)
-
     def error(message: object) -> int:
         print(f"ipp-compare: error: {message}", file=sys.stderr)
         return 2
 
     try:
+        env_config = build_env_config(
+            args.config, agents=args.agents, comm=args.comm, terrain=args.terrain,
+            threshold=args.threshold, resolution=args.resolution, budget=args.budget,
+            area_size=args.area_size)
+    except (ValueError, OSError) as err:
+        return error(err)
+    out = args.out
+    if out == DEFAULT_COMPARE_OUT:
+        out = out.format(agents=env_config.team.n_agents,
+                         comm=comm_label(env_config.team.comm_range))
+    out_dir = Path(out)
+    print(f"setting: {describe_config(env_config)}"
+          + (f" (config file {str(args.config)!r})" if args.config else ""), file=sys.stderr)
+    try:
         comparison = compare(
-            agents=args.agents, comm=args.comm, planners=args.planners, trials=args.trials,
-            seed=args.seed, terrain=args.terrain, threshold=args.threshold,
-            workers=args.workers, out=out_dir, config=args.config, resolution=args.resolution,
-            budget=args.budget, area_size=args.area_size, progress=not args.no_progress,
+            planners=args.planners, trials=args.trials, seed=args.seed, workers=args.workers,
+            out=out_dir, config=env_config, progress=not args.no_progress,
             animate=args.animate)
     except (ValueError, OSError) as err:
         return error(err)

@@ -6,7 +6,8 @@ Example (a notebook)::
     comparison = compare(agents=4, comm=25.0, planners="ig,coverage,random", trials=20)
     comparison            # renders the Markdown table; comparison.plot("figs") draws
 
-:func:`compare` builds the :class:`~ipp_toolkit.config.EnvConfig` (:func:`build_config`),
+:func:`compare` builds the :class:`~ipp_toolkit.config.EnvConfig` (the one builder,
+:func:`ipp_toolkit.settings.build_env_config`: keyword > config file > defaults),
 checks and builds every planner (:func:`resolve_planners`) before anything is written, runs
 :func:`ipp_toolkit.evaluation.evaluate` and summarises the rows; with ``out`` it also writes
 the tables and figures next to the raw results.
@@ -14,18 +15,16 @@ the tables and figures next to the raw results.
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import os
-import re
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from ipp_toolkit.config import START_POSITIONS, TERRAIN_KINDS, EnvConfig, WorldConfig, load_config
+from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.planners import available_planners, make_planner
+from ipp_toolkit.settings import build_env_config, format_comm, safe_name
 
 from .plots import plot_curves, plot_trajectories
 from .tables import Summary, summarise, to_markdown, write_tables
@@ -42,17 +41,8 @@ __all__ = [
     "safe_name",
 ]
 
-TERRAIN_NAMES = tuple(kind for kind in TERRAIN_KINDS if kind != "raster")
-"""Terrain kinds selectable by name; a raster is selected by giving its file."""
-
-
-def safe_name(label: str) -> str:
-    """``label`` reduced to a file-name-safe word (letters, digits, ``.``, ``_``, ``-``)."""
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("._") or "planner"
-
-
-def _format_comm(value: float) -> str:
-    return "inf" if math.isinf(value) else f"{value:g} m"
+build_config = build_env_config
+"""The one config builder (:func:`ipp_toolkit.settings.build_env_config`) under its old name."""
 
 
 @dataclass
@@ -96,7 +86,7 @@ class Comparison:
                                                    key=lambda item: (str(item[0][0]),
                                                                      int(item[0][1]))):
             title = (f"{label}, mission {mission}: {config.team.n_agents} UAVs, "
-                     f"D = {_format_comm(config.team.comm_range)}")
+                     f"D = {format_comm(config.team.comm_range)}")
             metrics = final.get((str(label), int(mission)))
             if metrics is not None:
                 title += f"; final entropy {metrics[0]:.3f}, F1 {metrics[1]:.3f}"
@@ -112,112 +102,6 @@ class Comparison:
         budget = self.summary.budget
         return {(str(r["planner"]), int(r["mission"])): (float(r["entropy"]), float(r["f1"]))
                 for r in self.result.rows if int(r["step"]) == budget}
-
-
-def _fixed_starts_fit(world: WorldConfig, agents: int) -> bool:
-    starts = START_POSITIONS.get(agents)
-    if starts is None:
-        return False
-    return all(max(x, y) <= world.area_size and not x % world.grid_spacing
-               and not y % world.grid_spacing for x, y in starts)
-
-
-def _terrain_section(terrain: str | os.PathLike[str] | None, threshold: float | None,
-                     base: EnvConfig) -> dict[str, Any]:
-    section: dict[str, Any] = {}
-    if threshold is not None:
-        if not math.isfinite(float(threshold)):
-            raise ValueError(f"threshold must be a finite number, got {threshold!r}")
-        section["threshold"] = float(threshold)
-    if terrain is None:
-        return section
-    name = os.fspath(terrain)
-    if name in TERRAIN_NAMES:
-        return {**section, "kind": name, "raster": None}
-    if name == "raster":
-        if base.terrain.raster is None:
-            raise ValueError("terrain 'raster' needs a raster file: give the FILE as terrain "
-                             "(or a config with terrain.raster)")
-        name = base.terrain.raster
-    path = Path(name)
-    if not path.exists():
-        raise ValueError(f"cannot read terrain file {name!r}: no such file (terrain is one of "
-                         f"{', '.join(TERRAIN_NAMES)} or a raster FILE)")
-    if not path.is_file():
-        raise ValueError(f"cannot read terrain file {name!r}: not a file")
-    from ipp_toolkit.terrain import load_raster, prepare_raster
-
-    try:
-        prepare_raster(load_raster(path), base.terrain.nan_policy, repr(name))
-    except OSError as err:
-        raise ValueError(f"cannot read terrain file {name!r}: {err.strerror}") from err
-    if threshold is None and base.terrain.threshold is None:
-        raise ValueError(f"a terrain file needs a threshold (--threshold T): raster cells >= T "
-                         f"are interesting; none given for {name!r}")
-    return {**section, "kind": "raster", "raster": str(path.resolve())}
-
-
-def build_config(agents: int | None = 4, comm: float | None = 25.0,
-                 terrain: str | os.PathLike[str] | None = "split",
-                 threshold: float | None = None,
-                 config: EnvConfig | str | os.PathLike[str] | None = None,
-                 resolution: float | None = None, budget: int | None = None,
-                 area_size: float | None = None) -> EnvConfig:
-    """The configuration of a comparison: a base config with the given overrides.
-
-    Args:
-        agents: team size N (None keeps the base config's). Teams without documented fixed
-            starts for the world get ``team.start = "random"``; more than
-            ``features.agent_id_scale`` agents raise that scale to N.
-        comm: communication range D in metres, ``math.inf`` for full (None keeps the base's).
-        terrain: ``split``, ``split-axis`` or ``blobs``, a raster FILE (kind ``raster``; needs a
-            threshold), ``raster`` (the base config's file) or None (the base's terrain).
-        threshold: raster threshold (cells whose mean value is >= it are interesting).
-        config: the base: an :class:`EnvConfig`, a YAML path or None (the paper's defaults).
-        resolution: map resolution r_M in metres.
-        budget: number of steps B.
-        area_size: side of the area in metres.
-
-    Raises:
-        ValueError: a bad value (the message names it), an unreadable terrain file, a terrain
-            file without threshold, or an invalid resulting configuration.
-    """
-    if config is None:
-        base = EnvConfig()
-    elif isinstance(config, EnvConfig):
-        base = config
-    else:
-        base = load_config(config)
-    if agents is not None and (isinstance(agents, bool) or int(agents) != agents or agents < 1):
-        raise ValueError(f"agents must be an integer >= 1, got {agents!r}")
-    if comm is not None and (math.isnan(float(comm)) or float(comm) < 0):
-        raise ValueError(f"comm must be >= 0 metres or inf, got {comm!r}")
-    world: dict[str, Any] = {}
-    if area_size is not None:
-        world["area_size"] = float(area_size)
-    if resolution is not None:
-        world["resolution"] = float(resolution)
-    new_world = WorldConfig(**{**dataclasses.asdict(base.world), **world}) if world \
-        else base.world
-    team: dict[str, Any] = {}
-    n_agents = base.team.n_agents if agents is None else int(agents)
-    if agents is not None:
-        team["n_agents"] = n_agents
-    if comm is not None:
-        team["comm_range"] = float(comm)
-    if budget is not None:
-        team["budget"] = budget
-    if base.team.start == "fixed" and not _fixed_starts_fit(new_world, n_agents):
-        team["start"] = "random"
-    sections: dict[str, Any] = {"team": team}
-    if world:
-        sections["world"] = world
-    if base.features.agent_id and n_agents > base.features.agent_id_scale:
-        sections["features"] = {"agent_id_scale": n_agents}
-    terrain_section = _terrain_section(terrain, threshold, base)
-    if terrain_section:
-        sections["terrain"] = terrain_section
-    return base.replace(**sections)
 
 
 def default_planners(note: Callable[[str], None] | None = None) -> list[str]:
@@ -294,9 +178,9 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
     return specs
 
 
-def compare(agents: int | None = 4, comm: float | None = 25.0,
+def compare(agents: int | None = None, comm: float | None = None,
             planners: str | Sequence[str | PlannerSpec] | None = None, trials: int = 50,
-            seed: int = 0, terrain: str | os.PathLike[str] | None = "split",
+            seed: int = 0, terrain: str | os.PathLike[str] | None = None,
             threshold: float | None = None, workers: int = 1,
             out: str | os.PathLike[str] | None = None,
             config: EnvConfig | str | os.PathLike[str] | None = None,
@@ -307,7 +191,8 @@ def compare(agents: int | None = 4, comm: float | None = 25.0,
 
     Args:
         agents, comm, terrain, threshold, config, resolution, budget, area_size: the
-            configuration, see :func:`build_config`.
+            configuration, see :func:`ipp_toolkit.settings.build_env_config` (None: the
+            config's value, else the paper's: 4 UAVs, D = 25 m, ``split``).
         planners: see :func:`resolve_planners`; None: every available registered planner.
         trials: number of test missions (>= 1).
         seed: run seed of the missions.
@@ -331,9 +216,9 @@ def compare(agents: int | None = 4, comm: float | None = 25.0,
         raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
     if isinstance(workers, bool) or int(workers) != workers or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
-    env_config = build_config(agents=agents, comm=comm, terrain=terrain, threshold=threshold,
-                              config=config, resolution=resolution, budget=budget,
-                              area_size=area_size)
+    env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
+                                  threshold=threshold, resolution=resolution, budget=budget,
+                                  area_size=area_size)
     specs = resolve_planners(planners, note)
     from ipp_toolkit.evaluation import evaluate
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ipp_toolkit.config import EnvConfig, config_to_dict
+from ipp_toolkit.settings import comm_label
 
 from .compare import compare
 from .plots import _colour, _new_figure, save_figure
@@ -43,10 +44,6 @@ class RobustnessStudy:
     table: str
 
 
-def _comm_text(comm: float) -> str:
-    return "inf" if math.isinf(comm) else f"{comm:g}"
-
-
 def _table(settings: list[tuple[int, float]], planners: list[str],
            summaries: dict[tuple[int, float], Summary]) -> tuple[str, str]:
     """Markdown and CSV of the final entropy and F1 per setting and planner."""
@@ -60,14 +57,14 @@ def _table(settings: list[tuple[int, float]], planners: list[str],
                  for p in planners}
         best_h = min(s[0].mean for s in stats.values())
         best_f = max(s[1].mean for s in stats.values())
-        cells = [str(setting[0]), _comm_text(setting[1])]
+        cells = [str(setting[0]), comm_label(setting[1])]
         for planner in planners:
             h, f = stats[planner]
             text_h = f"{h.mean:.3f} ± {h.std:.3f}"
             text_f = f"{f.mean:.3f} ± {f.std:.3f}"
             cells.append(f"**{text_h}**" if h.mean == best_h else text_h)
             cells.append(f"**{text_f}**" if f.mean == best_f else text_f)
-            csv_lines.append(f"{setting[0]},{_comm_text(setting[1])},{planner},{h.mean:.6g},"
+            csv_lines.append(f"{setting[0]},{comm_label(setting[1])},{planner},{h.mean:.6g},"
                              f"{h.std:.6g},{f.mean:.6g},{f.std:.6g},{h.n}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n", "\n".join(csv_lines) + "\n"
@@ -84,7 +81,7 @@ def _figure(settings: list[tuple[int, float]], planners: list[str],
             stats = [summaries[s].stat(planner, metric, summaries[s].budget) for s in settings]
             ax.bar(x + (k - (len(planners) - 1) / 2) * width, [s.mean for s in stats], width,
                    yerr=[s.std for s in stats], label=planner, color=_colour(k), capsize=2)
-        ax.set_xticks(x, [f"N={a}\nD={_comm_text(c)}" for a, c in settings], fontsize=7)
+        ax.set_xticks(x, [f"N={a}\nD={comm_label(c)}" for a, c in settings], fontsize=7)
         ax.set(ylabel=f"final {'entropy' if metric == 'entropy' else 'F1'}", ylim=(0, 1))
     axes[0].legend(fontsize=7)
     return save_figure(figure, stem)
@@ -116,7 +113,7 @@ def robustness_study(planners: str | Sequence[str] = "coma,ig,coverage",
     summaries: dict[tuple[int, float], Summary] = {}
     labels: list[str] = []
     for n_agents, comm in settings:
-        folder = out / f"a{n_agents}-d{_comm_text(comm)}"
+        folder = out / f"a{n_agents}-d{comm_label(comm)}"
         comparison = compare(agents=n_agents, comm=comm, planners=planners, trials=trials,
                              seed=seed, workers=workers, out=folder, resolution=resolution,
                              progress=progress, note=note)

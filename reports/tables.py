@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ipp_toolkit.io import atomic_write
+from ipp_toolkit.settings import format_comm
 
 __all__ = [
     "Stat",
@@ -124,7 +125,7 @@ class Summary:
             agents = "/".join(str(a) for a in self.agents)
             parts.append(f"{agents} UAV{'s' if self.agents != (1,) else ''}")
         if self.comm:
-            parts.append("D = " + "/".join(_format_comm(c) for c in self.comm))
+            parts.append("D = " + "/".join(format_comm(c) for c in self.comm))
         if self.terrain:
             parts.append("terrain " + "/".join(self.terrain))
         parts.append(f"budget B = {self.budget} steps")
@@ -141,10 +142,6 @@ class Summary:
 def _metric_word(metric: str) -> str:
     name = METRIC_NAMES.get(metric, metric)
     return name if name.isupper() else name.lower()
-
-
-def _format_comm(value: float) -> str:
-    return "inf" if math.isinf(value) else f"{value:g} m"
 
 
 def budget_steps(budget: int) -> tuple[int, ...]:

@@ -47,8 +47,8 @@ def test_help_lists_every_flag_with_its_default(capsys):
     assert text.startswith("usage: ipp-compare")
     for flag in FLAGS:
         assert flag in text, flag
-    for default in ("(default: 4)", "(default: 25)", "(default: all)", "(default: 50)",
-                    "(default: 0)", "(default: split)", "(default: None)",
+    for default in ("file's, else 4", "file's, else 25", "(default: all)", "(default: 50)",
+                    "(default: 0)", "file's, else split", "(default: None)",
                     "(default: results/compare-a{agents}-d{comm})", "(default: False)"):
         assert default in " ".join(text.split()), default
 

@@ -1,0 +1,243 @@
+"""One builder from user settings (flags, a YAML file, Python keywords) to an ``EnvConfig``.
+
+Every command of the toolkit (``ipp-compare``, ``ipp-simulate``, ``ipp-train``, the studies)
+and the Python faces (:func:`reports.compare`) build their mission config here, with one
+precedence rule::
+
+    explicit value (a flag or keyword that is not None)  >  the config file  >  defaults
+
+"Defaults" are the paper's (:class:`~ipp_toolkit.config.EnvConfig`) with a tool's own
+defaults on top (``ipp-train coma`` trains at r_M = 0.5 m with the own-position plane, for
+example). A key the YAML file does not write is not "set" by it: the tool's default applies.
+
+Two rules follow the team size wherever it came from: a team without documented fixed start
+positions in this world starts at random cells (unless the file itself asks for ``fixed``
+for that very team), and the agent-id plane's scale grows to the team size.
+
+This module also owns the small text forms every command shares: :func:`parse_comm`,
+:func:`comm_label`, :func:`format_comm` and :func:`safe_name`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from .config import (
+    EnvConfig,
+    FeatureConfig,
+    TeamConfig,
+    TerrainConfig,
+    WorldConfig,
+    config_from_dict,
+    config_to_dict,
+    read_config_file,
+    start_for_team_size,
+    terrain_kinds,
+)
+
+__all__ = [
+    "build_env_config",
+    "describe_config",
+    "parse_comm",
+    "comm_label",
+    "format_comm",
+    "safe_name",
+    "named_terrain_kinds",
+]
+
+
+def parse_comm(text: str | float, name: str = "--comm") -> float:
+    """A communication range from text: metres (>= 0) or ``inf``; ValueError naming ``name``."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be metres or 'inf', got {text!r}") from None
+    if math.isnan(value) or value < 0:
+        raise ValueError(f"{name} must be >= 0 metres or 'inf', got {text!r}")
+    return value
+
+
+def comm_label(value: float) -> str:
+    """A range as a file-name word: ``25``, ``0`` or ``inf``."""
+    return "inf" if math.isinf(value) else f"{value:g}"
+
+
+def format_comm(value: float) -> str:
+    """A range for people: ``25 m``, ``0 m`` or ``inf``."""
+    return "inf" if math.isinf(value) else f"{value:g} m"
+
+
+def safe_name(label: str) -> str:
+    """``label`` reduced to a file-name-safe word (letters, digits, ``.``, ``_``, ``-``)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("._") or "planner"
+
+
+def named_terrain_kinds() -> tuple[str, ...]:
+    """Terrain kinds selectable by name (a raster is selected by giving its file)."""
+    return tuple(kind for kind in terrain_kinds() if kind != "raster")
+
+
+def _merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
+    """Section-wise merge of two nested config dicts; ``top`` wins key by key."""
+    merged = {name: dict(values) for name, values in base.items()}
+    for name, values in top.items():
+        if isinstance(values, Mapping) and isinstance(merged.get(name), dict):
+            merged[name] = {**merged[name], **values}
+        else:
+            merged[name] = values
+    return merged
+
+
+def _check_raster_file(name: str, nan_policy: str) -> str:
+    path = Path(name)
+    if not path.exists():
+        raise ValueError(f"cannot read terrain file {name!r}: no such file (terrain is one of "
+                         f"{', '.join(named_terrain_kinds())} or a raster FILE)")
+    if not path.is_file():
+        raise ValueError(f"cannot read terrain file {name!r}: not a file")
+    from .terrain import load_raster, prepare_raster
+
+    try:
+        prepare_raster(load_raster(path), nan_policy, repr(name))
+    except OSError as err:
+        raise ValueError(f"cannot read terrain file {name!r}: {err.strerror}") from err
+    return str(path.resolve())
+
+
+def _terrain_overrides(terrain: str | os.PathLike[str] | None, threshold: float | None,
+                       layered: Mapping[str, Any]) -> dict[str, Any]:
+    section: dict[str, Any] = {}
+    if threshold is not None:
+        if isinstance(threshold, bool) or not math.isfinite(float(threshold)):
+            raise ValueError(f"threshold must be a finite number, got {threshold!r}")
+        section["threshold"] = float(threshold)
+    if terrain is None:
+        return section
+    name = os.fspath(terrain)
+    if name in named_terrain_kinds():
+        return {**section, "kind": name, "raster": None}
+    current = layered.get("terrain", {})
+    if name == "raster":
+        if not current.get("raster"):
+            raise ValueError("terrain 'raster' needs a raster file: give the FILE as terrain "
+                             "(or a config with terrain.raster)")
+        name = current["raster"]
+    nan_policy = current.get("nan_policy", TerrainConfig.nan_policy)
+    return {**section, "kind": "raster", "raster": _check_raster_file(name, nan_policy)}
+
+
+def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *,
+                     defaults: Mapping[str, Mapping[str, Any]] | None = None,
+                     agents: int | None = None, comm: float | None = None,
+                     terrain: str | os.PathLike[str] | None = None,
+                     threshold: float | None = None, resolution: float | None = None,
+                     budget: int | None = None, area_size: float | None = None,
+                     features: Mapping[str, bool] | None = None) -> EnvConfig:
+    """The mission config of a command: defaults < ``config`` < explicit keywords.
+
+    Args:
+        config: a YAML path (only the keys it writes count as set), an :class:`EnvConfig`
+            (every field counts as set) or None.
+        defaults: the tool's own defaults over the paper's, as nested section dicts, e.g.
+            ``{"world": {"resolution": 0.5}}``.
+        agents: team size N (None: not given).
+        comm: communication range D in metres, ``math.inf`` for full.
+        terrain: a registered kind (``split``, ``split-axis``, ``blobs``, ...), a raster FILE
+            (kind ``raster``; needs a threshold) or ``raster`` (the config's file).
+        threshold: raster threshold in the raster's units (cells whose mean value is >= it
+            are interesting); refused with a synthetic terrain.
+        resolution, budget, area_size: map resolution r_M (m), steps B, side of the area (m).
+        features: feature switches, e.g. ``{"own_position": True}``.
+
+    Raises:
+        ValueError: a bad value (the message names it and, for a file, the file), an
+            unreadable terrain file, a threshold without a raster or a raster without one, or
+            an invalid resulting configuration.
+    """
+    if isinstance(config, EnvConfig):
+        given: dict[str, Any] = config_to_dict(config)
+        source = "the given config"
+    elif config is not None:
+        given = read_config_file(config)
+        source = f"config file {os.fspath(config)!r}"
+    else:
+        given = {}
+        source = ""
+    layered = _merge(defaults or {}, given)
+    if agents is not None and (isinstance(agents, bool) or int(agents) != agents or agents < 1):
+        raise ValueError(f"agents must be an integer >= 1, got {agents!r}")
+    if comm is not None:
+        comm = parse_comm(comm, "comm")
+    flags: dict[str, dict[str, Any]] = {}
+    world = {key: float(value) for key, value in (("resolution", resolution),
+                                                 ("area_size", area_size)) if value is not None}
+    if world:
+        flags["world"] = world
+    team: dict[str, Any] = {}
+    if agents is not None:
+        team["n_agents"] = int(agents)
+    if comm is not None:
+        team["comm_range"] = comm
+    if budget is not None:
+        team["budget"] = budget
+    if team:
+        flags["team"] = team
+    if features:
+        flags["features"] = dict(features)
+    terrain_section = _terrain_overrides(terrain, threshold, layered)
+    if terrain_section:
+        flags["terrain"] = terrain_section
+    layered = _merge(layered, flags)
+    try:
+        draft = config_from_dict(_with_team_rules(layered, team_from_flag=agents is not None,
+                                                  start_given="start" in given.get("team", {})))
+    except ValueError as err:
+        raise ValueError(f"{err} (in {source})" if source and "(in " not in str(err)
+                         else str(err)) from None
+    if threshold is not None and draft.terrain.kind != "raster":
+        raise ValueError(f"threshold {threshold!r} is in a raster's units, but the terrain is "
+                         f"{draft.terrain.kind!r}; give a raster FILE as terrain or drop the "
+                         "threshold")
+    return draft
+
+
+def _with_team_rules(layered: dict[str, Any], team_from_flag: bool,
+                     start_given: bool) -> dict[str, Any]:
+    """The fixed-start fallback and the id-scale rule applied to a layered config dict."""
+    team = layered.get("team", {})
+    n_agents = team.get("n_agents", TeamConfig.n_agents)
+    if isinstance(n_agents, bool) or not isinstance(n_agents, int):
+        return layered  # the config's own validation names the bad value
+    try:
+        world = WorldConfig(**{key: tuple(value) if isinstance(value, list) else value
+                               for key, value in layered.get("world", {}).items()})
+    except (TypeError, ValueError):
+        return layered  # the config's own validation names the bad value
+    rules: dict[str, dict[str, Any]] = {}
+    start = team.get("start", TeamConfig.start)
+    if team_from_flag or not start_given:
+        fitted = start_for_team_size(start, n_agents, world)
+        if fitted != start:
+            rules["team"] = {"start": fitted}
+    features = layered.get("features", {})
+    scale = features.get("agent_id_scale", FeatureConfig.agent_id_scale)
+    if features.get("agent_id", True) and isinstance(scale, int) and n_agents > scale:
+        rules["features"] = {"agent_id_scale": n_agents}
+    return _merge(layered, rules)
+
+
+def describe_config(config: EnvConfig) -> str:
+    """One line naming the setting a command runs: team, range, terrain, map, budget."""
+    terrain = config.terrain
+    where = terrain.kind
+    if terrain.kind == "raster":
+        where = f"raster {Path(terrain.raster or '').name} >= {terrain.threshold:g}"
+    return (f"{config.team.n_agents} UAVs ({config.team.start} starts), "
+            f"D = {format_comm(config.team.comm_range)}, terrain {where}, "
+            f"{config.world.area_size:g} m area at r_M = {config.world.resolution:g} m, "
+            f"budget {config.team.budget} steps")
