@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .config import ACTOR_PLANES, FeatureConfig
-from .mapping import expected_gain
+from .gain import FootprintGainCache
 from .mission import MissionState
 from .team import N_ACTIONS
 
@@ -143,38 +143,22 @@ def footprint_gain(state: MissionState) -> np.ndarray:
     :func:`~ipp_toolkit.mapping.expected_gain` (the ``ig`` planner's objective), divided by
     the cell count of the largest footprint and by the larger class weight: it lies in
     [0, 1] whatever the map resolution, and it ranks the waypoints exactly as the sums do.
+    The sums are kept on the state and updated only where the maps changed since the last
+    call (:class:`~ipp_toolkit.gain.FootprintGainCache`).
 
     Returns:
         (N, Z, G, G) float32.
     """
-    n = state.n_agents
-    camera = state.geometry.camera
-    maps = state.maps
+    cache = state.gain_cache
+    if cache is None or cache.maps is not state.maps:
+        reward = state.config.reward
+        cache = state.gain_cache = FootprintGainCache(
+            state.maps, state.n_agents, state.geometry.camera,
+            (reward.weight_interesting, reward.weight_uninteresting))
     reward = state.config.reward
     scale = max(reward.weight_interesting, reward.weight_uninteresting, 1e-12)
-    g = state.geometry.grid_points
-    # Teammates that heard the same readings hold identical maps (all of them at D = inf):
-    # compute each distinct map once.
-    first_holder: dict[bytes, int] = {}
-    holder = np.array([first_holder.setdefault(maps.logodds[k].tobytes(), k)
-                       for k in range(n)])
-    distinct = np.unique(holder)
-    logodds, prob, entropy = (maps.logodds[distinct], maps.prob[distinct],
-                              maps.entropy[distinct])
-    out = np.empty((len(distinct), len(camera.accuracy), g, g), dtype=np.float32)
-    # Summed-area tables: one cumsum pair per altitude gives all G x G footprint sums.
-    table = np.zeros((len(distinct),) + tuple(s + 1 for s in logodds.shape[1:]),
-                     dtype=np.float64)
-    for iz in range(len(camera.accuracy)):
-        gain = expected_gain(logodds, prob, entropy, camera.accuracy[iz],
-                             camera.delta_logodds[iz], reward.weight_interesting,
-                             reward.weight_uninteresting)
-        np.cumsum(gain, axis=1, dtype=np.float64, out=table[:, 1:, 1:])
-        np.cumsum(table[:, 1:, 1:], axis=2, out=table[:, 1:, 1:])
-        r0, r1, c0, c1 = np.moveaxis(camera.rects[iz], -1, 0)  # each (G, G)
-        sums = table[:, r1, c1] - table[:, r0, c1] - table[:, r1, c0] + table[:, r0, c0]
-        out[:, iz] = sums / (camera.largest_footprint_cells * scale)
-    return out[np.searchsorted(distinct, holder)]
+    sums = cache.sums()
+    return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
 
 
 def gain_planes(state: MissionState) -> np.ndarray:

@@ -200,6 +200,8 @@ class BeliefMaps:
         wentropy: (M, H, W) float32, weighted entropy W(p) H(p) in bits.
         prob_blocks: (M, G, G) float64 block sums of ``prob``.
         wentropy_blocks: (M, G, G) float64 block sums of the weighted entropy W(p) H(p).
+        changes: every (map index, rect) refreshed so far, in order: caches built on the
+            maps (:class:`ipp_toolkit.gain.FootprintGainCache`) update only these regions.
     """
 
     def __init__(self, n_maps: int, blocks: BlockGrid, prior: float = 0.5,
@@ -212,6 +214,7 @@ class BeliefMaps:
         self.logodds = np.full((n_maps, size, size), self.prior_logodds, dtype=np.float32)
         p0 = np.float32(1.0 / (1.0 + np.exp(-self.prior_logodds)))
         h0 = entropy_from_logodds(np.float32(self.prior_logodds))
+        self.prior_prob, self.prior_entropy = p0, h0  # the caches' value in every new cell
         w0 = class_weights(np.float32(p0), weight_interesting, weight_uninteresting)
         self.prob = np.full((n_maps, size, size), p0, dtype=np.float32)
         self.entropy = np.full((n_maps, size, size), h0, dtype=np.float32)
@@ -220,6 +223,7 @@ class BeliefMaps:
                                            (n_maps,) + blocks.block_area.shape).copy()
         self.wentropy_blocks = np.broadcast_to(blocks.block_area * float(w0 * h0),
                                                (n_maps,) + blocks.block_area.shape).copy()
+        self.changes: list[tuple[int, Rect]] = []
 
     def weights(self, prob: np.ndarray) -> np.ndarray:
         """Class weights W(p) of this stack's reward configuration; same shape as ``prob``."""
@@ -246,6 +250,7 @@ class BeliefMaps:
         from the returned changes stay exact.
         """
         r0, r1, c0, c1 = rect
+        self.changes.append((index, (int(r0), int(r1), int(c0), int(c1))))
         logodds = self.logodds[index, r0:r1, c0:c1]
         new_prob = 1.0 / (1.0 + np.exp(-logodds))
         new_entropy = entropy_from_logodds(logodds)

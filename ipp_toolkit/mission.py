@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -130,6 +131,9 @@ class MissionState:
         blocked: (N,) bool, held back by the same-target rule at the last step.
         reward: team reward of the last step (0 after reset).
         history: metrics after every step, s = 0..step.
+        gain_cache: the footprint gain cache of the local maps
+            (:class:`ipp_toolkit.gain.FootprintGainCache`), built on first use by
+            :func:`ipp_toolkit.features.footprint_gain`; None until then.
     """
 
     config: EnvConfig
@@ -148,6 +152,7 @@ class MissionState:
     reward: float = 0.0
     history: list[Metrics] = field(default_factory=list)
     _drop_rng: np.random.Generator | None = None
+    gain_cache: Any = field(default=None, repr=False, compare=False)
 
     @property
     def n_agents(self) -> int:
