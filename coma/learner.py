@@ -707,6 +707,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--width", type=int, help="convolution channels")
     parser.add_argument("--agents", type=int, help="team size (default: from --config, 4)")
     parser.add_argument("--comm", type=float, help="communication range in metres")
+    parser.add_argument("--terrain", metavar="KIND",
+                        help="terrain kind of the training missions, e.g. mixture (default: "
+                             "the --config file's, else split)")
     parser.add_argument("--resolution", type=float, default=None,
                         help="map resolution for training in metres (default: the --config "
                              "file's, else 0.5)")
@@ -786,7 +789,7 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
         switches[name.strip()] = value.strip().lower() in ("true", "1", "on")
     env_config = build_env_config(args.config, defaults=TRAINING_DEFAULTS, agents=args.agents,
                                   comm=args.comm, resolution=args.resolution,
-                                  features=switches)
+                                  terrain=args.terrain, features=switches)
     return coma_config, env_config
 
 

@@ -38,7 +38,9 @@ __all__ = [
     "check_int",
 ]
 
-TERRAIN_KINDS = ("split", "split-axis", "blobs", "raster")
+TERRAIN_KINDS = ("split", "split-axis", "blobs", "fractal", "real", "mixture", "raster")
+REAL_SOURCES = ("mission", "train", "validation", "test", "all")
+DEFAULT_MIXTURE = (("split", 1.0), ("blobs", 1.0), ("fractal", 1.0), ("real", 1.0))
 NAN_POLICIES = ("raise", "min", "max", "mean")
 
 
@@ -150,15 +152,31 @@ class TerrainConfig:
 
     Attributes:
         kind: ``split`` (straight boundary at any angle), ``split-axis`` (the authors' four
-            axis-aligned splits), ``blobs`` (thresholded smooth random field), ``raster``,
-            or a kind added with :func:`ipp_toolkit.terrain.register_terrain`.
+            axis-aligned splits), ``blobs`` (thresholded smooth random field), ``fractal``
+            (thresholded random field with a power-law spectrum: hotspots of many sizes),
+            ``real`` (crops of the bundled real rasters, :mod:`ipp_toolkit.terrain_families`),
+            ``mixture`` (one of several kinds per mission, see ``mixture``), ``raster`` (one
+            raster file), or a kind added with :func:`ipp_toolkit.terrain.register_terrain`.
         share_min, share_max: range of the interesting share for ``split``/``blobs``.
         blob_scale: correlation length of the ``blobs`` field in metres.
         raster: path of a .npy/.png/.tif file for ``raster`` (or pass an array to the
             terrain generator directly).
-        threshold: raster cells whose area-averaged value is >= threshold are interesting.
+        threshold: raster cells whose area-averaged value is >= threshold are interesting (in
+            the raster's units).
+        threshold_quantile: the threshold as a quantile of the values instead, a fraction q
+            (1 - q of the cells are interesting) or a range (q_min, q_max) drawn per mission.
+            ``fractal`` and ``real`` use it (default (0.4, 0.9): 10-60 % interesting);
+            ``raster`` uses it in place of ``threshold``.
         nan_policy: what to do with NaN raster cells: ``raise`` or fill with the raster's
             ``min``, ``max`` or ``mean``.
+        spectral_exponent: range of the ``fractal`` field's exponent b (power ~ 1/f^b): near
+            2 rough, many small hotspots; near 4 smooth, few large regions.
+        real_sources: which bundled rasters ``real`` crops: ``mission`` (those of the
+            mission's namespace: train, validation or test), or one split, or ``all``.
+        crop_fraction: range of a ``real`` crop's side as a fraction of the raster's shorter
+            side.
+        mixture: ``(kind, weight)`` pairs for ``mixture`` (a mapping in YAML); empty means
+            split, blobs, fractal and real, equally weighted.
     """
 
     kind: str = "split"
@@ -168,6 +186,11 @@ class TerrainConfig:
     raster: str | None = None
     threshold: float | None = None
     nan_policy: str = "raise"
+    threshold_quantile: float | tuple[float, float] | None = None
+    spectral_exponent: tuple[float, float] = (2.0, 4.0)
+    real_sources: str = "mission"
+    crop_fraction: tuple[float, float] = (0.4, 1.0)
+    mixture: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         kinds = terrain_kinds()
@@ -181,13 +204,70 @@ class TerrainConfig:
             _fail("terrain", "nan_policy", self.nan_policy, f"choose one of {NAN_POLICIES}")
         if self.threshold is not None and not math.isfinite(self.threshold):
             _fail("terrain", "threshold", self.threshold, "must be finite")
-        if self.kind == "raster":
+        if self.threshold_quantile is not None:
+            object.__setattr__(self, "threshold_quantile", _range_of(
+                "threshold_quantile", self.threshold_quantile, 0.0, 1.0, open_ends=True))
+            if self.threshold is not None:
+                _fail("terrain", "threshold_quantile", self.threshold_quantile,
+                      "give either threshold (raster units) or threshold_quantile, not both")
+        object.__setattr__(self, "spectral_exponent", _range_of(
+            "spectral_exponent", self.spectral_exponent, 0.0, 8.0, open_ends=False))
+        object.__setattr__(self, "crop_fraction", _range_of(
+            "crop_fraction", self.crop_fraction, 0.0, 1.0, open_ends=False))
+        if self.crop_fraction[0] <= 0.0:
+            _fail("terrain", "crop_fraction", self.crop_fraction, "must lie in (0, 1]")
+        if self.real_sources not in REAL_SOURCES:
+            _fail("terrain", "real_sources", self.real_sources, f"choose one of {REAL_SOURCES}")
+        object.__setattr__(self, "mixture", self._checked_mixture(kinds))
+        if self.kind == "raster" or (self.kind == "mixture" and any(
+                kind == "raster" for kind, _ in self.mixture_weights())):
             if self.raster is None:
                 _fail("terrain", "raster", self.raster, "kind 'raster' needs a file path")
-            if self.threshold is None:
-                _fail("terrain", "threshold", self.threshold, "kind 'raster' needs a threshold")
+            if self.threshold is None and self.threshold_quantile is None:
+                _fail("terrain", "threshold", self.threshold,
+                      "kind 'raster' needs a threshold (or a threshold_quantile)")
         if self.raster is not None:
             object.__setattr__(self, "raster", os.fspath(self.raster))
+
+    def _checked_mixture(self, kinds: tuple[str, ...]) -> tuple[tuple[str, float], ...]:
+        items = self.mixture.items() if isinstance(self.mixture, Mapping) else self.mixture
+        try:
+            pairs = tuple((str(kind), float(weight)) for kind, weight in items)
+        except (TypeError, ValueError):
+            _fail("terrain", "mixture", self.mixture,
+                  "must map terrain kinds to weights, e.g. {split: 1, fractal: 2}")
+        for kind, weight in pairs:
+            if kind not in kinds or kind == "mixture":
+                _fail("terrain", "mixture", self.mixture,
+                      f"unknown terrain kind {kind!r}; choose from {kinds} (not mixture)")
+            if not math.isfinite(weight) or weight < 0:
+                _fail("terrain", "mixture", self.mixture,
+                      f"weight of {kind!r} must be a finite number >= 0, got {weight!r}")
+        if pairs and sum(weight for _, weight in pairs) <= 0:
+            _fail("terrain", "mixture", self.mixture, "needs a positive weight")
+        if len({kind for kind, _ in pairs}) != len(pairs):
+            _fail("terrain", "mixture", self.mixture, "names a kind twice")
+        return pairs
+
+    def mixture_weights(self) -> tuple[tuple[str, float], ...]:
+        """The ``mixture`` pairs in force (the default four kinds when it is empty)."""
+        return self.mixture or DEFAULT_MIXTURE
+
+
+def _range_of(name: str, value: Any, low: float, high: float,
+              open_ends: bool) -> tuple[float, float]:
+    """``value`` (a number or a pair) as an ordered (lo, hi) pair inside [low, high]."""
+    pair = (value, value) if isinstance(value, int | float) and not isinstance(value, bool) \
+        else value
+    try:
+        lo, hi = (float(v) for v in pair)
+    except (TypeError, ValueError):
+        _fail("terrain", name, value, "must be a number or a pair [min, max]")
+    inside = (low < lo <= hi < high) if open_ends else (low <= lo <= hi <= high)
+    if not inside:
+        bounds = f"({low:g}, {high:g})" if open_ends else f"[{low:g}, {high:g}]"
+        _fail("terrain", name, value, f"needs min <= max inside {bounds}")
+    return lo, hi
 
 
 START_POSITIONS: dict[int, tuple[tuple[float, float], ...]] = {

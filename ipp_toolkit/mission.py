@@ -274,7 +274,7 @@ def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str
     size = config.world.map_cells
     if ground_truth is None:
         truth = generate_terrain(config.terrain, config.world, streams.generator("terrain"),
-                                 raster=raster)
+                                 raster=raster, namespace=namespace)
     else:
         truth = np.asarray(ground_truth)
         if truth.shape != (size, size):

@@ -135,7 +135,9 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
                      defaults: Mapping[str, Mapping[str, Any]] | None = None,
                      agents: int | None = None, comm: float | None = None,
                      terrain: str | os.PathLike[str] | None = None,
-                     threshold: float | None = None, resolution: float | None = None,
+                     threshold: float | None = None,
+                     threshold_quantile: float | None = None,
+                     resolution: float | None = None,
                      budget: int | None = None, area_size: float | None = None,
                      features: Mapping[str, bool] | None = None) -> EnvConfig:
     """The mission config of a command: defaults < ``config`` < explicit keywords.
@@ -151,6 +153,8 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
             (kind ``raster``; needs a threshold) or ``raster`` (the config's file).
         threshold: raster threshold in the raster's units (cells whose mean value is >= it
             are interesting); refused with a synthetic terrain.
+        threshold_quantile: the threshold as a quantile q of the values instead (1 - q of the
+            cells are interesting): rasters, ``fractal`` and ``real``.
         resolution, budget, area_size: map resolution r_M (m), steps B, side of the area (m).
         features: feature switches, e.g. ``{"own_position": True}``.
 
@@ -190,6 +194,11 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
     if features:
         flags["features"] = dict(features)
     terrain_section = _terrain_overrides(terrain, threshold, layered)
+    if threshold_quantile is not None:
+        terrain_section["threshold_quantile"] = threshold_quantile
+        terrain_section.setdefault("threshold", None)
+    elif threshold is not None:
+        terrain_section["threshold_quantile"] = None
     if terrain_section:
         flags["terrain"] = terrain_section
     layered = _merge(layered, flags)

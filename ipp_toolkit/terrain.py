@@ -60,13 +60,15 @@ _BLOB_PADDING_SIGMAS = 5.0
 """Lattice margin around the area, in kernel stds: keeps the FFT's wrap-around below 1e-5."""
 
 
-def register_terrain(name: str, *, replace: bool = False
+def register_terrain(name: str, *, replace: bool = False, namespaced: bool = False
                      ) -> Callable[[TerrainGenerator], TerrainGenerator]:
     """Decorator adding a terrain generator under ``name`` to :data:`TERRAIN_GENERATORS`.
 
     The generator is called as ``fn(config, world, rng, raster)`` and must return an
-    (H, W) array (H = W = ``world.map_cells``) that is cast to bool. Registering a taken name
-    is an error unless ``replace`` is true, so a typo cannot silently shadow a built-in.
+    (H, W) array (H = W = ``world.map_cells``) that is cast to bool; with ``namespaced`` it
+    also gets the mission's namespace as ``namespace=`` (``train``, ``validation`` or
+    ``test``), e.g. to draw from separate data. Registering a taken name is an error unless
+    ``replace`` is true, so a typo cannot silently shadow a built-in.
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"terrain kind must be a non-empty string, got {name!r}")
@@ -76,21 +78,29 @@ def register_terrain(name: str, *, replace: bool = False
             raise ValueError(f"terrain kind {name!r} is already registered; "
                              "pass replace=True to override it")
         TERRAIN_GENERATORS[name] = fn
+        _NAMESPACED.discard(name)
+        if namespaced:
+            _NAMESPACED.add(name)
         return fn
 
     return decorator
 
 
+_NAMESPACED: set[str] = set()
+
+
 def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Generator,
-                     raster: np.ndarray | None = None) -> np.ndarray:
+                     raster: np.ndarray | None = None, namespace: str = "train") -> np.ndarray:
     """The ground truth of one mission.
 
     Args:
         config: the terrain section; ``config.kind`` picks the generator.
         world: the area and its map resolution.
-        rng: the mission's terrain stream (unused by ``raster``).
+        rng: the mission's terrain stream (unused by ``raster`` with a fixed threshold).
         raster: (h, w) numeric array, ``[y, x]`` with row 0 at y = 0, used instead of the
             file ``config.raster`` by kind ``raster``.
+        namespace: the mission's namespace (``train``, ``validation``, ``test``); kinds that
+            keep separate data per namespace (``real``) draw from its part.
 
     Returns:
         (H, W) bool map, H = W = ``world.map_cells``; True = interesting.
@@ -104,7 +114,10 @@ def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.G
         raise ValueError(f"unknown terrain kind {config.kind!r}; registered kinds: "
                          f"{sorted(TERRAIN_GENERATORS)}") from None
     size = world.map_cells
-    truth = np.asarray(generator(config, world, rng, raster))
+    if config.kind in _NAMESPACED:
+        truth = np.asarray(generator(config, world, rng, raster, namespace=namespace))
+    else:
+        truth = np.asarray(generator(config, world, rng, raster))
     if truth.shape != (size, size):
         raise ValueError(f"terrain kind {config.kind!r} returned shape {truth.shape}, "
                          f"expected {(size, size)}")
@@ -474,8 +487,9 @@ def clear_raster_cache() -> None:
 @register_terrain("raster")
 def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Generator,
                     raster: np.ndarray | None = None) -> np.ndarray:
-    if config.threshold is None:
-        raise ValueError("terrain kind 'raster' needs terrain.threshold")
+    if config.threshold is None and config.threshold_quantile is None:
+        raise ValueError("terrain kind 'raster' needs terrain.threshold or "
+                         "terrain.threshold_quantile")
     shape = (world.map_cells, world.map_cells)
     if raster is not None:
         name = "array"
@@ -487,6 +501,10 @@ def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Ge
         raise ValueError("terrain kind 'raster' needs terrain.raster (a file) or a raster array")
     # Caller -> generate_terrain -> here: point the warning at the caller.
     _warn_if_stretched(entry, name, stacklevel=3)
+    if config.threshold is None:  # a quantile of the area averages instead
+        low, high = config.threshold_quantile  # type: ignore[misc]
+        level = float(np.quantile(entry.values, float(rng.uniform(low, high))))
+        return entry.values > level if level <= entry.values.min() else entry.values >= level
     interesting = entry.values >= config.threshold
     if not interesting.any():
         raise ValueError(
@@ -494,3 +512,7 @@ def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Ge
             f"raster spans [{entry.source_min:g}, {entry.source_max:g}] (area averages on the "
             f"map: [{entry.values.min():g}, {entry.values.max():g}])")
     return interesting
+
+
+# The realistic families register themselves on import; they build on the helpers above.
+from . import terrain_families  # noqa: E402, F401

@@ -161,12 +161,15 @@ def _compare_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, metavar="SEED",
                         help="run seed of the test missions")
     parser.add_argument("--terrain", default=None, metavar="KIND|FILE",
-                        help="terrain kind (split, split-axis, blobs, ...) or a raster FILE "
-                             "(.npy/.png/.tif; needs --threshold); default: the --config "
-                             "file's, else split")
+                        help="terrain kind (split, split-axis, blobs, fractal, real, "
+                             "mixture) or a raster FILE (.npy/.png/.tif; needs --threshold or "
+                             "--threshold-quantile); default: the --config file's, else split")
     parser.add_argument("--threshold", type=_finite_float, default=None, metavar="T",
                         help="raster threshold in the raster's units: cells whose mean value "
                              "is >= T are interesting (required with a terrain FILE)")
+    parser.add_argument("--threshold-quantile", type=_finite_float, default=None, metavar="Q",
+                        help="threshold as a quantile of the values instead (1 - Q of the "
+                             "cells are interesting): a raster FILE, fractal or real")
     parser.add_argument("--workers", type=_positive_int("workers"),
                         default=min(2, os.cpu_count() or 1),
                         metavar="N", help="parallel evaluation processes; min(2, CPU count)")
@@ -211,7 +214,8 @@ def compare_main(argv: list[str] | None = None) -> int:
     try:
         env_config = build_env_config(
             args.config, agents=args.agents, comm=args.comm, terrain=args.terrain,
-            threshold=args.threshold, resolution=args.resolution, budget=args.budget,
+            threshold=args.threshold, threshold_quantile=args.threshold_quantile,
+            resolution=args.resolution, budget=args.budget,
             area_size=args.area_size)
     except (ValueError, OSError) as err:
         return error(err)

@@ -80,7 +80,7 @@ def test_bad_terrain_exits_2_and_writes_nothing(capsys, tmp_path):
     _fails(capsys, ["--terrain", str(tmp_path / "missing.tif"), "--threshold", "0.5",
                     "--out", str(out)], "cannot read terrain file")
     _fails(capsys, ["--terrain", "splt", "--out", str(out)],
-           "terrain is one of split, split-axis, blobs or a raster FILE")
+           "terrain is one of split, split-axis, blobs, fractal, real, mixture or a raster FILE")
     raster = tmp_path / "field.npy"
     np.save(raster, np.zeros((10, 10)))
     _fails(capsys, ["--terrain", str(raster), "--out", str(out)], "needs a threshold")

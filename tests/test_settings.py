@@ -6,6 +6,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from coma.learner import build_parser, configs_from_args
@@ -137,3 +138,14 @@ def test_ipp_simulate_refuses_an_unwritable_out_before_flying(tmp_path, capsys):
     assert simulate_main(["--out", str(blocker / "sub"), "--resolution", "1.0"]) == 2
     err = capsys.readouterr()
     assert "--out" in err.err and "sub" in err.err and "step" not in err.out
+
+
+def test_threshold_quantile_keyword(tmp_path):
+    assert build_env_config(terrain="fractal",
+                            threshold_quantile=0.8).terrain.threshold_quantile == (0.8, 0.8)
+    raster = tmp_path / "r.npy"
+    np.save(raster, np.arange(16.0).reshape(4, 4))
+    from_file = build_env_config(terrain=str(raster), threshold_quantile=0.5)
+    assert from_file.terrain.kind == "raster" and from_file.terrain.threshold is None
+    with pytest.raises(ValueError, match="not both"):
+        build_env_config(terrain=str(raster), threshold=3.0, threshold_quantile=0.5)
