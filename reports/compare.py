@@ -15,6 +15,8 @@ the tables and figures next to the raw results.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -23,7 +25,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.planners import available_planners, make_planner
+from ipp_toolkit.io import write_json
+from ipp_toolkit.planners import Planner, available_planners, make_planner
 from ipp_toolkit.settings import build_env_config, format_comm, safe_name
 
 from .plots import plot_curves, plot_trajectories
@@ -145,6 +148,11 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
             that cannot be built with its options (e.g. a missing checkpoint), a duplicate
             label or an empty list.
     """
+    return [spec for spec, _ in _built_planners(planners, note)]
+
+
+def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
+                    note: Callable[[str], None] | None) -> list[tuple[PlannerSpec, Planner]]:
     from ipp_toolkit.evaluation import PlannerSpec
 
     if planners is None or (isinstance(planners, str) and planners.strip() == "all"):
@@ -159,7 +167,7 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
     if not items:
         raise ValueError("no planner given")
     registered = available_planners()
-    specs: list[PlannerSpec] = []
+    built: list[tuple[PlannerSpec, Planner]] = []
     labels: set[str] = set()
     for item in items:
         spec = item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item)
@@ -171,11 +179,47 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
             raise ValueError(f"planner {label!r} is given twice")
         labels.add(label)
         try:
-            make_planner(spec.name, **dict(spec.options))
+            planner = make_planner(spec.name, **dict(spec.options))
         except (OSError, ValueError, TypeError, ImportError) as err:
             raise ValueError(f"planner {label!r} cannot be built: {err}") from err
-        specs.append(spec)
-    return specs
+        built.append((spec, planner))
+    return built
+
+
+def planner_checkpoints(built: Sequence[tuple[PlannerSpec, Planner]]) -> dict[str, dict[str, str]]:
+    """``{label: {"checkpoint": file name, "sha256": hex}}`` of every planner with weights
+    (a ``checkpoint`` attribute naming a file)."""
+    found = {}
+    for spec, planner in built:
+        path = getattr(planner, "checkpoint", None)
+        if path is not None and Path(path).is_file():
+            digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+            found[str(spec.effective_label)] = {"checkpoint": Path(path).name, "sha256": digest}
+    return found
+
+
+def _record_checkpoints(out: Path, checkpoints: dict[str, dict[str, str]], write: bool) -> None:
+    """Refuse a label whose weights changed since its missions were stored in ``out``; with
+    ``write``, add the checkpoints to ``out/config.json`` (once the evaluation wrote it)."""
+    path = out / "config.json"
+    if not path.is_file():
+        return
+    try:
+        stored = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return  # the evaluation reports an unreadable identity itself
+    known = stored.get("checkpoints", {}) if isinstance(stored, dict) else {}
+    for label, record in checkpoints.items():
+        old = known.get(label)
+        if old and old.get("sha256") != record["sha256"] \
+                and (out / "shards" / safe_name(label)).is_dir():
+            raise ValueError(f"the weights of planner {label!r} ({record['checkpoint']}) "
+                             f"changed since its missions were stored in {str(out)!r} "
+                             f"(sha256 {old.get('sha256', '?')[:12]} -> "
+                             f"{record['sha256'][:12]}); use another folder or label")
+    if write:
+        stored["checkpoints"] = {**known, **checkpoints}
+        write_json(path, stored)
 
 
 def compare(agents: int | None = None, comm: float | None = None,
@@ -186,7 +230,8 @@ def compare(agents: int | None = None, comm: float | None = None,
             config: EnvConfig | str | os.PathLike[str] | None = None,
             resolution: float | None = None, budget: int | None = None,
             progress: bool = True, area_size: float | None = None,
-            note: Callable[[str], None] | None = None, animate: bool = False) -> Comparison:
+            note: Callable[[str], None] | None = None, animate: bool = False,
+            reference: str = "ig") -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
@@ -203,6 +248,8 @@ def compare(agents: int | None = None, comm: float | None = None,
         progress: show a progress bar.
         note: receives notes about skipped default planners (default: stderr).
         animate: with ``out``, also write ``animations/<planner>.gif`` of mission 0.
+        reference: the planner of the summary's paired column (final entropy minus its on the
+            same missions, with its standard error and win rate); none when it is not flown.
 
     Returns:
         the :class:`Comparison`; its ``table`` is the Markdown table.
@@ -219,13 +266,22 @@ def compare(agents: int | None = None, comm: float | None = None,
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size)
-    specs = resolve_planners(planners, note)
+    built = _built_planners(planners, note)
+    specs = [spec for spec, _ in built]
+    checkpoints = planner_checkpoints(built)
+    if out is not None:
+        _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
     from ipp_toolkit.evaluation import evaluate
 
     result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
                       workers=int(workers), out_dir=out, progress=progress, namespace="test",
                       record_missions=(0,))
-    comparison = Comparison(result=result, summary=summarise(result.rows))
+    if out is not None:
+        _record_checkpoints(Path(out), checkpoints, write=True)
+    summary = summarise(result.rows, reference=reference, checkpoints={
+        label: f"{record['checkpoint']} sha256:{record['sha256'][:16]}"
+        for label, record in checkpoints.items()})
+    comparison = Comparison(result=result, summary=summary)
     if out is not None:
         comparison.write(out)
         if animate:

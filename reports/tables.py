@@ -19,7 +19,7 @@ import io
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,8 @@ from ipp_toolkit.settings import format_comm
 
 __all__ = [
     "Stat",
+    "Paired",
+    "paired_differences",
     "Summary",
     "summarise",
     "budget_steps",
@@ -69,6 +71,69 @@ class Stat:
 
 
 @dataclass(frozen=True)
+class Paired:
+    """A planner's paired difference to a reference planner on the same missions.
+
+    With d_k = metric of the planner minus the reference's on mission k:
+
+    Attributes:
+        mean: mean of d over missions (negative = lower than the reference).
+        se: standard error sd(d, ddof=1) / sqrt(n) (NaN for fewer than two missions).
+        win_rate: share of missions where the planner is better (d < 0 for a metric where
+            lower is better, d > 0 otherwise).
+        n: number of paired missions.
+    """
+
+    mean: float
+    se: float
+    win_rate: float
+    n: int
+
+
+def paired_differences(rows: Iterable[Mapping[str, Any]] | Any, reference: str,
+                       metric: str = "entropy", step: int | None = None,
+                       by: Sequence[str] = ("mission",)) -> dict[str, Paired]:
+    """Paired differences of every planner to ``reference`` at one step (common missions).
+
+    Args:
+        rows: tidy per-step rows (``planner``, ``step``, the ``by`` keys and ``metric``).
+        reference: the reference planner's label (e.g. ``"ig"``).
+        metric: the compared metric.
+        step: the compared step (default: the largest step in the rows, the budget).
+        by: the keys that identify one mission (add e.g. ``"agents"`` when rows of several
+            settings are pooled).
+
+    Returns:
+        ``{planner: Paired}`` for every planner but the reference that shares at least one
+        mission with it; empty when the reference is not in the rows.
+    """
+    table = _rows_of(rows)
+    if not table:
+        return {}
+    step = max(int(r["step"]) for r in table) if step is None else int(step)
+    values: dict[str, dict[tuple, float]] = {}
+    for row in table:
+        if int(row["step"]) == step:
+            value = _float(row.get(metric))
+            if math.isfinite(value):
+                key = tuple(str(row.get(k)) for k in by)
+                values.setdefault(str(row["planner"]), {})[key] = value
+    base = values.get(reference)
+    if base is None:
+        return {}
+    sign = -1.0 if LOWER_IS_BETTER.get(metric, False) else 1.0
+    result = {}
+    for planner, by_mission in values.items():
+        common = sorted(set(by_mission) & set(base))
+        if planner == reference or not common:
+            continue
+        d = np.array([by_mission[k] - base[k] for k in common])
+        se = float(d.std(ddof=1) / math.sqrt(len(d))) if len(d) > 1 else math.nan
+        result[planner] = Paired(float(d.mean()), se, float(np.mean(sign * d > 0)), len(d))
+    return result
+
+
+@dataclass(frozen=True)
 class Summary:
     """Per-planner statistics of an evaluation at a few steps of the budget.
 
@@ -83,6 +148,10 @@ class Summary:
         agents: distinct team sizes in the rows (one value for a single evaluation).
         comm: distinct communication ranges in metres (``inf`` allowed).
         terrain: distinct terrain kinds.
+        reference: the planner the paired column compares with ("" when it is not in the
+            rows).
+        paired: final-entropy :class:`Paired` difference of each other planner to it.
+        checkpoints: ``{planner: "name sha256:HEX"}`` of the learned planners' weights.
     """
 
     planners: tuple[str, ...]
@@ -95,6 +164,9 @@ class Summary:
     agents: tuple[int, ...] = ()
     comm: tuple[float, ...] = ()
     terrain: tuple[str, ...] = ()
+    reference: str = ""
+    paired: Mapping[str, Paired] = field(default_factory=dict)
+    checkpoints: Mapping[str, str] = field(default_factory=dict)
 
     def stat(self, planner: str, metric: str, step: int) -> Stat:
         """The :class:`Stat` of one cell (NaN, n = 0 when the rows had none)."""
@@ -133,9 +205,12 @@ class Summary:
         directions = ", ".join(
             f"{'lowest' if LOWER_IS_BETTER.get(m, False) else 'highest'} {_metric_word(m)}"
             for m in self.metrics)
+        paired = (f" Δ vs {self.reference}: final entropy minus {self.reference}'s on the same "
+                  "missions, mean ± standard error (share of missions ahead)."
+                  if self.reference and self.paired else "")
         return (f"Mean ± std over {self.missions} mission{'s' if self.missions != 1 else ''} "
                 f"at {fractions} % of the budget ({', '.join(parts)}). "
-                f"Bold: best per column ({directions}). "
+                f"Bold: best per column ({directions}).{paired} "
                 "ms/step: mean planning time per step.")
 
 
@@ -183,7 +258,8 @@ def _distinct(values: Iterable[Any]) -> tuple[Any, ...]:
 
 
 def summarise(rows: Iterable[Mapping[str, Any]] | Any, steps: Sequence[int] | None = None,
-              metrics: Sequence[str] = ("entropy", "f1")) -> Summary:
+              metrics: Sequence[str] = ("entropy", "f1"), reference: str = "ig",
+              checkpoints: Mapping[str, str] | None = None) -> Summary:
     """Reduce tidy per-step rows to a :class:`Summary`.
 
     Args:
@@ -193,6 +269,9 @@ def summarise(rows: Iterable[Mapping[str, Any]] | Any, steps: Sequence[int] | No
             and the caption.
         steps: steps to summarise; default :func:`budget_steps` of the largest step.
         metrics: metric columns, each summarised at every step.
+        reference: the planner of the paired column (final entropy minus its, per mission);
+            no column when it is not in the rows.
+        checkpoints: ``{planner: "name sha256:HEX"}`` to print under the table.
 
     Returns:
         the summary; mean and sample std (ddof = 1) over missions for every
@@ -236,9 +315,11 @@ def summarise(rows: Iterable[Mapping[str, Any]] | Any, steps: Sequence[int] | No
     agents = tuple(sorted({int(float(r["agents"])) for r in table if _has(r, "agents")}))
     comm = tuple(sorted({_float(r["comm"]) for r in table if _has(r, "comm")}))
     terrain = _distinct(str(r["terrain"]) for r in table if _has(r, "terrain"))
+    paired = paired_differences(table, reference, "entropy", budget)
     return Summary(planners=planners, metrics=tuple(metrics), steps=chosen, budget=budget,
                    stats=stats, plan_ms=plan_ms, missions=len(missions), agents=agents,
-                   comm=comm, terrain=terrain)
+                   comm=comm, terrain=terrain, reference=reference if paired else "",
+                   paired=paired, checkpoints=dict(checkpoints or {}))
 
 
 def _has(row: Mapping[str, Any], key: str) -> bool:
@@ -264,7 +345,7 @@ def to_markdown(summary: Summary) -> str:
     columns = _columns(summary)
     header = ["Planner"] + [
         f"{METRIC_NAMES.get(m, m)} {summary.fraction(s)} (s={s})" for m, s in columns
-    ] + ["ms/step"]
+    ] + ([f"Δ vs {summary.reference}"] if summary.paired else []) + ["ms/step"]
     lines = [summary.caption(), "",
              "| " + " | ".join(header) + " |",
              "|" + "|".join([":---"] + ["---:"] * (len(header) - 1)) + "|"]
@@ -274,9 +355,21 @@ def to_markdown(summary: Summary) -> str:
         for m, s in columns:
             text = _cell(summary.stat(planner, m, s), " ± ")
             cells.append(f"**{text}**" if planner in best[(m, s)] else text)
+        if summary.paired:
+            cells.append(_paired_cell(summary.paired.get(planner), " ± ", "%"))
         cells.append(_ms(summary.plan_ms.get(planner, math.nan)))
         lines.append("| " + " | ".join(cells) + " |")
+    if summary.checkpoints:
+        lines += ["", "Weights: " + "; ".join(f"{p}: {c}"
+                                              for p, c in summary.checkpoints.items())]
     return "\n".join(lines) + "\n"
+
+
+def _paired_cell(paired: Paired | None, sep: str, percent: str) -> str:
+    if paired is None:
+        return "-"
+    se = f"{sep}{paired.se:.{DIGITS}f}" if math.isfinite(paired.se) else ""
+    return f"{paired.mean:+.{DIGITS}f}{se} ({100 * paired.win_rate:.0f} {percent})"
 
 
 def _csv_number(value: float) -> str:
@@ -296,6 +389,12 @@ def to_csv(summary: Summary) -> str:
         pct = f"{100.0 * s / summary.budget:.0f}" if summary.budget else "0"
         header += [f"{m}_{pct}pct_s{s}_mean", f"{m}_{pct}pct_s{s}_std"]
     header += ["missions", "plan_ms_per_step"]
+    if summary.paired:
+        header += [f"entropy_final_minus_{summary.reference}_mean",
+                   f"entropy_final_minus_{summary.reference}_se",
+                   f"win_rate_vs_{summary.reference}"]
+    if summary.checkpoints:
+        header += ["checkpoint"]
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(header)
@@ -306,6 +405,12 @@ def to_csv(summary: Summary) -> str:
             row += [_csv_number(stat.mean), _csv_number(stat.std)]
         n = max((summary.stat(planner, m, s).n for m, s in columns), default=0)
         row += [str(n), _csv_number(summary.plan_ms.get(planner, math.nan))]
+        if summary.paired:
+            paired = summary.paired.get(planner)
+            row += ["", "", ""] if paired is None else [
+                _csv_number(paired.mean), _csv_number(paired.se), _csv_number(paired.win_rate)]
+        if summary.checkpoints:
+            row += [summary.checkpoints.get(planner, "")]
         writer.writerow(row)
     return buffer.getvalue()
 
@@ -323,7 +428,9 @@ def to_latex(summary: Summary, label: str = "tab:compare") -> str:
     """The summary as a LaTeX ``table`` (booktabs rules; best cells ``\\textbf{}``)."""
     columns = _columns(summary)
     k = len(summary.steps)
-    spec = "l" + "".join(" " + "c" * k for _ in summary.metrics) + " r"
+    spec = "l" + "".join(" " + "c" * k for _ in summary.metrics) + \
+        (" r" if summary.paired else "") + " r"
+    delta = rf"$\Delta$ vs {_latex_escape(summary.reference)} & " if summary.paired else ""
     groups = " & ".join(
         rf"\multicolumn{{{k}}}{{c}}{{{_latex_escape(METRIC_NAMES.get(m, m))}}}"
         for m in summary.metrics)
@@ -340,9 +447,9 @@ def to_latex(summary: Summary, label: str = "tab:compare") -> str:
         rf"\label{{{label}}}",
         rf"\begin{{tabular}}{{{spec}}}",
         r"\toprule",
-        rf" & {groups} & \\",
+        rf" & {groups} & {'& ' if summary.paired else ''}\\",
         rules,
-        rf"Planner & {fractions} & ms/step \\",
+        rf"Planner & {fractions} & {delta}ms/step \\",
         r"\midrule",
     ]
     for planner in summary.planners:
@@ -350,6 +457,8 @@ def to_latex(summary: Summary, label: str = "tab:compare") -> str:
         for m, s in columns:
             text = _cell(summary.stat(planner, m, s), r" $\pm$ ")
             cells.append(rf"\textbf{{{text}}}" if planner in best[(m, s)] else text)
+        if summary.paired:
+            cells.append(_paired_cell(summary.paired.get(planner), r" $\pm$ ", r"\%"))
         cells.append(_ms(summary.plan_ms.get(planner, math.nan)))
         lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import json
 import sys
 from pathlib import Path
 
@@ -178,3 +179,29 @@ def test_raster_terrain_file_end_to_end(capsys, tmp_path):
     assert compare_main(argv) == 0
     assert "terrain field.npy" in capsys.readouterr().out  # evaluate names it by file
     assert (out / "trajectories" / "random_mission0.png").is_file()
+
+
+@needs_evaluation
+def test_compare_records_checkpoints_and_the_paired_column(tmp_path, capsys):
+    from coma.persistence import shipped_policy
+
+    out = tmp_path / "out"
+    argv = ["--agents", "4", "--trials", "2", "--resolution", "1.0", "--budget", "2",
+            "--planners", "ig,random,coma", "--workers", "1", "--no-progress", "--out", str(out)]
+    assert compare_main(argv) == 0
+    stored = json.loads((out / "config.json").read_text())
+    digest = hashlib.sha256(Path(shipped_policy()).read_bytes()).hexdigest()
+    assert stored["checkpoints"]["coma"] == {"checkpoint": Path(shipped_policy()).name,
+                                             "sha256": digest}
+    assert "ig" not in stored["checkpoints"]
+    summary = (out / "summary.md").read_text()
+    assert "Δ vs ig" in summary and f"sha256:{digest[:16]}" in summary
+    header = (out / "summary.csv").read_text().splitlines()[0]
+    assert "entropy_final_minus_ig_se" in header and "win_rate_vs_ig" in header
+    # Weights that changed under a stored label are refused before anything is written.
+    stored["checkpoints"]["coma"]["sha256"] = "0" * 64
+    (out / "config.json").write_text(json.dumps(stored))
+    before = snapshot(out)
+    assert compare_main(argv) == 2
+    assert "changed since its missions were stored" in capsys.readouterr().err
+    assert snapshot(out) == before

@@ -18,6 +18,7 @@ from reports.plots import curves_from_rows, plot_curves, plot_trajectories
 from reports.tables import (
     Summary,
     budget_steps,
+    paired_differences,
     summarise,
     to_csv,
     to_latex,
@@ -132,12 +133,31 @@ def test_markdown_table(summary):
     assert "3 missions" in caption and "4 UAVs" in caption and "D = 25 m" in caption
     cells = markdown_cells(text)
     assert cells["Planner"] == ["Entropy 33 % (s=2)", "Entropy 67 % (s=4)", "Entropy 100 % (s=6)",
-                                "F1 33 % (s=2)", "F1 67 % (s=4)", "F1 100 % (s=6)", "ms/step"]
+                                "F1 33 % (s=2)", "F1 67 % (s=4)", "F1 100 % (s=6)", "Δ vs ig",
+                                "ms/step"]
     assert cells["ig"] == ["0.800 ± 0.100", "**0.600 ± 0.173**", "**0.300 ± 0.100**",
-                           "**0.400 ± 0.200**", "0.500 ± 0.000", "0.700 ± 0.000", "7.0"]
+                           "**0.400 ± 0.200**", "0.500 ± 0.000", "0.700 ± 0.000", "-", "7.0"]
+    # random - ig at the end: 0.5-0.2, 0.6-0.3, 0.7-0.4 = 0.3 each: +0.3, SE 0, ahead in 0 %.
     assert cells["random"] == ["**0.600 ± 0.000**", "0.700 ± 0.000", "0.600 ± 0.100",
                                "0.100 ± 0.000", "**0.700 ± 0.100**", "**0.800 ± 0.000**",
-                               "0.500"]
+                               "+0.300 ± 0.000 (0 %)", "0.500"]
+
+
+def test_paired_differences_on_a_hand_sized_case():
+    rows = []
+    for mission, (mine, ref) in enumerate([(0.3, 0.4), (0.6, 0.4), (0.1, 0.5)]):
+        rows += [{"planner": "mine", "mission": mission, "step": 3, "entropy": mine},
+                 {"planner": "ref", "mission": mission, "step": 3, "entropy": ref},
+                 {"planner": "ref", "mission": mission, "step": 1, "entropy": 0.9}]
+    rows.append({"planner": "mine", "mission": 7, "step": 3, "entropy": 0.0})  # unpaired
+    paired = paired_differences(rows, "ref")["mine"]
+    # d = -0.1, +0.2, -0.4: mean -0.1, sd 0.3, SE 0.3 / sqrt(3); ahead in 2 of 3.
+    assert paired.n == 3 and paired.mean == pytest.approx(-0.1)
+    assert paired.se == pytest.approx(0.3 / math.sqrt(3))
+    assert paired.win_rate == pytest.approx(2 / 3)
+    assert paired_differences(rows, "absent") == {}
+    f1 = paired_differences([dict(r, f1=r["entropy"]) for r in rows], "ref", metric="f1")
+    assert f1["mine"].win_rate == pytest.approx(1 / 3)  # higher F1 is better
 
 
 def test_ties_are_all_bold_and_comm_inf_in_caption():
@@ -149,13 +169,13 @@ def test_ties_are_all_bold_and_comm_inf_in_caption():
 
 def test_latex_table(summary):
     text = to_latex(summary)
-    assert r"\begin{tabular}{l ccc ccc r}" in text
+    assert r"\begin{tabular}{l ccc ccc r r}" in text
     assert r"\multicolumn{3}{c}{Entropy} & \multicolumn{3}{c}{F1}" in text
     assert r"\caption{Mean $\pm$ std over 3 missions" in text
     ig = next(line for line in text.splitlines() if line.startswith("ig &"))
     assert ig == (r"ig & 0.800 $\pm$ 0.100 & \textbf{0.600 $\pm$ 0.173} & "
                   r"\textbf{0.300 $\pm$ 0.100} & \textbf{0.400 $\pm$ 0.200} & "
-                  r"0.500 $\pm$ 0.000 & 0.700 $\pm$ 0.000 & 7.0 \\")
+                  r"0.500 $\pm$ 0.000 & 0.700 $\pm$ 0.000 & - & 7.0 \\")
     assert r"\textbf{0.600 $\pm$ 0.000}" in text  # random, entropy at 33 %
     assert "±" not in text
     escaped = to_latex(summarise([dict(r, planner="coma_v2&x") for r in synthetic_rows()]))
