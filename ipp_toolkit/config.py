@@ -172,7 +172,8 @@ class TerrainConfig:
         spectral_exponent: range of the ``fractal`` field's exponent b (power ~ 1/f^b): near
             2 rough, many small hotspots; near 4 smooth, few large regions.
         real_sources: which bundled rasters ``real`` crops: ``mission`` (those of the
-            mission's namespace: train, validation or test), or one split, or ``all``.
+            mission's namespace: train, validation or test), one split, ``all``, or one
+            raster by name (e.g. ``jacksboro_dem``, whatever its split).
         crop_fraction: range of a ``real`` crop's side as a fraction of the raster's shorter
             side.
         mixture: ``(kind, weight)`` pairs for ``mixture`` (a mapping in YAML); empty means
@@ -217,7 +218,12 @@ class TerrainConfig:
         if self.crop_fraction[0] <= 0.0:
             _fail("terrain", "crop_fraction", self.crop_fraction, "must lie in (0, 1]")
         if self.real_sources not in REAL_SOURCES:
-            _fail("terrain", "real_sources", self.real_sources, f"choose one of {REAL_SOURCES}")
+            from .terrain_families import real_raster_names  # imports this module: lazily
+
+            if self.real_sources not in real_raster_names():
+                _fail("terrain", "real_sources", self.real_sources,
+                      f"choose one of {REAL_SOURCES} or a bundled raster: "
+                      f"{', '.join(real_raster_names())}")
         object.__setattr__(self, "mixture", self._checked_mixture(kinds))
         if self.kind == "raster" or (self.kind == "mixture" and any(
                 kind == "raster" for kind, _ in self.mixture_weights())):

@@ -40,7 +40,8 @@ import numpy as np
 from .config import TerrainConfig, WorldConfig
 from .terrain import _bilinear_weights, generate_terrain, register_terrain, resample_area_average
 
-__all__ = ["RealRaster", "real_rasters", "fractal_field", "DEFAULT_THRESHOLD_QUANTILE"]
+__all__ = ["RealRaster", "real_rasters", "real_raster_names", "real_crop", "fractal_field",
+           "DEFAULT_THRESHOLD_QUANTILE"]
 
 DEFAULT_THRESHOLD_QUANTILE = (0.4, 0.9)
 """Quantile range of ``fractal`` and ``real`` when ``terrain.threshold_quantile`` is unset."""
@@ -73,15 +74,24 @@ class RealRaster:
 
 
 @functools.lru_cache(maxsize=1)
-def real_rasters() -> tuple[RealRaster, ...]:
-    """Every bundled real raster, in ``sources.json`` order (loaded once)."""
+def _manifest() -> tuple[dict, ...]:
     manifest = RASTER_FOLDER / "sources.json"
     try:
-        entries = json.loads(manifest.read_text())
+        return tuple(json.loads(manifest.read_text()))
     except (OSError, json.JSONDecodeError) as err:
         raise ValueError(f"cannot read the bundled raster list {str(manifest)!r}: {err}") from None
+
+
+def real_raster_names(split: str = "all") -> tuple[str, ...]:
+    """Names of the bundled real rasters (of one split: train, validation, test, or all)."""
+    return tuple(e["name"] for e in _manifest() if split in ("all", e["split"]))
+
+
+@functools.lru_cache(maxsize=1)
+def real_rasters() -> tuple[RealRaster, ...]:
+    """Every bundled real raster, in ``sources.json`` order (loaded once)."""
     rasters = []
-    for entry in entries:
+    for entry in _manifest():
         layers = np.load(RASTER_FOLDER / f"{entry['name']}.npy", allow_pickle=False)
         layers.setflags(write=False)
         rasters.append(RealRaster(entry["name"], entry["split"], entry["measures"], layers,
@@ -140,7 +150,7 @@ def _fractal_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.G
 
 def _sources(config: TerrainConfig, namespace: str) -> list[RealRaster]:
     split = namespace if config.real_sources == "mission" else config.real_sources
-    chosen = [r for r in real_rasters() if split == "all" or r.split == split]
+    chosen = [r for r in real_rasters() if split in ("all", r.split, r.name)]
     if not chosen:
         raise ValueError(f"no bundled real raster for split {split!r} (terrain.real_sources = "
                          f"{config.real_sources!r}, mission namespace {namespace!r})")

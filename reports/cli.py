@@ -298,14 +298,17 @@ def study_main(argv: list[str] | None = None) -> int:
     """
     parser = argparse.ArgumentParser(
         prog="ipp-study", description="Regenerate the paper's studies into a folder.")
-    parser.add_argument("study", choices=["robustness", "credit", "ablation"],
-                        help="robustness: paper Table I (team sizes x communication ranges); "
+    parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation"],
+                        help="generalisation: planners x terrain families (real test rasters "
+                             "included) x team settings, paired differences to IG; "
+                             "robustness: paper Table I (team sizes x communication ranges); "
                              "credit: COMA against its credit-assignment variants; ablation: "
                              "COMA with one input plane, the masking or the centring toggled; "
                              "each run trained alike, then compared on test missions")
-    parser.add_argument("--planners", default="coma,ig,coverage",
+    parser.add_argument("--planners", default=None,
                         help="planners, comma-separated (coma=PATH for your own policy, "
-                             "LABEL:coma=PATH to name it)")
+                             "LABEL:coma=PATH to name it); default: coma,ig,coverage, and "
+                             "for generalisation ig,coverage,random,coma,ppo")
     parser.add_argument("--agents", default="2,4,8", help="team sizes, comma-separated")
     parser.add_argument("--comm", default="0,25,inf", help="ranges in metres, comma-separated")
     parser.add_argument("--trials", type=_positive_int("--trials"), default=50)
@@ -328,6 +331,13 @@ def study_main(argv: list[str] | None = None) -> int:
                         help="credit, ablation: training seeds; with several, each run is "
                              "trained once per seed and the table gives mean and spread over "
                              "seeds (default: one seed, 0)")
+    parser.add_argument("--families", default="split,blobs,fractal,real",
+                        help="generalisation: terrain families at 4 UAVs / 25 m (real: one cell "
+                             "per test raster)")
+    parser.add_argument("--team-families", default="split,blobs",
+                        help="generalisation: families flown in every --agents x --comm setting")
+    parser.add_argument("--budget", type=_positive_int("--budget"), default=None,
+                        help="generalisation: steps B (default: the protocol's 15)")
     parser.add_argument("--no-progress", action="store_true")
     try:
         args = parser.parse_args(argv)
@@ -337,10 +347,25 @@ def study_main(argv: list[str] | None = None) -> int:
 
     out = args.out or f"results/{args.study}"
     try:
-        if args.study == "robustness":
+        if args.study == "generalisation":
+            from .generalisation import generalisation_study, study_cells
+
+            planners = args.planners or "ig,coverage,random,coma,ppo"
+            settings = [(int(a), _comm_range(c)) for a in args.agents.split(",")
+                        for c in args.comm.split(",")]
+            cells = study_cells([f for f in args.families.split(",") if f],
+                                [f for f in args.team_families.split(",") if f], settings)
+            study = generalisation_study(planners, cells, trials=args.trials, seed=args.seed,
+                                         out=out, workers=args.workers,
+                                         resolution=args.resolution, budget=args.budget,
+                                         progress=not args.no_progress)
+            print(study.table)
+            print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
+        elif args.study == "robustness":
             agents = [int(a) for a in args.agents.split(",")]
             comms = [_comm_range(c) for c in args.comm.split(",")]
-            study = robustness_study(args.planners, agents, comms, trials=args.trials,
+            study = robustness_study(args.planners or "coma,ig,coverage", agents, comms,
+                                     trials=args.trials,
                                      seed=args.seed, out=out, workers=args.workers,
                                      resolution=args.resolution,
                                      progress=not args.no_progress)

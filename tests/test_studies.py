@@ -103,3 +103,23 @@ def test_studies_train_each_run_once_per_seed_and_summarise_over_seeds(tmp_path)
     assert f"| a | 2 | 0.500 ± {spread:.3f} | **0.800 ± {np.std([0.7, 0.9], ddof=1):.3f}** |" \
         in table
     assert "| b | 2 | **0.300 ± 0.000** | 0.500 ± 0.000 |" in table
+
+
+def test_generalisation_study_end_to_end_on_a_tiny_grid(tmp_path):
+    from reports.generalisation import Cell, generalisation_study, study_cells
+
+    cells = study_cells(["split", "real"], ["blobs"], [(2, 0.0)])
+    assert [c.label for c in cells] == ["split", "real:bcsd_air_temperature",
+                                        "real:jacksboro_dem", "blobs"]
+    study = generalisation_study("ig,random", cells[:2] + [Cell("blobs", 2, 0.0)], trials=2,
+                                 out=tmp_path, resolution=1.0, budget=3, progress=False)
+    for suffix in ("md", "csv", "tex", "png", "pdf"):
+        assert (tmp_path / f"generalisation.{suffix}").is_file()
+    assert (tmp_path / "real-bcsd_air_temperature" / "a4-d25" / "results.csv").is_file()
+    rows = (tmp_path / "generalisation.csv").read_text().splitlines()
+    assert rows[0].startswith("terrain,agents,comm,planner") and len(rows) == 1 + 3 * 2
+    paired = study.summaries[cells[0]].paired["random"]
+    assert paired.n == 2 and "random − ig" in study.table
+    with pytest.raises(ValueError, match="reference planner 'ig'"):
+        generalisation_study("random,coverage", cells[:1], trials=1, out=tmp_path / "x")
+    assert not (tmp_path / "x").exists()

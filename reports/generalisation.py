@@ -1,0 +1,217 @@
+"""``ipp-study generalisation``: do learned planners beat IG off their training distribution?
+
+Every planner flies the same test missions in a grid of cells:
+
+* each terrain family at the paper's setting (4 UAVs, D = 25 m): ``split`` (the training
+  distribution of the paper's policies), ``blobs``, ``fractal`` and, one cell per real *test*
+  raster file, ``real`` (random crops, rotations/flips, threshold quantiles and starts: each
+  mission is a different map, so the standard error is one over maps);
+* the nine team settings (2/4/8 UAVs x D 0/25 m/inf) on ``split`` and ``blobs``.
+
+A cell is an ``ipp-compare`` folder (resumable); the study writes ``generalisation.md``,
+``.csv``, ``.tex`` and ``generalisation.png/.pdf``: mean final entropy per planner and the
+paired difference of every other planner to the reference (IG): mean ± standard error over
+missions and the share of missions ahead. A difference is **bold** where the planner is
+ahead by two standard errors (mean <= -2 SE).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.settings import comm_label, format_comm
+from ipp_toolkit.terrain_families import real_raster_names
+
+from .compare import compare
+from .plots import _colour, _new_figure, save_figure
+from .tables import Paired, Summary, atomic_write_text
+
+__all__ = ["Cell", "GeneralisationStudy", "generalisation_study", "study_cells"]
+
+NINE_SETTINGS = tuple((a, c) for a in (2, 4, 8) for c in (0.0, 25.0, math.inf))
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One cell of the study: a terrain (a family, or one real raster) and a team setting."""
+
+    terrain: str
+    agents: int
+    comm: float
+    real_source: str = ""
+
+    @property
+    def label(self) -> str:
+        return f"real:{self.real_source}" if self.real_source else self.terrain
+
+    @property
+    def folder(self) -> str:
+        return f"{self.label.replace(':', '-')}/a{self.agents}-d{comm_label(self.comm)}"
+
+
+@dataclass
+class GeneralisationStudy:
+    """Outcome of :func:`generalisation_study`.
+
+    Attributes:
+        cells: the cells in table order.
+        planners: planner labels.
+        reference: the reference planner of the paired columns.
+        summaries: the per-cell :class:`~reports.tables.Summary`.
+        table: the Markdown table.
+    """
+
+    cells: list[Cell]
+    planners: list[str]
+    reference: str
+    summaries: dict[Cell, Summary]
+    table: str
+
+
+def study_cells(families: Sequence[str] = ("split", "blobs", "fractal", "real"),
+                team_families: Sequence[str] = ("split", "blobs"),
+                settings: Sequence[tuple[int, float]] = NINE_SETTINGS,
+                family_setting: tuple[int, float] = (4, 25.0)) -> list[Cell]:
+    """The cells: every family at ``family_setting`` (``real``: one cell per test raster),
+    then every team setting on each of ``team_families`` (the family cell not repeated)."""
+    cells: list[Cell] = []
+    agents, comm = family_setting
+    for family in families:
+        if family == "real":
+            cells += [Cell("real", agents, comm, name) for name in real_raster_names("test")]
+        else:
+            cells.append(Cell(family, agents, comm))
+    for family in team_families:
+        cells += [Cell(family, a, c) for a, c in settings
+                  if Cell(family, a, c) not in cells]
+    return cells
+
+
+def _paired_text(paired: Paired | None) -> str:
+    if paired is None or not math.isfinite(paired.mean):
+        return "-"
+    se = f" ± {paired.se:.3f}" if math.isfinite(paired.se) else ""
+    text = f"{paired.mean:+.3f}{se} ({100 * paired.win_rate:.0f} %)"
+    return f"**{text}**" if math.isfinite(paired.se) and paired.mean <= -2 * paired.se else text
+
+
+def _tables(cells: list[Cell], planners: list[str], reference: str,
+            summaries: dict[Cell, Summary]) -> tuple[str, str, str]:
+    others = [p for p in planners if p != reference]
+    header = (["terrain", "UAVs", "D"] + [f"{p} H" for p in planners]
+              + [f"{p} − {reference}" for p in others])
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * 3 + "---:|" * (len(header) - 3)]
+    csv_rows = ["terrain,agents,comm,planner,entropy_final_mean,entropy_final_std,"
+                f"minus_{reference}_mean,minus_{reference}_se,win_rate,missions"]
+    tex_rows = []
+    for cell in cells:
+        summary = summaries[cell]
+        step = summary.budget
+        means = {p: summary.stat(p, "entropy", step) for p in planners}
+        best = min(s.mean for s in means.values())
+        cells_text = [cell.label, str(cell.agents), format_comm(cell.comm)]
+        for p in planners:
+            text = f"{means[p].mean:.3f}"
+            cells_text.append(f"**{text}**" if means[p].mean == best else text)
+        cells_text += [_paired_text(summary.paired.get(p)) for p in others]
+        lines.append("| " + " | ".join(cells_text) + " |")
+        tex_rows.append(" & ".join(c.replace("**", "").replace("%", r"\%").replace("_", r"\_")
+                                   .replace("±", r"$\pm$") for c in cells_text) + r" \\")
+        for p in planners:
+            paired = summary.paired.get(p)
+            values = ("", "", "") if paired is None else (f"{paired.mean:.6g}",
+                                                          f"{paired.se:.6g}",
+                                                          f"{paired.win_rate:.6g}")
+            csv_rows.append(f"{cell.label},{cell.agents},{comm_label(cell.comm)},{p},"
+                            f"{means[p].mean:.6g},{means[p].std:.6g},{','.join(values)},"
+                            f"{means[p].n}")
+    tex = "\n".join([r"% requires \usepackage{booktabs}", r"\begin{tabular}{lrr"
+                     + "r" * (len(header) - 3) + "}", r"\toprule",
+                     " & ".join(h.replace("_", r"\_").replace("−", "$-$") for h in header)
+                     + r" \\", r"\midrule", *tex_rows, r"\bottomrule", r"\end{tabular}"])
+    return "\n".join(lines) + "\n", "\n".join(csv_rows) + "\n", tex + "\n"
+
+
+def _figure(cells: list[Cell], planners: list[str], reference: str,
+            summaries: dict[Cell, Summary], stem: Path) -> list[Path]:
+    others = [p for p in planners if p != reference]
+    figure = _new_figure(max(6.0, 0.55 * len(cells)), 3.4)
+    ax = figure.subplots(1, 1)
+    x = np.arange(len(cells))
+    width = 0.8 / max(len(others), 1)
+    for k, planner in enumerate(others):
+        paired = [summaries[c].paired.get(planner) for c in cells]
+        means = [p.mean if p else np.nan for p in paired]
+        errors = [2 * p.se if p and math.isfinite(p.se) else 0.0 for p in paired]
+        ax.bar(x + (k - (len(others) - 1) / 2) * width, means, width, yerr=errors,
+               label=planner, color=_colour(k), capsize=2)
+    ax.axhline(0.0, color="black", linewidth=0.8)
+    ax.set_xticks(x, [f"{c.label}\nN={c.agents} D={comm_label(c.comm)}" for c in cells],
+                  fontsize=6, rotation=60, ha="right")
+    ax.set(ylabel=f"final entropy − {reference}'s (± 2 SE)")
+    ax.legend(fontsize=7)
+    return save_figure(figure, stem)
+
+
+def generalisation_study(planners: str | Sequence[str] = "ig,coverage,random,coma,ppo",
+                         cells: Sequence[Cell] | None = None, trials: int = 50, seed: int = 0,
+                         out: str | os.PathLike[str] = "results/generalisation",
+                         workers: int = 1, resolution: float | None = None,
+                         budget: int | None = None, reference: str = "ig",
+                         progress: bool = True,
+                         note: Callable[[str], None] | None = None) -> GeneralisationStudy:
+    """Fly every planner in every cell and write the study's tables and figure into ``out``.
+
+    Args:
+        planners: comma-separated names or specs; must include ``reference``.
+        cells: the grid (default :func:`study_cells`).
+        trials: test missions per cell (each ``real`` mission a different map).
+        seed: run seed of the missions.
+        out: the study folder; one resumable ``ipp-compare`` folder per cell inside.
+        workers: evaluation processes.
+        resolution, budget: overrides of the protocol's r_M = 0.1 m and B = 15.
+        reference: the planner the paired columns compare with.
+        progress: show progress bars.
+        note: receives notes (skipped planners); default stderr.
+
+    Raises:
+        ValueError: bad input (an unknown planner, no reference among the planners), checked
+            on the first cell before anything is written.
+    """
+    names = planners.split(",") if isinstance(planners, str) else list(planners)
+    if reference not in [n.split(":")[0].split("=")[0].strip() for n in names]:
+        raise ValueError(f"the reference planner {reference!r} is not among the planners "
+                         f"{planners!r}")
+    out = Path(out)
+    cells = list(study_cells() if cells is None else cells)
+    summaries: dict[Cell, Summary] = {}
+    labels: list[str] = []
+    for cell in cells:
+        terrain = {"kind": cell.terrain}
+        if cell.real_source:
+            terrain["real_sources"] = cell.real_source
+        config = EnvConfig().replace(terrain=terrain)
+        comparison = compare(agents=cell.agents, comm=cell.comm, planners=planners,
+                             trials=trials, seed=seed, workers=workers, out=out / cell.folder,
+                             config=config, resolution=resolution, budget=budget,
+                             progress=progress, note=note, reference=reference)
+        summaries[cell] = comparison.summary
+        labels = list(comparison.summary.planners)
+    markdown, csv_text, tex = _tables(cells, labels, reference, summaries)
+    caption = (f"Final entropy (mean over {trials} test missions per cell, seed {seed}; lower "
+               f"is better) and each planner's paired difference to {reference} on the same "
+               "missions: mean ± standard error (share of missions ahead); bold where ahead by "
+               "two standard errors. real:NAME cells: crops of one test raster never trained "
+               "on, one map per mission.\n\n")
+    atomic_write_text(out / "generalisation.md", caption + markdown)
+    atomic_write_text(out / "generalisation.csv", csv_text)
+    atomic_write_text(out / "generalisation.tex", tex)
+    _figure(cells, labels, reference, summaries, out / "generalisation")
+    return GeneralisationStudy(cells, labels, reference, summaries, caption + markdown)
