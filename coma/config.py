@@ -80,6 +80,10 @@ class COMAConfig:
             feature planes) to a residual network that starts at zero: COMA then trains a
             correction of the ``ig`` planner's choice, starting from it (not in the paper);
             the value is beta's start. Use it with ``warm_start = ""``.
+        residual_penalty: with ``gain_prior``, the actor loss adds this times the mean squared
+            residual logit (centred over the valid actions: softmax ignores a shift), so the
+            policy stays at the ``ig`` prior where the advantage does not consistently push
+            it away (not in the paper; 0 = off).
         init_policy: a COMA policy file (``best.pt``, ``last.pt`` or a shipped policy) whose
             actor and critic start this run instead of random networks or a warm start
             (fine-tuning, not in the paper); its variant, size and feature planes must match.
@@ -116,6 +120,7 @@ class COMAConfig:
     init_policy: str = ""
     critic_warmup_updates: int = 0
     gain_prior: float = 0.0
+    residual_penalty: float = 0.0
 
     def __post_init__(self) -> None:
         # JSON and YAML hand back lists: keep tuples so configs compare and hash alike.
@@ -157,7 +162,7 @@ class COMAConfig:
                 _fail(name, value, "must be a positive finite number")
         if not isinstance(self.normalise_advantage, bool):
             _fail("normalise_advantage", self.normalise_advantage, "must be true or false")
-        for name in ("clip_ratio", "entropy_coef", "gain_prior"):
+        for name in ("clip_ratio", "entropy_coef", "gain_prior", "residual_penalty"):
             value = getattr(self, name)
             if not _is_number(value) or value < 0:
                 _fail(name, value, "must be a non-negative finite number")

@@ -46,7 +46,7 @@ from ipp_toolkit.team import N_ACTIONS
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from .config import PRESETS, VARIANTS, COMAConfig, preset
 from .inputs import critic_input, value_input
-from .networks import bounded_softmax, epsilon_at
+from .networks import GainPriorActor, bounded_softmax, epsilon_at
 from .persistence import (
     COMANetworks,
     build_networks,
@@ -293,7 +293,17 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
             if not train_actor:
                 continue
 
-            probs = bounded_softmax(networks.actor(actor_obs[batch]), masks[batch], eps)
+            penalty = None
+            if cfg.residual_penalty > 0 and isinstance(networks.actor, GainPriorActor):
+                residual, prior = networks.actor.parts(actor_obs[batch])
+                logits = residual + prior
+                valid = masks[batch].to(residual.dtype)
+                centred = residual - (residual * valid).sum(-1, keepdim=True) / valid.sum(
+                    -1, keepdim=True)
+                penalty = (centred ** 2 * valid).sum() / valid.sum()
+            else:
+                logits = networks.actor(actor_obs[batch])
+            probs = bounded_softmax(logits, masks[batch], eps)
             # The critic's pre-step Q serves the actor: one forward pass fewer per mini-batch.
             q = q.detach()
             with torch.no_grad():
@@ -316,6 +326,8 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
             if cfg.entropy_coef > 0:
                 entropy = -(probs * torch.log(probs.clamp_min(1e-12))).sum(-1).mean()
                 actor_loss = actor_loss - cfg.entropy_coef * entropy
+            if penalty is not None:
+                actor_loss = actor_loss + cfg.residual_penalty * penalty
             _check_finite("actor loss", actor_loss)
             logs["actor_grad_norm"].append(_clip_step(optimisers["actor"], networks.actor,
                                                       actor_loss, cfg.max_grad_norm))

@@ -113,8 +113,13 @@ class GainPriorActor(nn.Module):
         gains = planes[:, self.option_channel, self.option_row, self.option_col]
         return gains / (gains.amax(dim=1, keepdim=True) + 1e-8)
 
+    def parts(self, planes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, C, G, G) planes -> the (B, 6) residual and prior logits (their sum: forward)."""
+        return self.residual(planes), self.log_beta.exp() * self.option_gains(planes)
+
     def forward(self, planes: torch.Tensor) -> torch.Tensor:
-        return self.residual(planes) + self.log_beta.exp() * self.option_gains(planes)
+        residual, prior = self.parts(planes)
+        return residual + prior
 
 
 def bounded_softmax(logits: torch.Tensor, mask: torch.Tensor, eps: float) -> torch.Tensor:

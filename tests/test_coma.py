@@ -553,3 +553,25 @@ def test_gain_prior_policy_starts_at_the_best_expected_gain(tmp_path):
         step_mission(state, actions)
     with pytest.raises(ValueError, match="gain_prior = -1"):
         tiny_coma(gain_prior=-1)
+
+
+def test_residual_penalty_keeps_the_gain_prior_actor_near_its_prior(tmp_path):
+    import torch
+
+    from ipp_toolkit.features import actor_observations
+    from ipp_toolkit.mission import reset_mission
+
+    env = tiny_env(4).replace(features={"gain": True})
+    sizes = {}
+    for penalty in (0.0, 50.0):
+        config = tiny_coma(gain_prior=30.0, missions=8, lr_actor=3e-3, residual_penalty=penalty)
+        train(config, env, tmp_path / f"run{penalty}", progress=False, tensorboard=False)
+        actor = load_policy(tmp_path / f"run{penalty}" / "last.pt")[0].actor
+        state = reset_mission(env, 0, 0, "validation")
+        planes = torch.as_tensor(actor_observations(state, env.features))
+        with torch.no_grad():
+            residual, _ = actor.parts(planes)
+        sizes[penalty] = float((residual - residual.mean(-1, keepdim=True)).abs().mean())
+    assert sizes[0.0] > 0.0 and sizes[50.0] < 0.5 * sizes[0.0], sizes
+    with pytest.raises(ValueError, match="residual_penalty"):
+        tiny_coma(residual_penalty=-1.0)
