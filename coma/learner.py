@@ -48,12 +48,13 @@ from .config import PRESETS, VARIANTS, COMAConfig, preset
 from .inputs import critic_input, value_input
 from .networks import GainPriorActor, bounded_softmax, epsilon_at
 from .persistence import (
+    DEFAULT_SHIPPED,
     COMANetworks,
     build_networks,
     load_policy,
     load_state_into,
+    resolve_policy,
     save_policy,
-    shipped_policy,
 )
 from .warm_start import WarmStartConfig
 
@@ -735,7 +736,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="train on these communication ranges in metres, e.g. 0,25,inf")
     parser.add_argument("--init", metavar="POLICY",
                         help="start from this COMA policy file instead of a warm start "
-                             "(fine-tuning), e.g. the shipped one: --init shipped")
+                             "(fine-tuning), or a shipped one: --init shipped:NAME "
+                             "(paper-actor, prior, mixed; plain 'shipped': coma's default)")
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
                         help="switch a feature plane of the mission config, e.g. "
                              "--feature own_position=true (repeatable)")
@@ -789,7 +791,8 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
     if args.comm_ranges is not None:
         changes["comm_ranges"] = _float_list("--comm-ranges", args.comm_ranges)
     if args.init is not None:
-        changes["init_policy"] = str(shipped_policy()) if args.init == "shipped" else args.init
+        init = f"shipped:{DEFAULT_SHIPPED}" if args.init == "shipped" else args.init
+        changes["init_policy"] = str(resolve_policy(init))
         if not Path(changes["init_policy"]).is_file():
             raise ValueError(f"--init {args.init!r}: no such policy file")
     coma_config = preset(args.preset, **changes)

@@ -33,8 +33,8 @@ from .inputs import critic_channels, value_channels
 from .networks import ConvNet, GainPriorActor
 
 __all__ = ["CHECKPOINT_KIND", "COMANetworks", "build_networks", "save_policy", "load_policy",
-           "check_transfer", "shipped_policy", "SHIPPED_POLICY", "SHIPPED_MIXED_POLICY",
-           "SHIPPED_PRIOR_POLICY"]
+           "check_transfer", "shipped_policy", "resolve_policy", "SHIPPED_POLICIES",
+           "DEFAULT_SHIPPED", "SHIPPED_POLICY", "SHIPPED_MIXED_POLICY", "SHIPPED_PRIOR_POLICY"]
 
 CHECKPOINT_KIND = "ipp-toolkit/coma"
 SHIPPED_POLICY = "coma_4agents_d25.pt"
@@ -43,6 +43,12 @@ SHIPPED_MIXED_POLICY = "coma_mixed.pt"
 #: The gain-prior policy (a residual over ``ig``'s objective), 4 agents, D = 25 m
 #: (planner ``coma_prior``).
 SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
+#: Shipped policies by name, as in ``coma=shipped:NAME`` and ``--init shipped:NAME``.
+SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
+                    "mixed": SHIPPED_MIXED_POLICY}
+#: The shipped policy the ``coma`` planner flies by default: the best on validation missions
+#: (4 UAVs, 25 m, 40 missions per family at r_M = 0.5 m; docs/generalisation.md).
+DEFAULT_SHIPPED = "prior"
 
 
 @dataclass
@@ -133,8 +139,24 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, A
 
 
 def shipped_policy(name: str = SHIPPED_POLICY) -> Path:
-    """Path of a policy shipped with the package (default: 4 agents, D = 25 m)."""
+    """Path of a policy file shipped with the package (default: 4 agents, D = 25 m)."""
     return Path(str(resources.files("coma") / "checkpoints" / name))
+
+
+def resolve_policy(policy: str | os.PathLike[str]) -> Path:
+    """A policy as named by a user: ``shipped:NAME`` (:data:`SHIPPED_POLICIES`), or a path.
+
+    Raises:
+        ValueError: ``shipped:`` with an unknown name (the message lists the names).
+    """
+    text = os.fspath(policy)
+    if not text.startswith("shipped:"):
+        return Path(text)
+    name = text.removeprefix("shipped:")
+    if name not in SHIPPED_POLICIES:
+        raise ValueError(f"unknown shipped policy {name!r}; shipped policies: "
+                         f"{', '.join(f'shipped:{n}' for n in SHIPPED_POLICIES)}")
+    return shipped_policy(SHIPPED_POLICIES[name])
 
 
 def load_state_into(module: torch.nn.Module, state: Any, what: str, path: str) -> None:

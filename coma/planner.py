@@ -11,6 +11,7 @@ in :attr:`COMAPlanner.transfer_notes`).
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 import torch
@@ -20,12 +21,10 @@ from ipp_toolkit.planners import AgentView, Planner
 
 from .learner import greedy_actions, mission_settings
 from .persistence import (
-    SHIPPED_MIXED_POLICY,
-    SHIPPED_POLICY,
-    SHIPPED_PRIOR_POLICY,
+    DEFAULT_SHIPPED,
     check_transfer,
     load_policy,
-    shipped_policy,
+    resolve_policy,
 )
 
 __all__ = ["COMAPlanner", "COMAMixedPlanner", "COMAPriorPlanner"]
@@ -35,18 +34,25 @@ class COMAPlanner(Planner):
     """Greedy (eps = 0, argmax over valid actions) COMA actor.
 
     Args:
-        checkpoint: a policy file (``best.pt`` / ``last.pt`` of ``ipp-train coma``); default:
-            the policy shipped with the package (4 agents, D = 25 m).
+        checkpoint: a policy file (``best.pt`` / ``last.pt`` of ``ipp-train coma``) or a
+            shipped policy by name, ``shipped:NAME`` (``paper-actor``, ``prior``, ``mixed``);
+            default: the best validated shipped policy (``DEFAULT_SHIPPED``).
     """
 
     name = "coma"
     needs_observations = True
-    #: File name of the packaged policy used when no checkpoint is given.
-    shipped = SHIPPED_POLICY
+    #: Name of the shipped policy used when no checkpoint is given.
+    shipped = DEFAULT_SHIPPED
+
+    #: For a deprecated alias: the spelling to use instead (warned at construction).
+    deprecated = ""
 
     def __init__(self, checkpoint: str | os.PathLike[str] | None = None):
+        if self.deprecated:
+            warnings.warn(f"planner {self.name!r} is deprecated; use {self.deprecated}",
+                          DeprecationWarning, stacklevel=2)
         torch.set_num_threads(1)
-        path = shipped_policy(self.shipped) if checkpoint is None else checkpoint
+        path = resolve_policy(f"shipped:{self.shipped}" if checkpoint is None else checkpoint)
         if checkpoint is None and not os.path.exists(path):
             raise FileNotFoundError(f"no shipped COMA policy at {str(path)!r}; train one with "
                                     "`ipp-train coma --out RUN` and pass coma=RUN/best.pt")
@@ -77,7 +83,7 @@ class COMAPlanner(Planner):
 
 
 class COMAMixedPlanner(COMAPlanner):
-    """The greedy COMA actor of the packaged policy fine-tuned on mixed teams.
+    """Deprecated alias of ``coma=shipped:mixed``: the policy fine-tuned on mixed teams.
 
     The shipped ``coma`` policy, fine-tuned with one (team size, range) pair per update from
     2, 4, 8 UAVs x D in {0, 25 m, inf} (``ipp-train coma --init shipped --team-sizes 2,4,8
@@ -86,11 +92,12 @@ class COMAMixedPlanner(COMAPlanner):
     """
 
     name = "coma_mixed"
-    shipped = SHIPPED_MIXED_POLICY
+    shipped = "mixed"
+    deprecated = "coma=shipped:mixed"
 
 
 class COMAPriorPlanner(COMAPlanner):
-    """The greedy COMA actor of the packaged gain-prior policy (4 agents, D = 25 m).
+    """Deprecated alias of ``coma=shipped:prior``: the gain-prior policy (4 agents, 25 m).
 
     Its actor is a :class:`~coma.networks.GainPriorActor`: logits = a learned residual +
     beta x each option's expected gain (the ``ig`` planner's objective, from the ``gain``
@@ -103,4 +110,5 @@ class COMAPriorPlanner(COMAPlanner):
     """
 
     name = "coma_prior"
-    shipped = SHIPPED_PRIOR_POLICY
+    shipped = "prior"
+    deprecated = "coma=shipped:prior"

@@ -29,7 +29,7 @@ from coma.advantages import counterfactual_advantage  # noqa: E402
 from coma.inputs import critic_input  # noqa: E402
 from coma.learner import greedy_actions  # noqa: E402
 from coma.networks import bounded_softmax  # noqa: E402
-from coma.persistence import load_policy, shipped_policy  # noqa: E402
+from coma.persistence import load_policy, resolve_policy  # noqa: E402
 from ipp_toolkit.features import actor_observations  # noqa: E402
 from ipp_toolkit.mission import reset_mission, step_mission  # noqa: E402
 from ipp_toolkit.team import ACTION_DELTAS, ACTION_NAMES  # noqa: E402
@@ -107,7 +107,7 @@ def main() -> None:
     parser.add_argument("--out", default="uav_advantages.png", help="figure to write")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    networks, _ = load_policy(args.checkpoint or shipped_policy())
+    networks, _ = load_policy(args.checkpoint or resolve_policy("shipped:paper-actor"))
     # The policy's own mission settings, at a coarse map resolution to keep this fast.
     config = networks.env_config.replace(world={"resolution": 0.5})
     if not 0 <= args.step < config.team.budget:

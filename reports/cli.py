@@ -150,12 +150,12 @@ def _compare_parser() -> argparse.ArgumentParser:
     parser.add_argument("--comm", type=_comm_range, default=None, metavar="METRES|inf",
                         help="communication range D in metres, or 'inf' (default: the "
                              "--config file's, else 25)")
-    parser.add_argument("--planners", default="all", metavar="LIST",
+    parser.add_argument("--planners", default="default", metavar="LIST",
                         help="comma-separated planners: registered names (ig, coverage, "
-                             "random, ...) or NAME=CHECKPOINT items (coma=PATH), each with "
-                             "an optional LABEL: prefix (mine:coma=PATH); 'all' = every "
-                             "registered planner that can be built (learned ones only when "
-                             "their checkpoint exists)")
+                             "random, ...) or NAME=CHECKPOINT items (coma=PATH, "
+                             "coma=shipped:NAME), each with an optional LABEL: prefix "
+                             "(mine:coma=PATH); 'default' = ig,coverage,random,coma,ppo; "
+                             "'all' = every registered planner that can be built")
     parser.add_argument("--trials", type=_positive_int("trials"), default=50, metavar="N",
                         help="number of test missions (the same missions for every planner)")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED",

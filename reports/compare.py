@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import write_json
-from ipp_toolkit.planners import Planner, available_planners, make_planner
+from ipp_toolkit.planners import Planner, available_planners, make_planner, planner_factory
 from ipp_toolkit.settings import build_env_config, format_comm, safe_name
 
 from .plots import plot_curves, plot_trajectories
@@ -41,6 +41,7 @@ __all__ = [
     "build_config",
     "resolve_planners",
     "default_planners",
+    "DEFAULT_PLANNERS",
     "safe_name",
 ]
 
@@ -107,8 +108,13 @@ class Comparison:
                 for r in self.result.rows if int(r["step"]) == budget}
 
 
-def default_planners(note: Callable[[str], None] | None = None) -> list[str]:
-    """Every registered planner that can be built with its default options.
+DEFAULT_PLANNERS = ("ig", "coverage", "random", "coma", "ppo")
+"""What ``ipp-compare`` flies without ``--planners``."""
+
+
+def default_planners(note: Callable[[str], None] | None = None,
+                     names: Sequence[str] = DEFAULT_PLANNERS) -> list[str]:
+    """The planners of ``names`` that can be built with their default options.
 
     A planner whose construction fails with ``FileNotFoundError`` or ``ValueError`` (a learned
     planner without a checkpoint), or whose entry point cannot be imported, is skipped and
@@ -117,8 +123,12 @@ def default_planners(note: Callable[[str], None] | None = None) -> list[str]:
     if note is None:
         def note(text: str) -> None:
             print(text, file=sys.stderr)
-    names = []
-    for name in available_planners():
+    available = available_planners()
+    kept = []
+    for name in names:
+        if name not in available:
+            note(f"note: skipping planner {name!r} (not registered)")
+            continue
         try:
             make_planner(name)
         except (FileNotFoundError, ValueError) as err:
@@ -127,6 +137,23 @@ def default_planners(note: Callable[[str], None] | None = None) -> list[str]:
         except ImportError as err:
             note(f"note: skipping planner {name!r} (its module cannot be imported: {err})")
             continue
+        kept.append(name)
+    return kept
+
+
+def _current_planners() -> list[str]:
+    """Every registered planner but deprecated aliases (``--planners all``)."""
+    import warnings
+
+    names = []
+    for name in available_planners():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                if getattr(planner_factory(name), "deprecated", ""):
+                    continue
+            except ImportError:
+                pass
         names.append(name)
     return names
 
@@ -136,7 +163,8 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
     """Parse, check and test-build the planners of a comparison.
 
     Args:
-        planners: None or ``"all"`` (:func:`default_planners`), a comma-separated string
+        planners: None or ``"default"`` (:data:`DEFAULT_PLANNERS`), ``"all"`` (every
+            registered planner but deprecated aliases), a comma-separated string
             (``"ig,coverage,coma=runs/x/ckpt.pt"``) or a sequence of names / specs.
         note: receives the notes about skipped planners.
 
@@ -155,8 +183,11 @@ def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
                     note: Callable[[str], None] | None) -> list[tuple[PlannerSpec, Planner]]:
     from ipp_toolkit.evaluation import PlannerSpec
 
-    if planners is None or (isinstance(planners, str) and planners.strip() == "all"):
-        items: list[str | PlannerSpec] = list(default_planners(note))
+    if planners is None or (isinstance(planners, str) and planners.strip() in ("all",
+                                                                                "default")):
+        every = isinstance(planners, str) and planners.strip() == "all"
+        items: list[str | PlannerSpec] = list(default_planners(
+            note, _current_planners() if every else DEFAULT_PLANNERS))
         if not items:
             raise ValueError("no planner is available: registered planners: "
                              f"{', '.join(available_planners()) or 'none'}")

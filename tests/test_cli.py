@@ -48,7 +48,7 @@ def test_help_lists_every_flag_with_its_default(capsys):
     assert text.startswith("usage: ipp-compare")
     for flag in FLAGS:
         assert flag in text, flag
-    for default in ("file's, else 4", "file's, else 25", "(default: all)", "(default: 50)",
+    for default in ("file's, else 4", "file's, else 25", "(default: default)", "(default: 50)",
                     "(default: 0)", "file's, else split", "(default: None)",
                     "(default: results/compare-a{agents}-d{comm})", "(default: False)"):
         assert default in " ".join(text.split()), default
@@ -183,16 +183,16 @@ def test_raster_terrain_file_end_to_end(capsys, tmp_path):
 
 @needs_evaluation
 def test_compare_records_checkpoints_and_the_paired_column(tmp_path, capsys):
-    from coma.persistence import shipped_policy
+    from coma.persistence import DEFAULT_SHIPPED, resolve_policy
 
     out = tmp_path / "out"
     argv = ["--agents", "4", "--trials", "2", "--resolution", "1.0", "--budget", "2",
             "--planners", "ig,random,coma", "--workers", "1", "--no-progress", "--out", str(out)]
     assert compare_main(argv) == 0
     stored = json.loads((out / "config.json").read_text())
-    digest = hashlib.sha256(Path(shipped_policy()).read_bytes()).hexdigest()
-    assert stored["checkpoints"]["coma"] == {"checkpoint": Path(shipped_policy()).name,
-                                             "sha256": digest}
+    shipped = resolve_policy(f"shipped:{DEFAULT_SHIPPED}")
+    digest = hashlib.sha256(shipped.read_bytes()).hexdigest()
+    assert stored["checkpoints"]["coma"] == {"checkpoint": shipped.name, "sha256": digest}
     assert "ig" not in stored["checkpoints"]
     summary = (out / "summary.md").read_text()
     assert "Δ vs ig" in summary and f"sha256:{digest[:16]}" in summary

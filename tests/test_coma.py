@@ -441,18 +441,18 @@ def test_warm_start_settings_come_from_the_coma_config(tmp_path):
         tiny_coma(warm_start_epochs=0)
 
 
-@pytest.mark.parametrize("name", ["coma", "coma_mixed", "coma_prior"])
-def test_shipped_policies_load_register_and_fly(name):
+@pytest.mark.parametrize("name", ["paper-actor", "mixed", "prior"])
+def test_shipped_policies_load_by_name_and_fly(name):
     from ipp_toolkit.planners import make_planner
 
-    planner = make_planner(name)
+    planner = make_planner("coma", checkpoint=f"shipped:{name}")
     assert Path(planner.checkpoint).stat().st_size < 2_000_000
     config = small_config(n_agents=8, comm_range=math.inf, resolution=1.0)
     result = run_mission(config, planner, seed=0, mission=0)
     assert len(result["rows"]) == config.team.budget + 1
     # The mixed policy trained on 8 UAVs at infinite range: no transfer to note there.
     transferred = [note for note in planner.transfer_notes if note.startswith("team.")]
-    if name == "coma_mixed":
+    if name == "mixed":
         assert len(planner.trained_settings) == 9 and transferred == []
     else:
         assert transferred == ["team.n_agents: trained 4, running 8",
@@ -575,3 +575,25 @@ def test_residual_penalty_keeps_the_gain_prior_actor_near_its_prior(tmp_path):
     assert sizes[0.0] > 0.0 and sizes[50.0] < 0.5 * sizes[0.0], sizes
     with pytest.raises(ValueError, match="residual_penalty"):
         tiny_coma(residual_penalty=-1.0)
+
+
+def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
+    from coma.learner import build_parser, configs_from_args
+    from coma.persistence import DEFAULT_SHIPPED, SHIPPED_POLICIES, resolve_policy, shipped_policy
+    from ipp_toolkit.planners import make_planner
+
+    assert resolve_policy("shipped:prior") == shipped_policy(SHIPPED_POLICIES["prior"])
+    assert resolve_policy("runs/x/best.pt") == Path("runs/x/best.pt")
+    with pytest.raises(ValueError, match="unknown shipped policy 'nope'; shipped policies: "
+                                         "shipped:paper-actor, shipped:prior, shipped:mixed"):
+        resolve_policy("shipped:nope")
+    default = make_planner("coma")
+    assert Path(default.checkpoint) == resolve_policy(f"shipped:{DEFAULT_SHIPPED}")
+    for alias, name in (("coma_prior", "prior"), ("coma_mixed", "mixed")):
+        with pytest.warns(DeprecationWarning, match=f"coma=shipped:{name}"):
+            assert Path(make_planner(alias).checkpoint) == resolve_policy(f"shipped:{name}")
+    coma_config, _ = configs_from_args(build_parser().parse_args(
+        ["--out", str(tmp_path), "--init", "shipped:mixed"]))
+    assert coma_config.init_policy == str(resolve_policy("shipped:mixed"))
+    with pytest.raises(ValueError, match="unknown shipped policy"):
+        configs_from_args(build_parser().parse_args(["--out", "x", "--init", "shipped:x"]))
