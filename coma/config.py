@@ -84,6 +84,13 @@ class COMAConfig:
             residual logit (centred over the valid actions: softmax ignores a shift), so the
             policy stays at the ``ig`` prior where the advantage does not consistently push
             it away (not in the paper; 0 = off).
+        validation_terrains: terrain kinds of the validation missions, each flown in every
+            setting (``()``: the training terrain), e.g. ``("split", "blobs", "fractal",
+            "real")`` to select on every family.
+        selection: how ``best.pt`` is chosen: ``mean`` (lowest mean final entropy over the
+            validation settings) or ``worst_vs_ig`` (lowest worst-case, over validation
+            terrains and settings, of the mean final entropy minus ``ig``'s on the same
+            missions: a policy must not fall behind IG on any family).
         init_policy: a COMA policy file (``best.pt``, ``last.pt`` or a shipped policy) whose
             actor and critic start this run instead of random networks or a warm start
             (fine-tuning, not in the paper); its variant, size and feature planes must match.
@@ -121,9 +128,17 @@ class COMAConfig:
     critic_warmup_updates: int = 0
     gain_prior: float = 0.0
     residual_penalty: float = 0.0
+    validation_terrains: tuple[str, ...] = ()
+    selection: str = "mean"
 
     def __post_init__(self) -> None:
         # JSON and YAML hand back lists: keep tuples so configs compare and hash alike.
+        if isinstance(self.validation_terrains, str):
+            object.__setattr__(self, "validation_terrains", tuple(
+                t for t in self.validation_terrains.split("+") if t))
+        object.__setattr__(self, "validation_terrains", tuple(self.validation_terrains))
+        if self.selection not in ("mean", "worst_vs_ig"):
+            _fail("selection", self.selection, "choose 'mean' or 'worst_vs_ig'")
         for name in ("team_sizes", "comm_ranges"):
             value = getattr(self, name)
             if isinstance(value, list | tuple):

@@ -352,7 +352,8 @@ def _check_finite(what: str, value: torch.Tensor) -> None:
 CSV_COLUMNS = ["update", "missions", "transitions", "eps", "return_mean", "final_entropy_mean",
                "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
                "critic_grad_norm", "actor_grad_norm", "transitions_per_s", "wall_s",
-               "eval_return", "eval_entropy_final", "eval_f1_final", "n_agents", "comm_range"]
+               "eval_return", "eval_entropy_final", "eval_f1_final", "eval_gap_worst",
+               "n_agents", "comm_range"]
 
 
 @dataclass
@@ -410,12 +411,48 @@ def setting_of_update(n_settings: int, seed: int, update: int) -> int:
 
 
 def validate(actor: nn.Module, settings: Sequence[EnvConfig],
-             geometries: Sequence[MissionGeometry], seed: int, n_missions: int
-             ) -> dict[str, float]:
-    """:func:`evaluate_greedy` on every setting, averaged key by key over the settings."""
+             geometries: Sequence[MissionGeometry], seed: int, n_missions: int,
+             reference: Sequence[float] | None = None) -> dict[str, float]:
+    """:func:`evaluate_greedy` on every setting, averaged key by key over the settings.
+
+    With ``reference`` (a planner's mean final entropy per setting, same missions) it also
+    gives ``gap_worst`` and ``gap_mean``: the largest and the mean of the policy's mean final
+    entropy minus the reference's over the settings.
+    """
     scores = [evaluate_greedy(actor, config, geometry, seed, n_missions)
               for config, geometry in zip(settings, geometries, strict=True)]
-    return {key: float(np.mean([s[key] for s in scores])) for key in scores[0]}
+    result = {key: float(np.mean([s[key] for s in scores])) for key in scores[0]}
+    if reference is not None:
+        budget = settings[0].team.budget
+        gaps = [s[f"entropy_{budget}"] - r for s, r in zip(scores, reference, strict=True)]
+        result.update(gap_worst=float(max(gaps)), gap_mean=float(np.mean(gaps)))
+    return result
+
+
+def validation_settings(coma_config: COMAConfig, settings: Sequence[EnvConfig]
+                        ) -> list[EnvConfig]:
+    """The validation missions' configs: every training setting on every validation terrain
+    (``coma_config.validation_terrains``; none: the settings themselves)."""
+    if not coma_config.validation_terrains:
+        return list(settings)
+    return [config.replace(terrain={"kind": kind}) for config in settings
+            for kind in coma_config.validation_terrains]
+
+
+def reference_scores(settings: Sequence[EnvConfig], seed: int, n_missions: int,
+                     planner: str = "ig") -> list[float]:
+    """``planner``'s mean final entropy on the validation missions of each setting (the
+    missions :func:`evaluate_greedy` flies), for ``selection = "worst_vs_ig"``."""
+    from ipp_toolkit.evaluation import evaluate
+
+    scores = []
+    for config in settings:
+        result = evaluate(config, [planner], missions=n_missions, seed=seed,
+                          namespace="validation", progress=False)
+        budget = config.team.budget
+        scores.append(float(np.mean([r["entropy"] for r in result.rows
+                                     if int(r["step"]) == budget])))
+    return scores
 
 
 def _initialise_from(networks: COMANetworks, path: str) -> None:
@@ -504,6 +541,15 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
     settings = mission_settings(coma_config, env_config)
     geometries = [MissionGeometry(config) for config in settings]
+    checks = validation_settings(coma_config, settings)
+    check_geometries = [MissionGeometry(config) for config in checks]
+    reference = (reference_scores(checks, coma_config.seed, coma_config.eval_missions)
+                 if coma_config.selection == "worst_vs_ig" else None)
+    budget = env_config.team.budget
+
+    def criterion(scores: dict[str, float]) -> float:
+        """What best.pt minimises: the mean final entropy, or the worst gap to IG."""
+        return scores["gap_worst"] if reference is not None else scores[f"entropy_{budget}"]
 
     if last_path.exists() and not resume:
         raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
@@ -546,15 +592,18 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                  "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
         run_info: dict[str, Any] = {"coma": coma_config.to_dict(),
                                     "env": config_to_dict(env_config)}
-        budget = env_config.team.budget
+        if reference is not None:
+            run_info["validation_reference"] = {
+                "planner": "ig", "terrains": [c.terrain.kind for c in checks],
+                "final_entropy": reference}
 
         def score_start() -> dict[str, float]:
             """Validate the starting networks; they are ``best.pt`` at update 0."""
             networks.actor.eval()
-            validation = validate(networks.actor, settings, geometries, coma_config.seed,
-                                  coma_config.eval_missions)
+            validation = validate(networks.actor, checks, check_geometries, coma_config.seed,
+                                  coma_config.eval_missions, reference)
             networks.actor.train()
-            state["best_entropy"] = validation[f"entropy_{budget}"]
+            state["best_entropy"] = criterion(validation)
             save_policy(best_path, networks, {"validation": validation, "update": 0})
             return {"validation_entropy": validation[f"entropy_{budget}"],
                     "validation_f1": validation[f"f1_{budget}"]}
@@ -642,15 +691,15 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             last_update = state["update"] == total_updates
             if state["update"] % coma_config.eval_every == 0 or last_update:
                 networks.actor.eval()
-                scores = validate(networks.actor, settings, geometries, coma_config.seed,
-                                  coma_config.eval_missions)
+                scores = validate(networks.actor, checks, check_geometries, coma_config.seed,
+                                  coma_config.eval_missions, reference)
                 networks.actor.train()
-                budget = env_config.team.budget
                 row.update(eval_return=scores["return"],
                            eval_entropy_final=scores[f"entropy_{budget}"],
-                           eval_f1_final=scores[f"f1_{budget}"])
-                if scores[f"entropy_{budget}"] < state["best_entropy"]:
-                    state["best_entropy"] = scores[f"entropy_{budget}"]
+                           eval_f1_final=scores[f"f1_{budget}"],
+                           eval_gap_worst=scores.get("gap_worst"))
+                if criterion(scores) < state["best_entropy"]:
+                    state["best_entropy"] = criterion(scores)
                     state["best_update"] = state["update"]
                     save_policy(best_path, networks, {"validation": scores,
                                                       "update": state["update"]})

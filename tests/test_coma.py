@@ -597,3 +597,29 @@ def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
     assert coma_config.init_policy == str(resolve_policy("shipped:mixed"))
     with pytest.raises(ValueError, match="unknown shipped policy"):
         configs_from_args(build_parser().parse_args(["--out", "x", "--init", "shipped:x"]))
+
+
+def test_selection_by_the_worst_gap_to_ig_over_validation_terrains(tmp_path):
+    import csv
+    import json
+
+    from coma.learner import reference_scores, validation_settings
+
+    env = tiny_env(2)
+    config = tiny_coma(missions=4, validation_terrains=("split", "blobs"),
+                       selection="worst_vs_ig")
+    checks = validation_settings(config, [env])
+    assert [c.terrain.kind for c in checks] == ["split", "blobs"]
+    train(config, env, tmp_path / "run", progress=False, tensorboard=False)
+    info = json.loads((tmp_path / "run" / "config.json").read_text())
+    reference = info["validation_reference"]
+    assert reference["terrains"] == ["split", "blobs"]
+    assert reference["final_entropy"] == pytest.approx(reference_scores(checks, 0, 2))
+    with open(tmp_path / "run" / "progress.csv", newline="") as handle:
+        gaps = [float(row["eval_gap_worst"]) for row in csv.DictReader(handle)]
+    assert gaps and all(math.isfinite(g) for g in gaps)
+    best = load_policy(tmp_path / "run" / "best.pt")[1]
+    assert best["validation"]["gap_worst"] <= min(gaps) + 1e-12
+    assert tiny_coma(validation_terrains="split+real").validation_terrains == ("split", "real")
+    with pytest.raises(ValueError, match="selection"):
+        tiny_coma(selection="best")
