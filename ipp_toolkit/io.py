@@ -77,14 +77,40 @@ def load_torch(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"checkpoint {str(path)!r} does not exist")
+    if path.stat().st_size == 0:
+        raise CheckpointError(f"checkpoint {str(path)!r} is empty (0 bytes)")
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # torch raises many types for corrupt or foreign files
+        first_line = (str(error).splitlines() or [""])[0][:200]
         raise CheckpointError(f"checkpoint {str(path)!r} is corrupt or not a plain-weights file "
-                              f"({type(error).__name__}: {str(error).splitlines()[0][:200]})") \
-            from None
+                              f"({type(error).__name__}: {first_line})") from None
     if not isinstance(data, dict) or data.get("format") != kind:
         found = data.get("format") if isinstance(data, dict) else type(data).__name__
         raise CheckpointError(f"checkpoint {str(path)!r} is not an {kind!r} file "
                               f"(format tag: {found!r})")
+    bad = _non_finite(data)
+    if bad:
+        raise CheckpointError(f"checkpoint {str(path)!r} holds non-finite values (NaN or inf) "
+                              f"in {bad}: refusing to load it")
     return data
+
+
+def _non_finite(value: Any, where: str = "") -> str:
+    """The key path of the first floating tensor with a NaN or inf inside ``value``, or ''."""
+    import torch
+
+    if isinstance(value, torch.Tensor):
+        return where or "the payload" if value.is_floating_point() and \
+            not bool(torch.isfinite(value).all()) else ""
+    if isinstance(value, Mapping):
+        items = value.items()
+    elif isinstance(value, list | tuple):
+        items = enumerate(value)
+    else:
+        return ""
+    for key, item in items:
+        found = _non_finite(item, f"{where}.{key}" if where else str(key))
+        if found:
+            return found
+    return ""

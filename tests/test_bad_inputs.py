@@ -1,0 +1,58 @@
+"""Bad inputs and faults: each refused with a clear error naming the bad thing, exit code 2
+from the command line, and nothing written."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from coma.persistence import resolve_policy
+from reports.cli import compare_main, train_main
+
+
+@pytest.fixture(scope="module")
+def broken_policies(tmp_path_factory) -> dict[str, str]:
+    folder = tmp_path_factory.mktemp("policies")
+    empty = folder / "empty.pt"
+    empty.write_bytes(b"")
+    garbage = folder / "garbage.pt"
+    garbage.write_bytes(b"\x00not a torch file")
+    data = torch.load(resolve_policy("shipped:prior"), weights_only=True)
+    name = next(iter(data["critic"]))
+    data["critic"][name] = torch.full_like(data["critic"][name], float("inf"))
+    infinite = folder / "infinite.pt"
+    torch.save(data, infinite)
+    return {"empty": str(empty), "garbage": str(garbage), "infinite": str(infinite)}
+
+
+@pytest.mark.parametrize("kind, message", [
+    ("empty", "is empty (0 bytes)"),
+    ("garbage", "is corrupt or not a plain-weights file"),
+    ("infinite", "holds non-finite values (NaN or inf) in critic."),
+])
+@pytest.mark.parametrize("planner", ["coma", "ppo"])
+def test_compare_refuses_broken_checkpoints(broken_policies, tmp_path, capsys, kind, message,
+                                            planner):
+    path = broken_policies[kind]
+    out = tmp_path / "out"
+    assert compare_main(["--planners", f"ig,{planner}={path}", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "ipp-compare: error:" in err and path in err
+    if planner == "coma" or kind == "empty":
+        assert message in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("kind", ["empty", "infinite"])
+def test_train_init_refuses_broken_checkpoints(broken_policies, tmp_path, capsys, kind):
+    out = tmp_path / "run"
+    code = train_main(["coma", "--out", str(out), "--init", broken_policies[kind],
+                       "--feature", "gain=true", "--set", "gain_prior=50"])
+    assert code == 2
+    assert broken_policies[kind] in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_unknown_shipped_policy_is_named(tmp_path, capsys):
+    assert compare_main(["--planners", "coma=shipped:best", "--out", str(tmp_path / "o")]) == 2
+    assert "unknown shipped policy 'best'" in capsys.readouterr().err
