@@ -17,7 +17,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["VARIANTS", "PRESETS", "COMAConfig", "preset"]
+from ipp_toolkit.config import EnvConfig, start_for_team_size
+
+__all__ = ["VARIANTS", "PRESETS", "COMAConfig", "preset", "mission_settings"]
 
 #: The credit-assignment variants of the paper's study.
 VARIANTS = ("coma", "central_qv", "actor_independent", "decentralised")
@@ -247,3 +249,21 @@ def preset(name: str, **changes: Any) -> COMAConfig:
     if name not in PRESETS:
         raise ValueError(f"unknown COMA preset {name!r}; choose from {sorted(PRESETS)}")
     return from_dict({**dataclasses.asdict(COMAConfig()), **PRESETS[name], **changes})
+
+
+def mission_settings(coma_config: COMAConfig, env_config: EnvConfig) -> list[EnvConfig]:
+    """The mission configs a run trains on: ``env_config`` for every (team size, range) pair.
+
+    Without ``team_sizes`` / ``comm_ranges`` this is ``[env_config]``. A team size without
+    documented fixed starts gets random ones. Raises ValueError (naming the value) where a
+    pair is not a valid mission, e.g. more agents than ``features.agent_id_scale``.
+    """
+    if not coma_config.team_sizes and not coma_config.comm_ranges:
+        return [env_config]
+    team = env_config.team
+    sizes = coma_config.team_sizes or (team.n_agents,)
+    ranges = coma_config.comm_ranges or (team.comm_range,)
+    return [env_config.replace(team={"n_agents": n_agents, "comm_range": comm_range,
+                                     "start": start_for_team_size(team.start, n_agents,
+                                                                  env_config.world)})
+            for n_agents in sizes for comm_range in ranges]

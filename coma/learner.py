@@ -34,7 +34,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from ipp_toolkit.config import EnvConfig, config_to_dict, start_for_team_size
+from ipp_toolkit.config import EnvConfig, config_to_dict
 from ipp_toolkit.evaluation import planner_seed
 from ipp_toolkit.features import actor_observations, actor_plane_names
 from ipp_toolkit.io import CheckpointError, atomic_write, write_json
@@ -44,9 +44,9 @@ from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
-from .config import PRESETS, VARIANTS, COMAConfig, preset
+from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
 from .inputs import critic_input, value_input
-from .networks import GainPriorActor, bounded_softmax, epsilon_at
+from .networks import GainPriorActor, bounded_softmax, epsilon_at, greedy_actions
 from .persistence import (
     DEFAULT_SHIPPED,
     COMANetworks,
@@ -184,23 +184,6 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
         returns=returns,
         final_entropy=np.array([s.history[-1].entropy for s in states]),
     )
-
-
-def greedy_actions(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
-    """Deployment policy: eps = 0 and the most probable valid action.
-
-    Args:
-        actor: the actor network.
-        observations: (B, C, G, G) float32 actor planes.
-        masks: (B, 6) valid actions.
-
-    Returns:
-        (B,) int64 actions, always valid.
-    """
-    with torch.no_grad():
-        logits = actor(torch.as_tensor(observations, dtype=torch.float32))
-    logits = logits.masked_fill(~torch.as_tensor(masks, dtype=torch.bool), -math.inf)
-    return logits.argmax(dim=-1).numpy()
 
 
 def evaluate_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometry,
@@ -377,24 +360,6 @@ class TrainResult:
     missions: int
     best_entropy: float
     history: list[dict[str, Any]] = field(default_factory=list)
-
-
-def mission_settings(coma_config: COMAConfig, env_config: EnvConfig) -> list[EnvConfig]:
-    """The mission configs a run trains on: ``env_config`` for every (team size, range) pair.
-
-    Without ``team_sizes`` / ``comm_ranges`` this is ``[env_config]``. A team size without
-    documented fixed starts gets random ones. Raises ValueError (naming the value) where a
-    pair is not a valid mission, e.g. more agents than ``features.agent_id_scale``.
-    """
-    if not coma_config.team_sizes and not coma_config.comm_ranges:
-        return [env_config]
-    team = env_config.team
-    sizes = coma_config.team_sizes or (team.n_agents,)
-    ranges = coma_config.comm_ranges or (team.comm_range,)
-    return [env_config.replace(team={"n_agents": n_agents, "comm_range": comm_range,
-                                     "start": start_for_team_size(team.start, n_agents,
-                                                                  env_config.world)})
-            for n_agents in sizes for comm_range in ranges]
 
 
 def setting_of_update(n_settings: int, seed: int, update: int) -> int:

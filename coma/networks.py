@@ -11,12 +11,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
 import torch
 from torch import nn
 
 from ipp_toolkit.team import ACTION_DELTAS, N_ACTIONS
 
-__all__ = ["ConvNet", "GainPriorActor", "bounded_softmax", "epsilon_at"]
+__all__ = ["ConvNet", "GainPriorActor", "bounded_softmax", "epsilon_at", "greedy_actions"]
 
 _KERNELS = (5, 4, 4)
 
@@ -149,3 +150,19 @@ def epsilon_at(missions_done: int, start: float, end: float, anneal_missions: in
         return end
     return start + (end - start) * missions_done / anneal_missions
 
+
+def greedy_actions(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """Deployment policy (the ``coma`` planner, validation): eps = 0, the likeliest valid action.
+
+    Args:
+        actor: the actor network.
+        observations: (B, C, G, G) float32 actor planes.
+        masks: (B, 6) valid actions.
+
+    Returns:
+        (B,) int64 actions, always valid.
+    """
+    with torch.no_grad():
+        logits = actor(torch.as_tensor(observations, dtype=torch.float32))
+    logits = logits.masked_fill(~torch.as_tensor(masks, dtype=torch.bool), -math.inf)
+    return logits.argmax(dim=-1).numpy()

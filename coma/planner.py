@@ -19,7 +19,8 @@ import torch
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
 
-from .learner import greedy_actions, mission_settings
+from .config import mission_settings
+from .networks import greedy_actions
 from .persistence import (
     DEFAULT_SHIPPED,
     check_transfer,

@@ -623,3 +623,14 @@ def test_selection_by_the_worst_gap_to_ig_over_validation_terrains(tmp_path):
     assert tiny_coma(validation_terrains="split+real").validation_terrains == ("split", "real")
     with pytest.raises(ValueError, match="selection"):
         tiny_coma(selection="best")
+
+
+def test_inference_never_imports_training():
+    import subprocess
+    import sys
+
+    code = ("import sys, coma.planner; "
+            "print(sorted(m for m in ('coma.learner', 'coma.warm_start') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
