@@ -13,7 +13,9 @@ interrupted run resumes where it stopped::
         config.json                          identity: config, seed, namespace (+ version)
         shards/<label>/planner.json          the planner spec behind the label
         shards/<label>/mission_00007.json    the rows (+ trajectory) of one mission
-        results.csv                          every row of the requested planners and missions
+        results.csv                          every row of the requested missions, of the
+                                             requested planners and of every planner stored
+                                             before with all of those missions
         trajectories/<label>_mission0.npz    recorded missions (ground truth, final map, path)
 
 Results are tidy rows, one per (planner, mission, step) with the columns
@@ -520,6 +522,29 @@ def _check_rows(rows: Any, label: str, mission: int, budget: int) -> list[dict[s
     return rows
 
 
+def _stored_planners(folder: Path, exclude: Sequence[str], missions: int,
+                     budget: int) -> dict[str, list[dict[str, Any]]]:
+    """Rows of the planners stored in ``folder`` (other than ``exclude``) that hold every one
+    of missions 0..missions-1, by label in folder order; incomplete ones are left out."""
+    stored: dict[str, list[dict[str, Any]]] = {}
+    shards = folder / "shards"
+    if not shards.is_dir():
+        return stored
+    for spec_path in sorted(shards.glob("*/planner.json")):
+        try:
+            label = str(json.loads(spec_path.read_text(encoding="utf-8"))["label"])
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+            continue
+        if label in exclude:
+            continue
+        try:
+            stored[label] = [row for mission in range(missions) for row in _read_shard(
+                _shard_path(folder, label, mission), label, mission, budget)]
+        except (OSError, UnicodeDecodeError, ValueError, KeyError):
+            continue  # missing or damaged missions: not a complete planner of this run
+    return stored
+
+
 def _read_shard(path: Path, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
     shard = json.loads(path.read_text(encoding="utf-8"))
     if not isinstance(shard, dict) or shard.get("format") != _FORMAT:
@@ -875,6 +900,10 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     rows = [row for label in labels for mission in range(missions)
             for row in done[(label, mission)]]
     if folder is not None:
+        # A result folder is a growing set: planners flown into it before keep their rows.
+        stored = _stored_planners(folder, labels, missions, config.team.budget)
+        labels = labels + list(stored)
+        rows += [row for label_rows in stored.values() for row in label_rows]
         _write_csv(folder / "results.csv", rows)
     return EvaluationResult(config=config, seed=seed, rows=rows, labels=labels,
                             trajectories={key: trajectories[key] for key in sorted(

@@ -56,3 +56,25 @@ def test_train_init_refuses_broken_checkpoints(broken_policies, tmp_path, capsys
 def test_unknown_shipped_policy_is_named(tmp_path, capsys):
     assert compare_main(["--planners", "coma=shipped:best", "--out", str(tmp_path / "o")]) == 2
     assert "unknown shipped policy 'best'" in capsys.readouterr().err
+
+
+def test_a_result_folder_is_a_growing_set(tmp_path, capsys):
+    import csv
+
+    out = tmp_path / "out"
+    common = ["--agents", "2", "--resolution", "1.0", "--budget", "2", "--workers", "1",
+              "--no-progress", "--out", str(out)]
+    assert compare_main(["--planners", "ig,random", "--trials", "2"] + common) == 0
+    assert compare_main(["--planners", "coverage", "--trials", "2"] + common) == 0
+
+    def planners() -> set[str]:
+        with open(out / "results.csv", newline="") as handle:
+            return {row["planner"] for row in csv.DictReader(handle)}
+
+    assert planners() == {"ig", "random", "coverage"}
+    summary = (out / "summary.md").read_text()
+    assert all(f"| {p} |" in summary for p in ("ig", "random", "coverage"))
+    assert "Δ vs ig" in summary  # the stored reference still gives the paired column
+    # More missions than the earlier planners hold: only complete planners are tabulated.
+    assert compare_main(["--planners", "random", "--trials", "3"] + common) == 0
+    assert planners() == {"random"}
