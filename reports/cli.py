@@ -186,6 +186,10 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="number of steps B (None: the config's, 15)")
     parser.add_argument("--area-size", type=_positive_float, default=None, metavar="METRES",
                         help="side of the square area in metres (None: the config's, 50)")
+    parser.add_argument("--namespace", choices=("test", "validation"), default="test",
+                        help="fly the held-out test missions, or the validation missions to "
+                             "select policies on (the default --out then starts with "
+                             "'validate-')")
     parser.add_argument("--animate", action="store_true", default=False,
                         help="also write animations/<planner>.gif of mission 0 per planner")
     parser.add_argument("--no-progress", action="store_true", default=False,
@@ -223,6 +227,8 @@ def compare_main(argv: list[str] | None = None) -> int:
     if out == DEFAULT_COMPARE_OUT:
         out = out.format(agents=env_config.team.n_agents,
                          comm=comm_label(env_config.team.comm_range))
+        if args.namespace == "validation":
+            out = out.replace("compare-", "validate-")
     out_dir = Path(out)
     print(f"setting: {describe_config(env_config)}"
           + (f" (config file {str(args.config)!r})" if args.config else ""), file=sys.stderr)
@@ -230,7 +236,7 @@ def compare_main(argv: list[str] | None = None) -> int:
         comparison = compare(
             planners=args.planners, trials=args.trials, seed=args.seed, workers=args.workers,
             out=out_dir, config=env_config, progress=not args.no_progress,
-            animate=args.animate)
+            animate=args.animate, namespace=args.namespace)
     except (ValueError, OSError) as err:
         return error(err)
     print(comparison.table)

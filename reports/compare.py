@@ -262,7 +262,7 @@ def compare(agents: int | None = None, comm: float | None = None,
             resolution: float | None = None, budget: int | None = None,
             progress: bool = True, area_size: float | None = None,
             note: Callable[[str], None] | None = None, animate: bool = False,
-            reference: str = "ig") -> Comparison:
+            reference: str = "ig", namespace: str = "test") -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
@@ -281,6 +281,8 @@ def compare(agents: int | None = None, comm: float | None = None,
         animate: with ``out``, also write ``animations/<planner>.gif`` of mission 0.
         reference: the planner of the summary's paired column (final entropy minus its on the
             same missions, with its standard error and win rate); none when it is not flown.
+        namespace: ``test`` (the held-out missions) or ``validation`` (the missions to select
+            policies and settings on; never select on test missions).
 
     Returns:
         the :class:`Comparison`; its ``table`` is the Markdown table.
@@ -294,6 +296,8 @@ def compare(agents: int | None = None, comm: float | None = None,
         raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
     if isinstance(workers, bool) or int(workers) != workers or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if namespace not in ("test", "validation"):
+        raise ValueError(f"namespace must be 'test' or 'validation', got {namespace!r}")
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size)
@@ -305,7 +309,7 @@ def compare(agents: int | None = None, comm: float | None = None,
     from ipp_toolkit.evaluation import evaluate
 
     result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
-                      workers=int(workers), out_dir=out, progress=progress, namespace="test",
+                      workers=int(workers), out_dir=out, progress=progress, namespace=namespace,
                       record_missions=(0,))
     if out is not None:
         _record_checkpoints(Path(out), checkpoints, write=True)

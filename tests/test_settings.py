@@ -149,3 +149,16 @@ def test_threshold_quantile_keyword(tmp_path):
     assert from_file.terrain.kind == "raster" and from_file.terrain.threshold is None
     with pytest.raises(ValueError, match="not both"):
         build_env_config(terrain=str(raster), threshold=3.0, threshold_quantile=0.5)
+
+
+def test_ipp_compare_validation_namespace(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = ["--agents", "2", "--resolution", "1.0", "--budget", "2", "--trials", "1",
+            "--planners", "random", "--workers", "1", "--no-progress"]
+    assert compare_main(argv + ["--namespace", "validation"]) == 0
+    stored = json.loads((tmp_path / "results" / "validate-a2-d25" / "config.json").read_text())
+    assert stored["namespace"] == "validation"
+    assert compare_main(argv + ["--namespace", "validation", "--out",
+                                "results/validate-a2-d25", "--seed", "0"]) == 0
+    assert compare_main(argv + ["--namespace", "test", "--out", "results/validate-a2-d25"]) == 2
+    assert "namespace" in capsys.readouterr().err
