@@ -32,7 +32,6 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from ipp_toolkit.config import EnvConfig, config_to_dict
 from ipp_toolkit.evaluation import planner_seed
@@ -40,6 +39,7 @@ from ipp_toolkit.features import actor_observations, actor_plane_names
 from ipp_toolkit.io import CheckpointError, atomic_write, write_json
 from ipp_toolkit.mission import MissionGeometry, MissionState, reset_mission, step_mission
 from ipp_toolkit.planners import Planner, agent_views
+from ipp_toolkit.progress import progress_bar
 from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.team import N_ACTIONS
 
@@ -614,8 +614,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
 
     per_update = coma_config.missions_per_update
     total_updates = math.ceil(coma_config.missions / per_update)
-    bar = tqdm(total=total_updates, initial=state["update"], disable=not progress,
-               desc=f"COMA ({coma_config.variant})", unit="update")
+    bar = progress_bar(total_updates, f"COMA ({coma_config.variant})", "updates",
+                       initial=state["update"], disable=not progress)
     updates_this_call = 0
     try:
         while state["update"] < total_updates and (max_updates is None

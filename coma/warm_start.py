@@ -24,11 +24,11 @@ from typing import Any
 
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.planners import make_planner
+from ipp_toolkit.progress import progress_bar
 
 from .advantages import td_lambda_targets
 from .persistence import COMANetworks
@@ -110,8 +110,8 @@ def warm_start(networks: COMANetworks, env_config: EnvConfig, config: WarmStartC
     geometry = MissionGeometry(env_config)
     cfg = networks.coma_config
     batches = []
-    bar = tqdm(total=config.missions, disable=not progress, unit="mission",
-               desc=f"warm start: flying {config.planner}")
+    bar = progress_bar(config.missions, f"warm start: flying {config.planner}", "missions",
+                       disable=not progress)
     done = 0
     while done < config.missions:
         count = min(config.missions_per_batch, config.missions - done)

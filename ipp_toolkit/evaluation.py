@@ -44,7 +44,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from .config import EnvConfig, check_int, config_from_dict, config_to_dict
 from .io import atomic_write, write_json
@@ -57,6 +56,7 @@ from .planners import (
     make_planner,
     planner_factory,
 )
+from .progress import progress_bar
 from .seeding import mission_streams
 from .settings import safe_name
 
@@ -887,8 +887,8 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         if result["trajectory"] is not None:
             trajectories[(label, mission)] = result["trajectory"]
 
-    with tqdm(total=len(labels) * missions, initial=len(labels) * missions - len(tasks),
-              disable=not progress, desc="evaluate", unit="mission", dynamic_ncols=True) as bar:
+    with progress_bar(len(labels) * missions, "evaluate", "missions",
+                      initial=len(labels) * missions - len(tasks), disable=not progress) as bar:
         if local_runner is not None:
             for label, mission in tasks:
                 finish(*local_runner.run(label, mission))
@@ -913,7 +913,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
 
 
 def _run_parallel(runner: _Runner, tasks: Sequence[tuple[str, int]], n_workers: int,
-                  finish: Callable[[str, int, dict[str, Any]], None], bar: tqdm) -> None:
+                  finish: Callable[[str, int, dict[str, Any]], None], bar: Any) -> None:
     """Fly ``tasks`` in a spawn process pool; ``finish`` stores each result as it arrives.
 
     On a failed mission the pending tasks are cancelled, the running ones are awaited and

@@ -1,0 +1,82 @@
+"""Progress of long runs: one live line on a terminal, a short line every few percent in a log.
+
+tqdm redraws its bar with carriage returns, which is right on a terminal and floods a log
+file (a run under ``nohup`` or in CI writes thousands of partial lines). :func:`progress_bar`
+gives tqdm on a terminal and, when the stream is not one, a :class:`LineProgress` with the same
+``update`` / ``set_postfix`` / ``close`` calls that prints one line each time another
+``every`` percent is done (and at the end)::
+
+    evaluate: 25% (50/200 missions, 12 s)
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import IO, Any
+
+from tqdm import tqdm
+
+__all__ = ["LineProgress", "progress_bar"]
+
+
+class LineProgress:
+    """A tqdm stand-in for streams that are not terminals.
+
+    Args:
+        total: the count that is 100 %.
+        desc: the name printed first.
+        unit: what is counted (plural as printed).
+        initial: already done (a resumed run).
+        every: print a line each time this many more percent are done.
+        file: the stream (default stderr).
+    """
+
+    def __init__(self, total: int, desc: str, unit: str, initial: int = 0, every: float = 5.0,
+                 file: IO[str] | None = None) -> None:
+        self.total = max(int(total), 0)
+        self.n = int(initial)
+        self.desc, self.unit, self.every = desc, unit, float(every)
+        self.file = file if file is not None else sys.stderr
+        self.start = time.monotonic()
+        self.postfix = ""
+        self._printed_percent = self._percent()
+        self._closed = False
+
+    def _percent(self) -> float:
+        return 100.0 * self.n / self.total if self.total else 100.0
+
+    def _print(self) -> None:
+        elapsed = time.monotonic() - self.start
+        extra = f", {self.postfix}" if self.postfix else ""
+        print(f"{self.desc}: {self._percent():.0f}% ({self.n}/{self.total} {self.unit}, "
+              f"{elapsed:.0f} s{extra})", file=self.file, flush=True)
+        self._printed_percent = self._percent()
+
+    def update(self, n: int = 1) -> None:
+        self.n += int(n)
+        if self._percent() - self._printed_percent >= self.every or (
+                self.n >= self.total and self._printed_percent < 100.0):
+            self._print()
+
+    def set_postfix(self, **values: Any) -> None:
+        self.postfix = " ".join(f"{k}={v}" for k, v in values.items())
+
+    def close(self) -> None:
+        self._closed = True
+
+    def __enter__(self) -> LineProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def progress_bar(total: int, desc: str, unit: str, initial: int = 0, disable: bool = False,
+                 file: IO[str] | None = None) -> tqdm | LineProgress:
+    """tqdm on a terminal, :class:`LineProgress` otherwise; ``disable`` shows nothing."""
+    stream = file if file is not None else sys.stderr
+    if disable or stream.isatty():
+        return tqdm(total=total, initial=initial, desc=desc, unit=unit, disable=disable,
+                    dynamic_ncols=True, file=stream)
+    return LineProgress(total, desc, unit, initial=initial, file=stream)
