@@ -524,8 +524,8 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
                 raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
                                  "env config")
         else:
-            print(f"ipp-train ppo: no checkpoint in {str(out_dir)!r}; starting from scratch",
-                  file=sys.stderr)
+            raise ValueError(f"nothing to resume: {str(ckpt_path)!r} does not exist (drop "
+                             "--resume to start a new run)")
     elif ckpt_path.exists() or (out_dir / "policy.pt").exists():
         raise ValueError(f"{str(out_dir)!r} already holds a PPO run; pass resume=True "
                          "(--resume) or choose another output folder")

@@ -516,6 +516,9 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         """What best.pt minimises: the mean final entropy, or the worst gap to IG."""
         return scores["gap_worst"] if reference is not None else scores[f"entropy_{budget}"]
 
+    if resume and not last_path.exists():
+        raise CheckpointError(f"nothing to resume: {str(last_path)!r} does not exist (drop "
+                              "--resume to start a new run)")
     if last_path.exists() and not resume:
         raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
                               "(--resume) to continue it, or choose another folder")

@@ -16,6 +16,7 @@ later ``reset()`` calls without a seed run missions 1, 2, ... of the same run, a
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -126,6 +127,10 @@ class IPPEnv(ParallelEnv):
                 # Unseeded: fresh OS entropy, so copies of one env never replay each other.
                 self._seed = int(np.random.SeedSequence().entropy % (2**63))
             self._mission_index += 1
+        unknown = sorted(set(options or {}) - {"mission"})
+        if unknown:  # a warning, not an error: PettingZoo's API test passes other options
+            warnings.warn(f"ignoring unknown reset option(s) {unknown}; the only option is "
+                          "'mission'", UserWarning, stacklevel=2)
         if options and "mission" in options:
             mission = options["mission"]
             if isinstance(mission, bool) or not isinstance(mission, int | np.integer) \

@@ -78,3 +78,20 @@ def test_a_result_folder_is_a_growing_set(tmp_path, capsys):
     # More missions than the earlier planners hold: only complete planners are tabulated.
     assert compare_main(["--planners", "random", "--trials", "3"] + common) == 0
     assert planners() == {"random"}
+
+
+@pytest.mark.parametrize("trainer", ["coma", "ppo"])
+def test_resume_without_a_run_is_refused(tmp_path, capsys, trainer):
+    out = tmp_path / "nothing-here"
+    assert train_main([trainer, "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "nothing to resume" in err and "nothing-here" in err
+
+
+def test_unknown_reset_option_is_named():
+    from ipp_toolkit.config import EnvConfig
+    from ipp_toolkit.env import IPPEnv
+
+    env = IPPEnv(EnvConfig().replace(world={"resolution": 1.0}))
+    with pytest.warns(UserWarning, match=r"unknown reset option\(s\) \['misson'\]"):
+        env.reset(seed=0, options={"misson": 3})
