@@ -852,8 +852,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"\nipp-train coma: interrupted; continue with --resume --out {args.out} "
               "(from the last checkpoint)", file=sys.stderr)
         return 130
+    criterion = ("worst gap to IG's final entropy" if coma_config.selection == "worst_vs_ig"
+                 else "final entropy")
     print(f"trained {result.updates} updates ({result.missions} missions); best validation "
-          f"entropy {result.best_entropy:.3f}; policy: {result.best_policy}")
+          f"{criterion} {result.best_entropy:+.3f}; policy: {result.best_policy}")
     return 0
 
 
