@@ -49,7 +49,6 @@ from ipp_toolkit.config import (
     config_to_dict,
     start_for_team_size,
 )
-from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
 from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
 from ipp_toolkit.settings import build_env_config
@@ -253,12 +252,6 @@ def _build_policy(config: PPOTrainConfig, obs_shape: tuple[int, ...], device: st
     policy = cls(_observation_space(obs_shape), spaces.Discrete(6), lambda _: config.lr,
                  **_policy_kwargs(config))
     return policy.to(device)
-
-
-def expected_obs_shape(env_config: EnvConfig) -> tuple[int, int, int]:
-    """(C, G, G) actor observation shape of a configuration."""
-    g = env_config.world.grid_points
-    return (len(actor_plane_names(env_config.features)), g, g)
 
 
 # --------------------------------------------------------------------------------------------

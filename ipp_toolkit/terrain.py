@@ -38,7 +38,6 @@ __all__ = [
     "prepare_raster",
     "resample_area_average",
     "resampled_raster",
-    "clear_raster_cache",
 ]
 
 TerrainGenerator = Callable[
@@ -477,11 +476,6 @@ def resampled_raster(path: str | os.PathLike[str], shape: tuple[int, int],
     entry = _file_entry(path, shape, nan_policy)
     _warn_if_stretched(entry, repr(os.fspath(path)), stacklevel=2)
     return entry.values.copy()
-
-
-def clear_raster_cache() -> None:
-    """Forget every cached raster file."""
-    _cached_file.cache_clear()
 
 
 @register_terrain("raster")
