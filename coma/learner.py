@@ -831,7 +831,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         coma_config, env_config = configs_from_args(args)
-        mission_settings(coma_config, env_config)  # an invalid team or range fails here
+        # An invalid team, range or validation terrain fails here, before anything is written.
+        validation_settings(coma_config, mission_settings(coma_config, env_config))
         if coma_config.warm_start:
             from ipp_toolkit.planners import planner_factory
 

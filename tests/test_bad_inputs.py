@@ -95,3 +95,52 @@ def test_unknown_reset_option_is_named():
     env = IPPEnv(EnvConfig().replace(world={"resolution": 1.0}))
     with pytest.warns(UserWarning, match=r"unknown reset option\(s\) \['misson'\]"):
         env.reset(seed=0, options={"misson": 3})
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--terrain", "blob"], "terrain is one of split"),
+    (["--set", "validation_terrains=split+blob"], "unknown terrain kind"),
+    (["--set", "selection=best"], "selection"),
+    (["--set", "residual_penalty=-1"], "residual_penalty"),
+    (["--init", "shipped:nope"], "unknown shipped policy 'nope'"),
+    (["--agents", "3", "--config", "/nonexistent/mission.yaml"], "cannot read config file"),
+])
+def test_train_coma_bad_settings_exit_2_and_write_nothing(tmp_path, capsys, argv, message):
+    out = tmp_path / "run"
+    assert train_main(["coma", "--out", str(out)] + argv) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--families", "blob"], "unknown terrain kind"),
+    (["--planners", "random,coverage"], "reference planner 'ig'"),
+    (["--planners", "ig,astar"], "unknown planner 'astar'"),
+])
+def test_study_generalisation_bad_input_exits_2(tmp_path, capsys, argv, message):
+    from reports.cli import study_main
+
+    out = tmp_path / "study"
+    assert study_main(["generalisation", "--out", str(out), "--trials", "1", "--no-progress"]
+                      + argv) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--agents", "0"], "agents"),
+    (["--comm", "-5"], "--comm"),
+    (["--resolution", "0.3"], "whole number of cells"),
+    (["--config", "/nonexistent.yaml"], "cannot read config file"),
+])
+def test_simulate_bad_input_exits_2(tmp_path, capsys, argv, message):
+    from reports.cli import simulate_main
+
+    out = tmp_path / "sim"
+    try:
+        code = simulate_main(argv + ["--out", str(out)])
+    except SystemExit as exit_:  # argparse refuses malformed flags itself
+        code = exit_.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
