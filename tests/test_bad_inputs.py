@@ -144,3 +144,42 @@ def test_simulate_bad_input_exits_2(tmp_path, capsys, argv, message):
     assert code == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_killed_compare_resumes_without_loss_or_duplicates(tmp_path):
+    import csv
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    argv = ["--agents", "2", "--resolution", "1.0", "--budget", "3", "--trials", "40",
+            "--planners", "ig,random", "--workers", "2", "--no-progress"]
+    script = ("import sys; from reports.cli import compare_main; "
+              "sys.exit(compare_main(sys.argv[1:]))")
+    killed = tmp_path / "killed"
+    process = subprocess.Popen([sys.executable, "-c", script, *argv, "--out", str(killed)],
+                               start_new_session=True, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if len(list(killed.glob("shards/*/mission_*.json"))) >= 10:
+            break
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGKILL)  # the main process and its pool workers
+    process.wait()
+    stored = len(list(killed.glob("shards/*/mission_*.json")))
+    assert 0 < stored < 80, stored  # killed mid-run, with missions stored
+    assert compare_main(argv + ["--out", str(killed)]) == 0  # resumes
+    assert compare_main(argv + ["--out", str(tmp_path / "whole")]) == 0
+
+    def rows(folder):
+        with open(folder / "results.csv", newline="") as handle:
+            return [{k: v for k, v in row.items() if k != "plan_ms"}
+                    for row in csv.DictReader(handle)]
+
+    resumed, whole = rows(killed), rows(tmp_path / "whole")
+    keys = [(r["planner"], r["mission"], r["step"]) for r in resumed]
+    assert len(keys) == len(set(keys)) == 2 * 40 * 4  # nothing lost, nothing twice
+    assert resumed == whole
