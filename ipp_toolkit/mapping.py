@@ -138,16 +138,26 @@ class BlockGrid:
         if np.any(np.diff(self.edges) <= 0):
             raise ValueError(f"resolution {resolution} m is too coarse for waypoints every "
                              f"{spacing} m: some waypoint block holds no map cell")
+        self._ranges: dict[tuple[int, int], tuple[int, int, np.ndarray]] = {}
         sizes = np.diff(self.edges).astype(np.float64)
         self.block_sizes = sizes
         self.block_area = np.outer(sizes, sizes)  # (G, G) cells per block
 
     def block_range(self, lo: int, hi: int) -> tuple[int, int, np.ndarray]:
-        """Blocks overlapped by map cells [lo, hi) and the reduceat offsets inside it."""
-        first = int(np.searchsorted(self.edges, lo, side="right")) - 1
-        last = int(np.searchsorted(self.edges, hi, side="left"))  # exclusive
-        offsets = np.maximum(self.edges[first:last], lo) - lo
-        return first, last, offsets
+        """Blocks overlapped by map cells [lo, hi) and the reduceat offsets inside it.
+
+        Memoised: footprints come from a few hundred camera rectangles, and this sits on the
+        simulator's hot path (several calls per map and step).
+        """
+        key = (lo, hi)
+        found = self._ranges.get(key)
+        if found is None:
+            first = int(np.searchsorted(self.edges, lo, side="right")) - 1
+            last = int(np.searchsorted(self.edges, hi, side="left"))  # exclusive
+            offsets = np.maximum(self.edges[first:last], lo) - lo
+            offsets.setflags(write=False)
+            found = self._ranges[key] = (first, last, offsets)
+        return found
 
     def add_block_sums(self, planes: np.ndarray, values: np.ndarray, rect: Rect) -> None:
         """planes[G, G] += block sums of ``values`` (shape of ``rect``) placed at ``rect``."""
