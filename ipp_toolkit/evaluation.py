@@ -7,16 +7,8 @@ come from ``reset_mission(config, seed, k, namespace)`` and the planner is reset
 derived from ``(namespace, seed, k)`` only.
 
 With ``out_dir`` every finished mission is stored at once as a shard, written atomically, so an
-interrupted run resumes where it stopped::
-
-    out_dir/
-        config.json                          identity: config, seed, namespace (+ version)
-        shards/<label>/planner.json          the planner spec behind the label
-        shards/<label>/mission_00007.json    the rows (+ trajectory) of one mission
-        results.csv                          every row of the requested missions, of the
-                                             requested planners and of every planner stored
-                                             before with all of those missions
-        trajectories/<label>_mission0.npz    recorded missions (ground truth, final map, path)
+interrupted run resumes where it stopped, and a folder grows when other planners are flown
+into it (the layout: :mod:`ipp_toolkit.result_store`).
 
 Results are tidy rows, one per (planner, mission, step) with the columns
 :data:`RESULT_COLUMNS`; :meth:`EvaluationResult.curves` turns them into (missions, B + 1)
@@ -27,8 +19,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
-import csv
-import io
 import json
 import math
 import multiprocessing
@@ -45,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import EnvConfig, check_int, config_from_dict, config_to_dict
-from .io import atomic_write, write_json
+from .config import EnvConfig, check_int, config_from_dict
+from .io import write_json
 from .mission import MissionGeometry, MissionState, reset_mission, step_mission
 from .planners import (
     ENTRY_POINT_GROUP,
@@ -57,6 +47,22 @@ from .planners import (
     planner_factory,
 )
 from .progress import progress_bar
+from .result_store import (
+    RESULT_COLUMNS,
+    EvaluationError,
+    _check_folder,
+    _identity,
+    _read_csv,
+    _read_identity,
+    _read_shard,
+    _read_trajectory,
+    _shard_path,
+    _stored_planners,
+    _trajectory_path,
+    _write_csv,
+    _write_shard,
+    _write_trajectory,
+)
 from .seeding import mission_streams
 from .settings import safe_name
 
@@ -72,25 +78,10 @@ __all__ = [
     "planner_seed",
 ]
 
-RESULT_COLUMNS = ("planner", "agents", "comm", "terrain", "seed", "mission", "step",
-                  "entropy", "f1", "rmse", "reward", "plan_ms")
-"""Columns of a result row: identity (planner label, team size, communication range in metres,
-terrain, run seed, mission index, step s = 0..B), the global map's metrics after step s, the
-team reward of step s and the planner's wall-clock time for step s in milliseconds (both NaN
-at s = 0)."""
-
 METRICS = ("entropy", "f1", "rmse", "reward", "plan_ms")
 """The numeric per-step columns that :meth:`EvaluationResult.curves` accepts."""
 
-_INT_COLUMNS = frozenset({"agents", "seed", "mission", "step"})
-_FLOAT_COLUMNS = frozenset({"comm", "entropy", "f1", "rmse", "reward", "plan_ms"})
-_FORMAT = 1  # version of the shard and config.json layout
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
-
-
-class EvaluationError(ValueError):
-    """An evaluation folder cannot be used: it holds results of another configuration or of
-    another planner under the same label, or a file in it is malformed."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -419,248 +410,6 @@ def _transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
                      f"{getattr(factory, '__qualname__', factory)!r}, which worker processes "
                      "cannot import (a local or interactive definition): define it in an "
                      "importable module, or use workers=1")
-
-
-# --------------------------------------------------------------------------------------------
-# Files
-
-
-def _identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, Any]:
-    from . import __version__
-
-    # Through JSON so that it compares equal to what is read back from config.json.
-    return json.loads(json.dumps({"format": _FORMAT, "config": config_to_dict(config),
-                                  "seed": int(seed), "namespace": namespace,
-                                  "version": __version__}))
-
-
-def _flat_differences(old: Any, new: Any, prefix: str) -> list[str]:
-    if isinstance(old, dict) and isinstance(new, dict):
-        keys = sorted(set(old) | set(new))
-        return [d for k in keys
-                for d in _flat_differences(old.get(k), new.get(k), f"{prefix}.{k}" if prefix
-                                           else str(k))]
-    return [] if old == new else [prefix]
-
-
-def _read_identity(folder: Path) -> dict[str, Any]:
-    path = folder / "config.json"
-    try:
-        stored = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise EvaluationError(f"{str(folder)!r} holds no evaluation: {str(path)!r} is "
-                              "missing") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise EvaluationError(f"cannot read {str(path)!r}: {err}") from None
-    if not isinstance(stored, dict) or not {"config", "seed", "namespace"} <= set(stored):
-        raise EvaluationError(f"{str(path)!r} is not an evaluation identity: it needs the "
-                              "keys 'config', 'seed' and 'namespace'")
-    return stored
-
-
-def _check_folder(folder: Path, identity: dict[str, Any],
-                  specs: Sequence[PlannerSpec]) -> bool:
-    """Check that ``folder`` may take these results; returns whether config.json exists."""
-    if folder.exists() and not folder.is_dir():
-        raise EvaluationError(f"out_dir {str(folder)!r} exists and is not a folder")
-    if not (folder / "config.json").exists():
-        if (folder / "shards").exists():
-            raise EvaluationError(f"out_dir {str(folder)!r} holds shards/ but no config.json: "
-                                  "cannot tell which configuration they belong to")
-        return False
-    stored = _read_identity(folder)
-    # A folder written before a config field existed stored no value for it; the field's
-    # default keeps the old behaviour, so compare the stored config with its defaults filled.
-    try:
-        stored["config"] = json.loads(json.dumps(config_to_dict(
-            config_from_dict(stored["config"]))))
-    except (ValueError, TypeError):
-        pass  # not a valid config now: compared as stored, and reported as different
-    differing = []
-    for key in ("config", "seed", "namespace"):
-        differing += _flat_differences(stored.get(key), identity[key], key)
-    if differing:
-        raise EvaluationError(
-            f"out_dir {str(folder)!r} holds results of another configuration (differing: "
-            f"{', '.join(differing)}); use another folder or the same configuration")
-    if stored.get("version") != identity["version"]:
-        warnings.warn(f"{str(folder)!r} was written by ipp-toolkit {stored.get('version')}, "
-                      f"this is {identity['version']}: stored missions are reused",
-                      stacklevel=3)
-    for spec in specs:
-        path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
-        if not path.exists():
-            continue
-        try:
-            stored_spec = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-            raise EvaluationError(f"cannot read {str(path)!r}: {err}") from None
-        if stored_spec != spec.to_dict():
-            raise EvaluationError(
-                f"out_dir {str(folder)!r} holds missions of planner label "
-                f"{spec.effective_label!r} made with {stored_spec!r}, not {spec.to_dict()!r}; "
-                "give this planner another label or use another folder")
-    return True
-
-
-def _shard_path(folder: Path, label: str, mission: int) -> Path:
-    return folder / "shards" / safe_name(label) / f"mission_{mission:05d}.json"
-
-
-def _trajectory_path(folder: Path, label: str, mission: int) -> Path:
-    return folder / "trajectories" / f"{safe_name(label)}_mission{mission}.npz"
-
-
-def _check_rows(rows: Any, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
-    if not isinstance(rows, list) or len(rows) != budget + 1:
-        raise ValueError(f"expected {budget + 1} rows")
-    for step, row in enumerate(rows):
-        if not isinstance(row, dict) or tuple(row) != RESULT_COLUMNS:
-            raise ValueError(f"row {step} does not have the columns {RESULT_COLUMNS}")
-        if row["planner"] != label or row["mission"] != mission or row["step"] != step:
-            raise ValueError(f"row {step} belongs to another planner, mission or step")
-    return rows
-
-
-def _stored_planners(folder: Path, exclude: Sequence[str], missions: int,
-                     budget: int) -> dict[str, list[dict[str, Any]]]:
-    """Rows of the planners stored in ``folder`` (other than ``exclude``) that hold every one
-    of missions 0..missions-1, by label in folder order; incomplete ones are left out."""
-    stored: dict[str, list[dict[str, Any]]] = {}
-    shards = folder / "shards"
-    if not shards.is_dir():
-        return stored
-    for spec_path in sorted(shards.glob("*/planner.json")):
-        try:
-            label = str(json.loads(spec_path.read_text(encoding="utf-8"))["label"])
-        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
-            continue
-        if label in exclude:
-            continue
-        try:
-            stored[label] = [row for mission in range(missions) for row in _read_shard(
-                _shard_path(folder, label, mission), label, mission, budget)]
-        except (OSError, UnicodeDecodeError, ValueError, KeyError):
-            continue  # missing or damaged missions: not a complete planner of this run
-    return stored
-
-
-def _read_shard(path: Path, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
-    shard = json.loads(path.read_text(encoding="utf-8"))
-    if not isinstance(shard, dict) or shard.get("format") != _FORMAT:
-        raise ValueError("not a shard of this format")
-    if shard.get("label") != label or shard.get("mission") != mission:
-        raise ValueError("the shard belongs to another planner or mission")
-    return _check_rows(shard.get("rows"), label, mission, budget)
-
-
-def _write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any]) -> None:
-    trajectory = result["trajectory"]
-    shard = {
-        "format": _FORMAT,
-        "label": spec.effective_label,
-        "planner": spec.name,
-        "options": spec.options,
-        "mission": mission,
-        "rows": result["rows"],
-        "trajectory": None if trajectory is None else {
-            "positions": np.asarray(trajectory["positions"]).tolist(),
-            "footprints": np.asarray(trajectory["footprints"]).tolist(),
-        },
-    }
-    write_json(_shard_path(folder, spec.effective_label, mission), shard)
-
-
-def _write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
-    arrays = {
-        "ground_truth": np.asarray(trajectory["ground_truth"], dtype=bool),
-        "final_prob": np.asarray(trajectory["final_prob"], dtype=np.float16),
-        "positions": np.asarray(trajectory["positions"], dtype=np.float64),
-        "footprints": np.asarray(trajectory["footprints"], dtype=np.int64),
-        "area_size": np.float64(trajectory["area_size"]),
-        "resolution": np.float64(trajectory["resolution"]),
-    }
-    atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
-
-
-def _read_trajectory(path: Path) -> dict[str, Any]:
-    with np.load(path, allow_pickle=False) as data:
-        missing = {"ground_truth", "final_prob", "positions", "footprints", "area_size",
-                   "resolution"} - set(data.files)
-        if missing:
-            raise ValueError(f"missing arrays {sorted(missing)}")
-        return {
-            "ground_truth": data["ground_truth"].astype(bool),
-            "final_prob": data["final_prob"],
-            "positions": data["positions"],
-            "footprints": data["footprints"],
-            "area_size": float(data["area_size"]),
-            "resolution": float(data["resolution"]),
-        }
-
-
-def _format_cell(value: Any) -> str:
-    if isinstance(value, bool):
-        return str(int(value))
-    if isinstance(value, int | np.integer):
-        return str(int(value))
-    if isinstance(value, float | np.floating):
-        value = float(value)
-        if math.isnan(value):
-            return ""
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    return str(value)
-
-
-def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    text = io.StringIO()
-    writer = csv.writer(text, lineterminator="\n")
-    writer.writerow(RESULT_COLUMNS)
-    for row in rows:
-        writer.writerow([_format_cell(row[column]) for column in RESULT_COLUMNS])
-    data = text.getvalue().encode("utf-8")
-    atomic_write(path, lambda handle: handle.write(data))
-
-
-def _parse_cell(column: str, text: str) -> Any:
-    if column in _INT_COLUMNS:
-        return int(text)
-    if column in _FLOAT_COLUMNS:
-        return math.nan if text == "" else float(text)
-    return text
-
-
-def _read_csv(path: Path) -> list[dict[str, Any]]:
-    try:
-        handle = open(path, encoding="utf-8", newline="")
-    except FileNotFoundError:
-        raise EvaluationError(f"{str(path)!r} is missing") from None
-    except OSError as err:
-        raise EvaluationError(f"cannot read {str(path)!r}: {err.strerror}") from None
-    rows = []
-    with handle:
-        reader = csv.reader(handle)
-        try:
-            header = next(reader, None)
-            if header is None or tuple(header) != RESULT_COLUMNS:
-                raise EvaluationError(f"{str(path)!r} is malformed: its header is {header}, "
-                                      f"expected {list(RESULT_COLUMNS)}")
-            for cells in reader:
-                if len(cells) != len(RESULT_COLUMNS):
-                    raise EvaluationError(f"{str(path)!r} is malformed: line {reader.line_num} "
-                                          f"has {len(cells)} cells, expected "
-                                          f"{len(RESULT_COLUMNS)}")
-                try:
-                    rows.append({c: _parse_cell(c, t) for c, t in zip(RESULT_COLUMNS, cells,
-                                                                      strict=True)})
-                except ValueError as err:
-                    raise EvaluationError(f"{str(path)!r} is malformed: line "
-                                          f"{reader.line_num}: {err}") from None
-        except (csv.Error, UnicodeDecodeError) as err:
-            raise EvaluationError(f"{str(path)!r} is malformed: {err}") from None
-    return rows
 
 
 # --------------------------------------------------------------------------------------------
