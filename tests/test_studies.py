@@ -10,6 +10,7 @@ from reports.cli import study_main
 from reports.studies import robustness_study
 
 
+@pytest.mark.slow
 def test_robustness_study_writes_table_and_figure(tmp_path):
     study = robustness_study("random,coverage", agents=(2,), comms=(0.0, math.inf),
                              trials=2, resolution=1.0, out=tmp_path, progress=False)
@@ -30,6 +31,7 @@ def test_ipp_study_cli_bad_input(tmp_path, capsys):
                        "--out", str(tmp_path / "x"), "--no-progress"]) == 2
 
 
+@pytest.mark.slow
 def test_credit_assignment_study_end_to_end(tmp_path):
     from reports.studies import credit_assignment_study
 
@@ -46,6 +48,7 @@ def test_credit_assignment_study_end_to_end(tmp_path):
     assert study_main(["credit", "--variants", "comma", "--out", str(tmp_path / "x")]) == 2
 
 
+@pytest.mark.slow
 def test_ablation_study_end_to_end(tmp_path):
     from reports.studies import ablation_study
 
@@ -65,6 +68,7 @@ def test_ablation_study_end_to_end(tmp_path):
     assert study_main(["ablation", "--ablations", "nosuch", "--out", str(tmp_path / "x")]) == 2
 
 
+@pytest.mark.slow
 def test_studies_train_each_run_once_per_seed_and_summarise_over_seeds(tmp_path):
     import numpy as np
 
@@ -105,6 +109,7 @@ def test_studies_train_each_run_once_per_seed_and_summarise_over_seeds(tmp_path)
     assert "| b | 2 | **0.300 ± 0.000** | 0.500 ± 0.000 |" in table
 
 
+@pytest.mark.slow
 def test_generalisation_study_end_to_end_on_a_tiny_grid(tmp_path):
     from reports.generalisation import Cell, generalisation_study, study_cells
 
