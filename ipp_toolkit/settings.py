@@ -245,7 +245,12 @@ def describe_config(config: EnvConfig) -> str:
     terrain = config.terrain
     where = terrain.kind
     if terrain.kind == "raster":
-        where = f"raster {Path(terrain.raster or '').name} >= {terrain.threshold:g}"
+        if terrain.threshold is not None:
+            level = f">= {terrain.threshold:g}"
+        else:
+            low, high = terrain.threshold_quantile  # type: ignore[misc]
+            level = f">= quantile {low:g}" if low == high else f">= quantile in [{low:g}, {high:g}]"
+        where = f"raster {Path(terrain.raster or '').name} {level}"
     return (f"{config.team.n_agents} UAVs ({config.team.start} starts), "
             f"D = {format_comm(config.team.comm_range)}, terrain {where}, "
             f"{config.world.area_size:g} m area at r_M = {config.world.resolution:g} m, "

@@ -162,3 +162,24 @@ def test_ipp_compare_validation_namespace(tmp_path, capsys, monkeypatch):
                                 "results/validate-a2-d25", "--seed", "0"]) == 0
     assert compare_main(argv + ["--namespace", "test", "--out", "results/validate-a2-d25"]) == 2
     assert "namespace" in capsys.readouterr().err
+
+
+def test_describe_config_names_a_raster_threshold_or_its_quantile(tmp_path):
+    from ipp_toolkit.settings import describe_config
+
+    raster = tmp_path / "field.npy"
+    np.save(raster, np.arange(16.0).reshape(4, 4))
+    by_value = describe_config(build_env_config(terrain=str(raster), threshold=3.0))
+    by_quantile = describe_config(build_env_config(terrain=str(raster), threshold_quantile=0.5))
+    assert "raster field.npy >= 3" in by_value
+    assert "raster field.npy >= quantile 0.5" in by_quantile
+
+
+def test_ipp_compare_runs_a_raster_thresholded_at_a_quantile(tmp_path, capsys):
+    raster = tmp_path / "field.npy"
+    np.save(raster, np.arange(400.0).reshape(20, 20))
+    assert compare_main(["--terrain", str(raster), "--threshold-quantile", "0.6", "--agents",
+                         "2", "--resolution", "1.0", "--budget", "2", "--trials", "1",
+                         "--planners", "random", "--workers", "1", "--no-progress",
+                         "--out", str(tmp_path / "out")]) == 0
+    assert "quantile 0.6" in capsys.readouterr().err
