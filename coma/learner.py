@@ -507,7 +507,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     settings = mission_settings(coma_config, env_config)
     geometries = [MissionGeometry(config) for config in settings]
     checks = validation_settings(coma_config, settings)
-    check_geometries = [MissionGeometry(config) for config in checks]
+    check_geometries = geometries if checks == settings else [
+        MissionGeometry(config) for config in checks]
     reference = (reference_scores(checks, coma_config.seed, coma_config.eval_missions)
                  if coma_config.selection == "worst_vs_ig" else None)
     budget = env_config.team.budget

@@ -354,9 +354,10 @@ def study_main(argv: list[str] | None = None) -> int:
     out = args.out or f"results/{args.study}"
     try:
         if args.study == "generalisation":
+            from .compare import DEFAULT_PLANNERS
             from .generalisation import generalisation_study, study_cells
 
-            planners = args.planners or "ig,coverage,random,coma,ppo"
+            planners = args.planners or ",".join(DEFAULT_PLANNERS)
             settings = [(int(a), _comm_range(c)) for a in args.agents.split(",")
                         for c in args.comm.split(",")]
             cells = study_cells([f for f in args.families.split(",") if f],

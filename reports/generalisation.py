@@ -29,7 +29,7 @@ from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.settings import comm_label, format_comm
 from ipp_toolkit.terrain_families import real_raster_names
 
-from .compare import compare
+from .compare import DEFAULT_PLANNERS, compare
 from .plots import _colour, _new_figure, save_figure
 from .tables import Paired, Summary, atomic_write_text
 
@@ -160,7 +160,7 @@ def _figure(cells: list[Cell], planners: list[str], reference: str,
     return save_figure(figure, stem)
 
 
-def generalisation_study(planners: str | Sequence[str] = "ig,coverage,random,coma,ppo",
+def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNERS),
                          cells: Sequence[Cell] | None = None, trials: int = 50, seed: int = 0,
                          out: str | os.PathLike[str] = "results/generalisation",
                          workers: int = 1, resolution: float | None = None,
@@ -185,8 +185,10 @@ def generalisation_study(planners: str | Sequence[str] = "ig,coverage,random,com
         ValueError: bad input (an unknown planner, no reference among the planners), checked
             on the first cell before anything is written.
     """
+    from ipp_toolkit.evaluation import PlannerSpec
+
     names = planners.split(",") if isinstance(planners, str) else list(planners)
-    if reference not in [n.split(":")[0].split("=")[0].strip() for n in names]:
+    if reference not in [PlannerSpec.parse(n).effective_label for n in names if n.strip()]:
         raise ValueError(f"the reference planner {reference!r} is not among the planners "
                          f"{planners!r}")
     out = Path(out)
