@@ -149,13 +149,12 @@ def footprint_gain(state: MissionState) -> np.ndarray:
     Returns:
         (N, Z, G, G) float32.
     """
+    reward = state.config.reward
     cache = state.gain_cache
     if cache is None or cache.maps is not state.maps:
-        reward = state.config.reward
         cache = state.gain_cache = FootprintGainCache(
             state.maps, state.n_agents, state.geometry.camera,
             (reward.weight_interesting, reward.weight_uninteresting))
-    reward = state.config.reward
     scale = max(reward.weight_interesting, reward.weight_uninteresting, 1e-12)
     sums = cache.sums()
     return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
