@@ -21,8 +21,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import torch  # noqa: E402
 
 from coma.config import preset  # noqa: E402
-from coma.learner import _make_optimisers, collect_rollout, update  # noqa: E402
+from coma.learner import make_optimisers, update  # noqa: E402
 from coma.persistence import build_networks  # noqa: E402
+from coma.rollout import collect_rollout  # noqa: E402
 from ipp_toolkit.config import EnvConfig  # noqa: E402
 from ipp_toolkit.mission import MissionGeometry  # noqa: E402
 
@@ -38,7 +39,7 @@ def main() -> None:
     config = preset(args.preset)
     env = EnvConfig().replace(world={"resolution": args.resolution})
     networks = build_networks(config, env)
-    optimisers = _make_optimisers(networks)
+    optimisers = make_optimisers(networks)
     target = copy.deepcopy(networks.critic)
     geometry = MissionGeometry(env)
     generator = torch.Generator().manual_seed(0)

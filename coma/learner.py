@@ -1,13 +1,15 @@
 """COMA: counterfactual multi-agent policy gradients for the UAV team, top to bottom.
 
-Read in order: the rollout (missions in lock-step, a shared actor sampling from the bounded
-softmax), the critic update (TD(lambda) targets per episode from a target critic refreshed
-every ``target_update_transitions``), the advantage (``coma.advantages``), the actor update
-(the paper's ``-log pi(u) A``, or with ``clip_ratio > 0`` PPO's clipped surrogate), then
-logging, evaluation and checkpoints. An optional warm start (``coma.warm_start``) imitates a
-planner first. Hyper-parameters live in :class:`COMAConfig`; the mission in an
-:class:`EnvConfig`. ``train`` is the Python entry point, ``main`` the ``ipp-train coma``
-command.
+Read in order: the rollout (``coma.rollout``: missions in lock-step, a shared actor sampling
+from the bounded softmax), the critic update (TD(lambda) targets per episode from a target
+critic refreshed every ``target_update_transitions``), the advantage (``coma.advantages``),
+the actor update (the paper's ``-log pi(u) A``, or with ``clip_ratio > 0`` PPO's clipped
+surrogate), then logging, validation (``coma.validation``) and checkpoints. An optional warm
+start (``coma.warm_start``) imitates a planner first. Hyper-parameters live in
+:class:`COMAConfig`; the mission in an :class:`EnvConfig`. This module owns :func:`update`
+(one COMA update) and :func:`train` (the run: start or resume, the update loop, logs,
+``best.pt`` and ``last.pt``); ``coma.cli`` is the ``ipp-train coma`` command around it and
+``coma.run_files`` keeps its progress log.
 
 Reproducibility: mission k of a run always has the same terrain and sensor noise
 (``ipp_toolkit.seeding``); action sampling and mini-batch shuffling draw from one torch
@@ -17,15 +19,9 @@ continues exactly as if it had not stopped.
 
 from __future__ import annotations
 
-import argparse
 import copy
-import csv
-import io
 import math
-import sys
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,180 +30,39 @@ import torch
 from torch import nn
 
 from ipp_toolkit.config import EnvConfig, config_to_dict
-from ipp_toolkit.evaluation import planner_seed
-from ipp_toolkit.features import actor_observations, actor_plane_names
-from ipp_toolkit.io import CheckpointError, atomic_write, write_json
-from ipp_toolkit.mission import MissionGeometry, MissionState, reset_mission, step_mission
-from ipp_toolkit.planners import Planner, agent_views
+from ipp_toolkit.features import actor_plane_names
+from ipp_toolkit.io import CheckpointError, write_json
+from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.progress import progress_bar
-from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
-from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
-from .inputs import critic_input, value_input
-from .networks import GainPriorActor, bounded_softmax, epsilon_at, greedy_actions
+from .config import COMAConfig, mission_settings
+from .networks import GainPriorActor, bounded_softmax, epsilon_at
 from .persistence import (
-    DEFAULT_SHIPPED,
     COMANetworks,
     build_networks,
     load_policy,
     load_state_into,
-    resolve_policy,
     save_policy,
 )
+from .rollout import Rollout, collect_rollout
+from .run_files import (
+    TrainResult,
+    read_progress,
+    resume_fields,
+    saved_update,
+    write_progress,
+)
+from .validation import reference_scores, validate, validation_settings
 from .warm_start import WarmStartConfig
+from .warm_start import warm_start as imitate
 
-__all__ = ["TrainingDiverged", "TrainResult", "Rollout", "collect_rollout", "greedy_actions",
-           "evaluate_greedy", "validate", "mission_settings", "setting_of_update", "train",
-           "main", "TRAINING_DEFAULTS"]
+__all__ = ["TrainingDiverged", "update", "make_optimisers", "setting_of_update", "train"]
 
 
 class TrainingDiverged(RuntimeError):
     """A loss became NaN or infinite; the last good checkpoint is kept."""
-
-
-# --------------------------------------------------------------------------------------------
-# Rollout
-
-
-@dataclass
-class Rollout:
-    """One update's data: E missions of T steps with N agents, in lock-step.
-
-    Attributes:
-        actor_obs: (E, N, T, C_actor, G, G) float32.
-        critic_obs: (E, N, T, C_critic, G, G) float32.
-        value_obs: (E, N, T, C_value, G, G) float32, or None unless ``central_qv``.
-        masks: (E, N, T, 6) bool valid actions.
-        actions: (E, N, T) int64.
-        behaviour_probs: (E, N, T) probability of each action under the policy that chose
-            it (1 for a demonstrator's actions).
-        rewards: (E, T) float32 team rewards.
-        returns: (E,) undiscounted return of each mission.
-        final_entropy: (E,) entropy metric at the end of each mission.
-    """
-
-    actor_obs: torch.Tensor
-    critic_obs: torch.Tensor
-    value_obs: torch.Tensor | None
-    masks: torch.Tensor
-    actions: torch.Tensor
-    behaviour_probs: torch.Tensor
-    rewards: torch.Tensor
-    returns: np.ndarray
-    final_entropy: np.ndarray
-
-    @property
-    def transitions(self) -> int:
-        """Agent-transitions in the rollout: E * N * T."""
-        return int(np.prod(self.actions.shape))
-
-
-def _stack_time(frames: list[np.ndarray]) -> torch.Tensor:
-    """T frames of (E, N, ...) -> (E, N, T, ...)."""
-    return torch.from_numpy(np.stack(frames, axis=2))
-
-
-def _learning_masks(state: MissionState) -> np.ndarray:
-    """(N, 6) bool masks the learner uses: the valid actions, or all actions in the no-mask
-    ablation (``team.invalid_action = "hold"``: a masked choice holds the UAV in place)."""
-    if state.config.team.invalid_action == "hold":
-        return np.ones((state.n_agents, N_ACTIONS), dtype=bool)
-    return state.masks().astype(bool)
-
-
-def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: MissionGeometry,
-                    seed: int, first_mission: int, n_missions: int, eps: float,
-                    generator: torch.Generator, namespace: str = "train",
-                    demonstrators: Sequence[Planner] | None = None) -> Rollout:
-    """Play ``n_missions`` missions in lock-step with the bounded-softmax policy.
-
-    Missions ``first_mission ... first_mission + n_missions - 1`` of run ``seed`` are used, so
-    consecutive updates see fresh terrains. The actor runs once per step for all agents of all
-    missions; the critic inputs are built with the joint action just sampled.
-
-    Args:
-        demonstrators: one planner per mission that acts instead of the actor (demonstrations
-            for a warm start, see ``coma.warm_start``); ``eps`` is then unused.
-    """
-    variant = networks.coma_config.variant
-    features = env_config.features
-    states = [reset_mission(env_config, seed, first_mission + e, namespace, geometry)
-              for e in range(n_missions)]
-    if demonstrators is not None:
-        if len(demonstrators) != n_missions:
-            raise ValueError(f"need one demonstrator per mission ({n_missions}), got "
-                             f"{len(demonstrators)}")
-        for e, planner in enumerate(demonstrators):
-            planner.reset(env_config, planner_seed(seed, first_mission + e, namespace))
-    actor_frames, critic_frames, value_frames, mask_frames, action_frames, reward_frames = \
-        [], [], [], [], [], []
-    behaviour_frames: list[np.ndarray] = []
-    returns = np.zeros(n_missions)
-    for _ in range(env_config.team.budget):
-        obs = np.stack([actor_observations(s, features) for s in states])  # (E, N, C, G, G)
-        masks = np.stack([_learning_masks(s) for s in states])  # (E, N, 6)
-        if demonstrators is None:
-            with torch.no_grad():
-                logits = networks.actor(torch.from_numpy(obs).flatten(0, 1))
-                probs = bounded_softmax(logits, torch.from_numpy(masks).flatten(0, 1), eps)
-            chosen = torch.multinomial(probs, 1, generator=generator)
-            behaviour = probs.gather(-1, chosen).view(n_missions, -1).numpy()
-            actions = chosen.view(n_missions, -1).numpy()
-        else:
-            actions = np.stack([np.asarray(planner.act(agent_views(s, planner.needs_observations,
-                                                                   planner.observation_features)),
-                                           dtype=np.int64)
-                                for planner, s in zip(demonstrators, states, strict=True)])
-            behaviour = np.ones(actions.shape, dtype=np.float32)
-        critic_frames.append(np.stack([critic_input(s, features, variant, actions[e], obs[e])
-                                       for e, s in enumerate(states)]))
-        if networks.value is not None:
-            value_frames.append(np.stack([value_input(s, features, obs[e])
-                                          for e, s in enumerate(states)]))
-        rewards = np.array([step_mission(s, actions[e]) for e, s in enumerate(states)])
-        returns += rewards
-        actor_frames.append(obs)
-        mask_frames.append(masks)
-        action_frames.append(actions)
-        behaviour_frames.append(behaviour)
-        reward_frames.append(rewards)
-    return Rollout(
-        actor_obs=_stack_time(actor_frames),
-        critic_obs=_stack_time(critic_frames),
-        value_obs=_stack_time(value_frames) if value_frames else None,
-        masks=_stack_time(mask_frames),
-        actions=_stack_time(action_frames).long(),
-        behaviour_probs=_stack_time(behaviour_frames).float(),
-        rewards=torch.from_numpy(np.stack(reward_frames, axis=1)).float(),
-        returns=returns,
-        final_entropy=np.array([s.history[-1].entropy for s in states]),
-    )
-
-
-def evaluate_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometry,
-                    seed: int, n_missions: int, namespace: str = "validation"
-                    ) -> dict[str, float]:
-    """Mean entropy and F1 of the greedy policy on held-out missions, after every step.
-
-    Returns:
-        ``entropy_s`` and ``f1_s`` for s = 0..B, and ``return``: the mean team return.
-    """
-    states = [reset_mission(env_config, seed, m, namespace, geometry) for m in range(n_missions)]
-    total_return = 0.0
-    features = env_config.features
-    for _ in range(env_config.team.budget):
-        obs = np.stack([actor_observations(s, features) for s in states])
-        masks = np.stack([s.masks() for s in states])
-        actions = greedy_actions(actor, obs.reshape(-1, *obs.shape[2:]),
-                                 masks.reshape(-1, N_ACTIONS)).reshape(n_missions, -1)
-        total_return += sum(step_mission(s, actions[e]) for e, s in enumerate(states))
-    result = {"return": total_return / n_missions}
-    for step in range(env_config.team.budget + 1):
-        result[f"entropy_{step}"] = float(np.mean([s.history[step].entropy for s in states]))
-        result[f"f1_{step}"] = float(np.mean([s.history[step].f1 for s in states]))
-    return result
 
 
 # --------------------------------------------------------------------------------------------
@@ -332,36 +187,6 @@ def _check_finite(what: str, value: torch.Tensor) -> None:
 # Training run: state, checkpoints, logs
 
 
-CSV_COLUMNS = ["update", "missions", "transitions", "eps", "return_mean", "final_entropy_mean",
-               "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
-               "critic_grad_norm", "actor_grad_norm", "transitions_per_s", "wall_s",
-               "eval_return", "eval_entropy_final", "eval_f1_final", "eval_gap_worst",
-               "n_agents", "comm_range"]
-
-
-@dataclass
-class TrainResult:
-    """Where a run left its files and how it ended.
-
-    Attributes:
-        out_dir: the run folder.
-        best_policy: path of the policy with the lowest validation entropy (``best.pt``).
-        last_checkpoint: path of the resumable training checkpoint (``last.pt``).
-        updates: updates done in total.
-        missions: training missions played in total.
-        best_entropy: validation final entropy of the best policy.
-        history: one dict per update (the CSV rows).
-    """
-
-    out_dir: Path
-    best_policy: Path
-    last_checkpoint: Path
-    updates: int
-    missions: int
-    best_entropy: float
-    history: list[dict[str, Any]] = field(default_factory=list)
-
-
 def setting_of_update(n_settings: int, seed: int, update: int) -> int:
     """Index of the mission setting that update ``update`` (0-based) trains on.
 
@@ -373,51 +198,6 @@ def setting_of_update(n_settings: int, seed: int, update: int) -> int:
     block, offset = divmod(update, n_settings)
     order = np.random.default_rng([seed, block, 0x5E77]).permutation(n_settings)
     return int(order[offset])
-
-
-def validate(actor: nn.Module, settings: Sequence[EnvConfig],
-             geometries: Sequence[MissionGeometry], seed: int, n_missions: int,
-             reference: Sequence[float] | None = None) -> dict[str, float]:
-    """:func:`evaluate_greedy` on every setting, averaged key by key over the settings.
-
-    With ``reference`` (a planner's mean final entropy per setting, same missions) it also
-    gives ``gap_worst`` and ``gap_mean``: the largest and the mean of the policy's mean final
-    entropy minus the reference's over the settings.
-    """
-    scores = [evaluate_greedy(actor, config, geometry, seed, n_missions)
-              for config, geometry in zip(settings, geometries, strict=True)]
-    result = {key: float(np.mean([s[key] for s in scores])) for key in scores[0]}
-    if reference is not None:
-        budget = settings[0].team.budget
-        gaps = [s[f"entropy_{budget}"] - r for s, r in zip(scores, reference, strict=True)]
-        result.update(gap_worst=float(max(gaps)), gap_mean=float(np.mean(gaps)))
-    return result
-
-
-def validation_settings(coma_config: COMAConfig, settings: Sequence[EnvConfig]
-                        ) -> list[EnvConfig]:
-    """The validation missions' configs: every training setting on every validation terrain
-    (``coma_config.validation_terrains``; none: the settings themselves)."""
-    if not coma_config.validation_terrains:
-        return list(settings)
-    return [config.replace(terrain={"kind": kind}) for config in settings
-            for kind in coma_config.validation_terrains]
-
-
-def reference_scores(settings: Sequence[EnvConfig], seed: int, n_missions: int,
-                     planner: str = "ig") -> list[float]:
-    """``planner``'s mean final entropy on the validation missions of each setting (the
-    missions :func:`evaluate_greedy` flies), for ``selection = "worst_vs_ig"``."""
-    from ipp_toolkit.evaluation import evaluate
-
-    scores = []
-    for config in settings:
-        result = evaluate(config, [planner], missions=n_missions, seed=seed,
-                          namespace="validation", progress=False)
-        budget = config.team.budget
-        scores.append(float(np.mean([r["entropy"] for r in result.rows
-                                     if int(r["step"]) == budget])))
-    return scores
 
 
 def _initialise_from(networks: COMANetworks, path: str) -> None:
@@ -439,7 +219,8 @@ def _initialise_from(networks: COMANetworks, path: str) -> None:
             load_state_into(module, getattr(source, name).state_dict(), f"the {name}", path)
 
 
-def _make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
+def make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
+    """Adam for the actor (``lr_actor``) and for the critic(s) (``lr_critic``)."""
     cfg = networks.coma_config
     optimisers = {"actor": torch.optim.Adam(networks.actor.parameters(), lr=cfg.lr_actor),
                   "critic": torch.optim.Adam(networks.critic.parameters(), lr=cfg.lr_critic)}
@@ -448,21 +229,40 @@ def _make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]
     return optimisers
 
 
-def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, extrasaction="ignore")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow({k: ("" if row.get(k) is None else row.get(k)) for k in CSV_COLUMNS})
-    data = buffer.getvalue().encode("utf-8")
-    atomic_write(path, lambda handle: handle.write(data))
+def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config: EnvConfig,
+            generator: torch.Generator) -> tuple[COMANetworks, nn.Module,
+                                                 dict[str, torch.optim.Optimizer],
+                                                 dict[str, Any], list[dict[str, Any]]]:
+    """The run in ``last_path`` as it stopped: networks (in training mode), target critic,
+    optimisers, progress counters and logged rows; ``generator`` gets its sampling state.
 
-
-def _comparable(config: COMAConfig) -> dict[str, Any]:
-    """Fields that must match to resume a run (the total length may be extended)."""
-    values = config.to_dict()
-    values.pop("missions")
-    return values
+    Raises:
+        CheckpointError: the checkpoint is corrupt or belongs to another run.
+    """
+    networks, data = load_policy(last_path)
+    if resume_fields(networks.coma_config) != resume_fields(coma_config):
+        raise CheckpointError(f"checkpoint {str(last_path)!r} belongs to a run with other "
+                              "COMA settings; start a new folder instead")
+    if config_to_dict(networks.env_config) != config_to_dict(env_config):
+        raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
+                              "mission config; start a new folder instead")
+    networks.coma_config = coma_config
+    for module in (networks.actor, networks.critic, networks.value):
+        if module is not None:
+            module.train()
+    target_critic = copy.deepcopy(networks.critic)
+    load_state_into(target_critic, data["target_critic"], "the target critic",
+                    str(last_path))
+    optimisers = make_optimisers(networks)
+    for name, optimiser in optimisers.items():
+        try:
+            optimiser.load_state_dict(data["optimisers"][name])
+        except (KeyError, ValueError) as error:
+            raise CheckpointError(f"checkpoint {str(last_path)!r}: cannot restore the "
+                                  f"{name} optimiser ({error})") from None
+    generator.set_state(data["generator"])
+    state = dict(data["progress"])
+    return networks, target_critic, optimisers, state, read_progress(csv_path, state["update"])
 
 
 def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
@@ -526,34 +326,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     generator = torch.Generator().manual_seed(coma_config.seed)
     history: list[dict[str, Any]] = []
     if resume and last_path.exists():
-        networks, data = load_policy(last_path)
-        if _comparable(networks.coma_config) != _comparable(coma_config):
-            raise CheckpointError(f"checkpoint {str(last_path)!r} belongs to a run with other "
-                                  "COMA settings; start a new folder instead")
-        if config_to_dict(networks.env_config) != config_to_dict(env_config):
-            raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
-                                  "mission config; start a new folder instead")
-        networks.coma_config = coma_config
-        for module in (networks.actor, networks.critic, networks.value):
-            if module is not None:
-                module.train()
-        target_critic = copy.deepcopy(networks.critic)
-        load_state_into(target_critic, data["target_critic"], "the target critic",
-                        str(last_path))
-        optimisers = _make_optimisers(networks)
-        for name, optimiser in optimisers.items():
-            try:
-                optimiser.load_state_dict(data["optimisers"][name])
-            except (KeyError, ValueError) as error:
-                raise CheckpointError(f"checkpoint {str(last_path)!r}: cannot restore the "
-                                      f"{name} optimiser ({error})") from None
-        generator.set_state(data["generator"])
-        state = dict(data["progress"])
-        if csv_path.exists():
-            with open(csv_path, newline="") as handle:
-                history = [{k: _parse(v) for k, v in row.items()}
-                           for row in csv.DictReader(handle)]
-            history = [row for row in history if row["update"] <= state["update"]]
+        networks, target_critic, optimisers, state, history = _resume(
+            last_path, csv_path, coma_config, env_config, generator)
     else:
         torch.manual_seed(coma_config.seed)
         networks = build_networks(coma_config, env_config)
@@ -585,8 +359,6 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             _initialise_from(networks, coma_config.init_policy)
             run_info["init_policy"] = {"path": coma_config.init_policy, **score_start()}
         elif warm_start is not None:
-            from .warm_start import warm_start as imitate
-
             tick = time.perf_counter()
             scores = imitate(networks, env_config, warm_start, coma_config.seed, generator,
                              progress)
@@ -598,7 +370,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             # The gain-prior actor starts as a planner worth scoring (ig's choice).
             run_info["gain_prior_start"] = score_start()
         target_critic = copy.deepcopy(networks.critic)
-        optimisers = _make_optimisers(networks)
+        optimisers = make_optimisers(networks)
         write_json(out / "config.json", run_info)
 
     def save_checkpoint() -> None:
@@ -608,7 +380,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             "generator": generator.get_state(),
             "progress": dict(state),
         })
-        _write_csv(csv_path, history)
+        write_progress(csv_path, history)
 
     writer = None
     if tensorboard:
@@ -641,7 +413,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                 raise TrainingDiverged(
                     f"{error} at update {state['update'] + 1}; training stopped. The last "
                     f"good checkpoint is kept: {str(last_path)!r} (update "
-                    f"{_saved_update(last_path)}); lower the learning rates or check the "
+                    f"{saved_update(last_path)}); lower the learning rates or check the "
                     "rewards") from None
             elapsed = time.perf_counter() - tick
             state["update"] += 1
@@ -691,174 +463,4 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             writer.close()
     return TrainResult(out, best_path, last_path, state["update"], state["missions"],
                        state["best_entropy"], history)
-
-
-def _saved_update(path: Path) -> str:
-    if not path.exists():
-        return "none yet"
-    try:
-        _, data = load_policy(path)
-        return str(data["progress"]["update"])
-    except (CheckpointError, KeyError):
-        return "unreadable"
-
-
-def _parse(text: str) -> Any:
-    if text == "":
-        return None
-    number = float(text)
-    return int(number) if number.is_integer() and "." not in text and "e" not in text \
-        else number
-
-
-# --------------------------------------------------------------------------------------------
-# Command line: ipp-train coma
-
-
-TRAINING_DEFAULTS = {"world": {"resolution": 0.5}, "features": {"own_position": True}}
-"""``ipp-train coma``'s defaults over the paper's mission: training at r_M = 0.5 m (the policy
-flies at any resolution) with the own-position plane (docs/departures.md). A ``--config`` file
-wins over them, an explicit flag over the file."""
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="ipp-train coma",
-        description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.")
-    parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
-                        help="hyper-parameter preset (default: cpu)")
-    parser.add_argument("--variant", choices=VARIANTS, help="credit-assignment variant")
-    parser.add_argument("--config", help="YAML mission config (world, team, features, ...) "
-                             "over the training defaults (the paper's mission at r_M 0.5 m "
-                             "with features.own_position on); explicit flags win over it")
-    parser.add_argument("--seed", type=int, help="run seed")
-    parser.add_argument("--out", required=True, help="run folder")
-    parser.add_argument("--resume", action="store_true", help="continue the run in --out")
-    parser.add_argument("--missions", type=int, help="training missions in total")
-    parser.add_argument("--width", type=int, help="convolution channels")
-    parser.add_argument("--agents", type=int, help="team size (default: from --config, 4)")
-    parser.add_argument("--comm", type=float, help="communication range in metres")
-    parser.add_argument("--terrain", metavar="KIND",
-                        help="terrain kind of the training missions, e.g. mixture (default: "
-                             "the --config file's, else split)")
-    parser.add_argument("--resolution", type=float, default=None,
-                        help="map resolution for training in metres (default: the --config "
-                             "file's, else 0.5)")
-    parser.add_argument("--warm-start", metavar="PLANNER",
-                        help="first imitate this registered planner (e.g. ig; 'none' to "
-                             "switch the preset's off); not in the paper")
-    parser.add_argument("--team-sizes", metavar="N,N,...",
-                        help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
-                             "randomisation; not in the paper)")
-    parser.add_argument("--comm-ranges", metavar="D,D,...",
-                        help="train on these communication ranges in metres, e.g. 0,25,inf")
-    parser.add_argument("--init", metavar="POLICY",
-                        help="start from this COMA policy file instead of a warm start "
-                             "(fine-tuning), or a shipped one: --init shipped:NAME "
-                             "(paper-actor, prior, mixed; plain 'shipped': coma's default)")
-    parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
-                        help="switch a feature plane of the mission config, e.g. "
-                             "--feature own_position=true (repeatable)")
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="any COMAConfig field, e.g. --set lr_actor=1e-4 (repeatable)")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    return parser
-
-
-def _coerce(text: str) -> Any:
-    if text.lower() in ("true", "false"):
-        return text.lower() == "true"
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
-def _int_list(flag: str, text: str) -> list[int]:
-    try:
-        return [int(item) for item in text.split(",")]
-    except ValueError:
-        raise ValueError(f"{flag} expects integers separated by commas, got {text!r}") from None
-
-
-def _float_list(flag: str, text: str) -> list[float]:
-    try:
-        return [float(item) for item in text.split(",")]
-    except ValueError:
-        raise ValueError(f"{flag} expects numbers (or inf) separated by commas, got "
-                         f"{text!r}") from None
-
-
-def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
-    """The configs a parsed ``ipp-train coma`` command asks for (ValueError on bad input)."""
-    changes: dict[str, Any] = {}
-    for item in args.set:
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
-        changes[name.strip()] = _coerce(value.strip())
-    for name in ("variant", "seed", "missions", "width"):
-        if getattr(args, name) is not None:
-            changes[name] = getattr(args, name)
-    if args.warm_start is not None:
-        changes["warm_start"] = "" if args.warm_start == "none" else args.warm_start
-    if args.team_sizes is not None:
-        changes["team_sizes"] = _int_list("--team-sizes", args.team_sizes)
-    if args.comm_ranges is not None:
-        changes["comm_ranges"] = _float_list("--comm-ranges", args.comm_ranges)
-    if args.init is not None:
-        init = f"shipped:{DEFAULT_SHIPPED}" if args.init == "shipped" else args.init
-        changes["init_policy"] = str(resolve_policy(init))
-        if not Path(changes["init_policy"]).is_file():
-            raise ValueError(f"--init {args.init!r}: no such policy file")
-    coma_config = preset(args.preset, **changes)
-    switches: dict[str, bool] = {}
-    for item in args.feature:
-        name, sep, value = item.partition("=")
-        if not sep or value.strip().lower() not in ("true", "false", "1", "0", "on", "off"):
-            raise ValueError(f"--feature expects NAME=true|false, got {item!r}")
-        switches[name.strip()] = value.strip().lower() in ("true", "1", "on")
-    env_config = build_env_config(args.config, defaults=TRAINING_DEFAULTS, agents=args.agents,
-                                  comm=args.comm, resolution=args.resolution,
-                                  terrain=args.terrain, features=switches)
-    return coma_config, env_config
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``ipp-train coma``: returns 0 on success, 1 on divergence, 2 on bad input."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        coma_config, env_config = configs_from_args(args)
-        # An invalid team, range or validation terrain fails here, before anything is written.
-        validation_settings(coma_config, mission_settings(coma_config, env_config))
-        if coma_config.warm_start:
-            from ipp_toolkit.planners import planner_factory
-
-            planner_factory(coma_config.warm_start)  # an unknown name fails before training
-    except ValueError as error:
-        print(f"ipp-train coma: error: {error}", file=sys.stderr)
-        return 2
-    try:
-        result = train(coma_config, env_config, args.out, resume=args.resume,
-                       progress=not args.no_progress)
-    except (FileExistsError, CheckpointError) as error:
-        print(f"ipp-train coma: error: {error}", file=sys.stderr)
-        return 2
-    except TrainingDiverged as error:
-        print(f"ipp-train coma: {error}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f"\nipp-train coma: interrupted; continue with --resume --out {args.out} "
-              "(from the last checkpoint)", file=sys.stderr)
-        return 130
-    criterion = ("worst gap to IG's final entropy" if coma_config.selection == "worst_vs_ig"
-                 else "final entropy")
-    print(f"trained {result.updates} updates ({result.missions} missions); best validation "
-          f"{criterion} {result.best_entropy:+.3f}; policy: {result.best_policy}")
-    return 0
-
-
 

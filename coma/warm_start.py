@@ -32,6 +32,7 @@ from ipp_toolkit.progress import progress_bar
 
 from .advantages import td_lambda_targets
 from .persistence import COMANetworks
+from .rollout import collect_rollout
 
 __all__ = ["DEMO_MISSION_OFFSET", "WarmStartConfig", "warm_start"]
 
@@ -105,8 +106,6 @@ def warm_start(networks: COMANetworks, env_config: EnvConfig, config: WarmStartC
         equals the demonstrator's), ``actor_loss``, ``critic_loss`` (last epoch means) and
         ``demo_return`` (the demonstrator's mean team return).
     """
-    from .learner import collect_rollout
-
     geometry = MissionGeometry(env_config)
     cfg = networks.coma_config
     batches = []

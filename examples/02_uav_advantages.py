@@ -27,8 +27,7 @@ import torch  # noqa: E402
 
 from coma.advantages import counterfactual_advantage  # noqa: E402
 from coma.inputs import critic_input  # noqa: E402
-from coma.learner import greedy_actions  # noqa: E402
-from coma.networks import bounded_softmax  # noqa: E402
+from coma.networks import bounded_softmax, greedy_actions  # noqa: E402
 from coma.persistence import load_policy, resolve_policy  # noqa: E402
 from ipp_toolkit.features import actor_observations  # noqa: E402
 from ipp_toolkit.mission import reset_mission, step_mission  # noqa: E402

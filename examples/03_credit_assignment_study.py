@@ -28,8 +28,9 @@ import time
 import torch
 
 from coma.config import VARIANTS, COMAConfig
-from coma.learner import evaluate_greedy, train
+from coma.learner import train
 from coma.persistence import load_policy
+from coma.validation import evaluate_greedy
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.mission import MissionGeometry
 

@@ -13,23 +13,22 @@ into it (the layout: :mod:`ipp_toolkit.result_store`).
 Results are tidy rows, one per (planner, mission, step) with the columns
 :data:`RESULT_COLUMNS`; :meth:`EvaluationResult.curves` turns them into (missions, B + 1)
 arrays. :func:`load_results` reads a folder back.
+
+This module owns the mission loop (:func:`run_mission`), the task runner that flies one
+(planner label, mission) with cached planners, and :func:`evaluate`. Its neighbours own the
+rest: planner specs and their syntax (:mod:`ipp_toolkit.planner_specs`), the planner seed
+(:func:`ipp_toolkit.seeding.planner_seed`), the worker processes
+(:mod:`ipp_toolkit.process_pool`) and the folder layout (:mod:`ipp_toolkit.result_store`).
 """
 
 from __future__ import annotations
 
-import concurrent.futures
-import contextlib
-import json
 import math
-import multiprocessing
 import os
-import pickle
-import sys
 import time
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -38,151 +37,41 @@ import numpy as np
 from .config import EnvConfig, check_int, config_from_dict
 from .io import write_json
 from .mission import MissionGeometry, MissionState, reset_mission, step_mission
-from .planners import (
-    ENTRY_POINT_GROUP,
-    Planner,
-    PlannerFactory,
-    agent_views,
-    make_planner,
-    planner_factory,
-)
+from .planner_specs import PlannerSpec, as_specs
+from .planners import Planner, PlannerFactory, agent_views, make_planner, planner_factory
+from .process_pool import limit_torch_threads, run_parallel, transferable_factory
 from .progress import progress_bar
 from .result_store import (
     RESULT_COLUMNS,
     EvaluationError,
-    _check_folder,
-    _identity,
-    _read_csv,
-    _read_identity,
-    _read_shard,
-    _read_trajectory,
-    _shard_path,
-    _stored_planners,
-    _trajectory_path,
-    _write_csv,
-    _write_shard,
-    _write_trajectory,
+    check_folder,
+    folder_identity,
+    read_identity,
+    read_results_csv,
+    read_shard,
+    read_trajectory,
+    shard_path,
+    stored_planners,
+    trajectory_path,
+    write_results_csv,
+    write_shard,
+    write_trajectory,
 )
-from .seeding import mission_streams
+from .seeding import planner_seed
 from .settings import safe_name
 
 __all__ = [
     "RESULT_COLUMNS",
     "METRICS",
-    "PlannerSpec",
     "EvaluationError",
     "EvaluationResult",
     "run_mission",
     "evaluate",
     "load_results",
-    "planner_seed",
 ]
 
 METRICS = ("entropy", "f1", "rmse", "reward", "plan_ms")
 """The numeric per-step columns that :meth:`EvaluationResult.curves` accepts."""
-
-_THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
-
-
-# --------------------------------------------------------------------------------------------
-# Planner specs
-
-
-@dataclass(frozen=True)
-class PlannerSpec:
-    """A planner to evaluate: a registry name, its keyword options and its label.
-
-    Attributes:
-        name: registry name, e.g. ``"ig"`` or ``"coma"`` (see :func:`make_planner`).
-        options: keyword options for ``make_planner`` (e.g. ``{"checkpoint": "run/ckpt.pt"}``);
-            must be JSON-serialisable (path-like values are stored as strings).
-        label: name of the planner in results and tables; defaults to ``name``.
-    """
-
-    name: str
-    options: dict = field(default_factory=dict)
-    label: str | None = None
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name.strip():
-            raise ValueError(f"planner name must be a non-empty string, got {self.name!r}")
-        if not isinstance(self.options, Mapping):
-            raise ValueError(f"options of planner {self.name!r} must be a mapping, "
-                             f"got {self.options!r}")
-        options = {str(k): os.fspath(v) if isinstance(v, os.PathLike) else v
-                   for k, v in self.options.items()}
-        try:
-            json.dumps(options, allow_nan=False)
-        except (TypeError, ValueError) as err:
-            raise ValueError(f"options of planner {self.name!r} must be JSON-serialisable "
-                             f"(they are stored with the results): {err}") from None
-        object.__setattr__(self, "options", options)
-        if self.label is not None and (not isinstance(self.label, str) or not self.label.strip()):
-            raise ValueError(f"planner label must be a non-empty string or None, "
-                             f"got {self.label!r}")
-
-    def __hash__(self) -> int:
-        return hash((self.name, json.dumps(self.options, sort_keys=True), self.label))
-
-    @property
-    def effective_label(self) -> str:
-        """The label used in results: ``label`` or, when it is None, ``name``."""
-        return self.label if self.label is not None else self.name
-
-    @classmethod
-    def parse(cls, text: str) -> PlannerSpec:
-        """Parse ``"[LABEL:]NAME[=CHECKPOINT]"`` (the command line's planner syntax).
-
-        ``"ig"`` gives name ``ig`` without options; ``"coma=runs/x/ckpt.pt"`` gives name
-        ``coma`` with ``options={"checkpoint": "runs/x/ckpt.pt"}``. The label is the name
-        unless a ``LABEL:`` prefix names it, so two policies of one planner can be compared:
-        ``"coma,coma-mixed:coma=runs/mixed/best.pt"``.
-        """
-        syntax = "[LABEL:]NAME or [LABEL:]NAME=CHECKPOINT"
-        if not isinstance(text, str) or not text.strip():
-            raise ValueError(f"planner must be {syntax}, got {text!r}")
-        head, sep, value = (part.strip() for part in text.strip().partition("="))
-        label, colon, name = (part.strip() for part in head.rpartition(":"))
-        if not name or (sep and not value) or (colon and not label):
-            raise ValueError(f"planner must be {syntax}, got {text!r}")
-        return cls(name=name, options={"checkpoint": value} if sep else {},
-                   label=label if colon else name)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe description ``{"name", "options", "label"}`` (label resolved)."""
-        return {"name": self.name, "options": dict(self.options), "label": self.effective_label}
-
-
-def _as_specs(planners: str | Sequence[str | PlannerSpec]) -> list[PlannerSpec]:
-    if isinstance(planners, str | PlannerSpec):
-        items: list[Any] = ([p for p in planners.split(",") if p.strip()]
-                            if isinstance(planners, str) else [planners])
-    else:
-        items = list(planners)
-    if not items:
-        raise ValueError("no planner given: pass at least one planner name or PlannerSpec")
-    specs = []
-    for item in items:
-        if isinstance(item, PlannerSpec):
-            specs.append(item)
-        elif isinstance(item, str):
-            specs.append(PlannerSpec.parse(item))
-        else:
-            raise ValueError(f"a planner must be a name or a PlannerSpec, got {item!r}")
-    return specs
-
-
-def planner_seed(seed: int, mission: int, namespace: str = "test") -> int:
-    """The seed a planner is reset with for mission ``mission`` of run ``seed``.
-
-    Derived from ``(namespace, seed, mission)`` only (a stream independent of the mission's
-    terrain, start, sensor and message streams), so it is the same for every planner and any
-    number of workers.
-    """
-    root = mission_streams(namespace, seed, mission).terrain
-    # The terrain stream is child 0 of the mission's root; child 4 is never used by a mission.
-    child = np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key[:-1], 4))
-    return int(child.generate_state(1, np.uint32)[0])
 
 
 # --------------------------------------------------------------------------------------------
@@ -273,16 +162,7 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
 
 
 # --------------------------------------------------------------------------------------------
-# Running many missions (in this process or in a worker process)
-
-
-def _limit_torch_threads() -> None:
-    """One intra-op thread for torch, if a planner imported it (it is never imported here)."""
-    torch = sys.modules.get("torch")
-    if torch is not None:
-        with contextlib.suppress(Exception):
-            if torch.get_num_threads() != 1:
-                torch.set_num_threads(1)
+# Running many missions (in this process, or in worker processes: ipp_toolkit.process_pool)
 
 
 @dataclass
@@ -330,7 +210,7 @@ class _Runner:
                              f"{spec.options})")
                 raise
             if self.single_thread:
-                _limit_torch_threads()
+                limit_torch_threads()
             self._planners[label] = planner
         return planner
 
@@ -345,71 +225,8 @@ class _Runner:
                          f"{self.namespace!r}) with planner {label!r}")
             raise
         if self.single_thread:
-            _limit_torch_threads()
+            limit_torch_threads()
         return label, mission, result
-
-
-_WORKER: _Runner | None = None
-
-
-def _init_worker(runner: _Runner) -> None:
-    """Process-pool initializer: one thread per worker, then keep the runner for the tasks."""
-    global _WORKER
-    for name in _THREAD_VARIABLES:
-        os.environ[name] = "1"
-    runner.single_thread = True
-    _limit_torch_threads()
-    _WORKER = runner
-
-
-def _worker_task(label: str, mission: int) -> tuple[str, int, dict[str, Any]]:
-    if _WORKER is None:  # pragma: no cover - only if the initializer did not run
-        raise RuntimeError("evaluation worker used without its initializer")
-    return _WORKER.run(label, mission)
-
-
-@contextlib.contextmanager
-def _single_thread_environment() -> Iterator[None]:
-    """Set the thread-count variables while worker processes start (they inherit them)."""
-    saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
-    try:
-        for name in _THREAD_VARIABLES:
-            os.environ[name] = "1"
-        yield
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
-
-
-def _transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
-    """The factory of ``spec`` to send to worker processes (pickled by reference).
-
-    None when a worker finds the planner by itself (an entry point).
-
-    Raises:
-        ValueError: the factory lives where a spawned worker cannot import it (a local
-            scope, or ``__main__`` of an interactive session or notebook).
-    """
-    factory = planner_factory(spec.name)
-    main = sys.modules.get("__main__")
-    importable = not (getattr(factory, "__module__", None) == "__main__"
-                      and getattr(main, "__file__", None) is None)
-    if importable:
-        try:
-            pickle.dumps(factory)
-        except Exception:
-            importable = False
-    if importable:
-        return factory
-    if spec.name in {ep.name for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}:
-        return None
-    raise ValueError(f"planner {spec.name!r} is registered by "
-                     f"{getattr(factory, '__qualname__', factory)!r}, which worker processes "
-                     "cannot import (a local or interactive definition): define it in an "
-                     "importable module, or use workers=1")
 
 
 # --------------------------------------------------------------------------------------------
@@ -480,14 +297,14 @@ def load_results(out_dir: str | os.PathLike[str]) -> EvaluationResult:
             ``results.csv``; the message names the file.
     """
     folder = Path(out_dir)
-    stored = _read_identity(folder)
+    stored = read_identity(folder)
     try:
         config = config_from_dict(stored["config"])
         seed = int(stored["seed"])
         namespace = str(stored["namespace"])
     except (TypeError, ValueError) as err:
         raise EvaluationError(f"{str(folder / 'config.json')!r} is malformed: {err}") from None
-    rows = _read_csv(folder / "results.csv")
+    rows = read_results_csv(folder / "results.csv")
     labels: list[str] = []
     missions: dict[str, set[int]] = {}
     for row in rows:
@@ -499,10 +316,10 @@ def load_results(out_dir: str | os.PathLike[str]) -> EvaluationResult:
     trajectories: dict[tuple[str, int], dict[str, Any]] = {}
     for label in labels:
         for mission in sorted(missions[label]):
-            path = _trajectory_path(folder, label, mission)
+            path = trajectory_path(folder, label, mission)
             if path.exists():
                 try:
-                    trajectories[(label, mission)] = _read_trajectory(path)
+                    trajectories[(label, mission)] = read_trajectory(path)
                 except (OSError, ValueError, EOFError) as err:
                     warnings.warn(f"skipping unreadable trajectory {str(path)!r}: {err}",
                                   stacklevel=2)
@@ -560,7 +377,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         record_missions = (int(record_missions),)
     record = frozenset(check_int("record_missions", k, 0) for k in record_missions)
     record = frozenset(k for k in record if k < missions)
-    specs = _as_specs(planners)
+    specs = as_specs(planners)
     for spec in specs:
         planner_factory(spec.name)  # raises for an unknown name, listing the registered ones
     labels = [spec.effective_label for spec in specs]
@@ -574,8 +391,8 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                              f"name {safe_name(label)!r}; rename one")
         stems[safe_name(label)] = label
     folder = Path(out_dir) if out_dir is not None else None
-    identity = _identity(config, seed, namespace)
-    has_identity = _check_folder(folder, identity, specs) if folder is not None else False
+    identity = folder_identity(config, seed, namespace)
+    has_identity = check_folder(folder, identity, specs) if folder is not None else False
 
     spec_of = dict(zip(labels, specs, strict=True))
     done: dict[tuple[str, int], list[dict[str, Any]]] = {}
@@ -583,19 +400,19 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     if folder is not None and has_identity:
         for label in labels:
             for mission in range(missions):
-                path = _shard_path(folder, label, mission)
+                path = shard_path(folder, label, mission)
                 if not path.exists():
                     continue
                 try:
-                    rows = _read_shard(path, label, mission, config.team.budget)
+                    rows = read_shard(path, label, mission, config.team.budget)
                 except (OSError, UnicodeDecodeError, ValueError, KeyError) as err:
                     warnings.warn(f"shard {str(path)!r} is corrupt ({err}); flying mission "
                                   f"{mission} of planner {label!r} again", stacklevel=2)
                     continue
                 if mission in record:
-                    npz = _trajectory_path(folder, label, mission)
+                    npz = trajectory_path(folder, label, mission)
                     try:
-                        trajectories[(label, mission)] = _read_trajectory(npz)
+                        trajectories[(label, mission)] = read_trajectory(npz)
                     except FileNotFoundError:
                         continue  # stored without its trajectory: fly it again to record it
                     except (OSError, ValueError, EOFError) as err:
@@ -616,7 +433,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             local_runner.planner(label)  # a planner that cannot be built fails before writing
     elif tasks:
         for label in dict.fromkeys(label for label, _ in tasks):
-            entries[label].factory = _transferable_factory(spec_of[label])
+            entries[label].factory = transferable_factory(spec_of[label])
 
     if folder is not None:
         folder.mkdir(parents=True, exist_ok=True)
@@ -630,8 +447,8 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     def finish(label: str, mission: int, result: dict[str, Any]) -> None:
         if folder is not None:
             if result["trajectory"] is not None:
-                _write_trajectory(_trajectory_path(folder, label, mission), result["trajectory"])
-            _write_shard(folder, spec_of[label], mission, result)
+                write_trajectory(trajectory_path(folder, label, mission), result["trajectory"])
+            write_shard(folder, spec_of[label], mission, result)
         done[(label, mission)] = result["rows"]
         if result["trajectory"] is not None:
             trajectories[(label, mission)] = result["trajectory"]
@@ -644,59 +461,19 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                 bar.update(1)
         elif tasks:
             runner = _Runner(config, seed, namespace, entries, record)
-            _run_parallel(runner, tasks, n_workers, finish, bar)
+            run_parallel(runner, tasks, n_workers, finish, bar)
 
     rows = [row for label in labels for mission in range(missions)
             for row in done[(label, mission)]]
     if folder is not None:
         # A result folder is a growing set: planners flown into it before keep their rows.
-        stored = _stored_planners(folder, labels, missions, config.team.budget)
+        stored = stored_planners(folder, labels, missions, config.team.budget)
         labels = labels + list(stored)
         rows += [row for label_rows in stored.values() for row in label_rows]
-        _write_csv(folder / "results.csv", rows)
+        write_results_csv(folder / "results.csv", rows)
     return EvaluationResult(config=config, seed=seed, rows=rows, labels=labels,
                             trajectories={key: trajectories[key] for key in sorted(
                                 trajectories, key=lambda k: (labels.index(k[0]), k[1]))
                                 if key[1] in record},
                             out_dir=folder, namespace=namespace)
 
-
-def _run_parallel(runner: _Runner, tasks: Sequence[tuple[str, int]], n_workers: int,
-                  finish: Callable[[str, int, dict[str, Any]], None], bar: Any) -> None:
-    """Fly ``tasks`` in a spawn process pool; ``finish`` stores each result as it arrives.
-
-    On a failed mission the pending tasks are cancelled, the running ones are awaited and
-    stored, and the first error is raised. On KeyboardInterrupt nothing more is stored.
-    """
-    context = multiprocessing.get_context("spawn")
-    executor = concurrent.futures.ProcessPoolExecutor(
-        max_workers=n_workers, mp_context=context, initializer=_init_worker,
-        initargs=(runner,))
-    futures: list[concurrent.futures.Future] = []
-    stored: set[concurrent.futures.Future] = set()
-    error: BaseException | None = None
-    try:
-        with _single_thread_environment():  # workers start during the submissions
-            futures = [executor.submit(_worker_task, label, mission)
-                       for label, mission in tasks]
-        for future in concurrent.futures.as_completed(futures):
-            if future.exception() is not None:
-                error = future.exception()
-                break
-            finish(*future.result())
-            stored.add(future)
-            bar.update(1)
-    except BaseException:
-        executor.shutdown(wait=False, cancel_futures=True)
-        raise
-    executor.shutdown(wait=True, cancel_futures=True)
-    if error is not None:
-        if isinstance(error, concurrent.futures.process.BrokenProcessPool):
-            error.add_note("a worker process of the evaluation died: it could not start (e.g. "
-                           "it failed to import a planner) or was killed (e.g. out of memory)")
-        for future in futures:
-            if (future not in stored and future.done() and not future.cancelled()
-                    and future.exception() is None):
-                finish(*future.result())
-                bar.update(1)
-        raise error

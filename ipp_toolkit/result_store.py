@@ -32,9 +32,12 @@ from .io import atomic_write, write_json
 from .settings import safe_name
 
 if TYPE_CHECKING:
-    from .evaluation import PlannerSpec
+    from .planner_specs import PlannerSpec
 
-__all__ = ["RESULT_COLUMNS", "EvaluationError"]
+__all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
+           "check_folder", "shard_path", "trajectory_path", "stored_planners", "read_shard",
+           "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
+           "read_results_csv"]
 
 RESULT_COLUMNS = ("planner", "agents", "comm", "terrain", "seed", "mission", "step",
                   "entropy", "f1", "rmse", "reward", "plan_ms")
@@ -53,7 +56,8 @@ class EvaluationError(ValueError):
     another planner under the same label, or a file in it is malformed."""
 
 
-def _identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, Any]:
+def folder_identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, Any]:
+    """What ``config.json`` records of a run: layout version, config, seed, namespace, version."""
     from . import __version__
 
     # Through JSON so that it compares equal to what is read back from config.json.
@@ -71,7 +75,8 @@ def _flat_differences(old: Any, new: Any, prefix: str) -> list[str]:
     return [] if old == new else [prefix]
 
 
-def _read_identity(folder: Path) -> dict[str, Any]:
+def read_identity(folder: Path) -> dict[str, Any]:
+    """The stored ``config.json`` of ``folder`` (EvaluationError when missing or malformed)."""
     path = folder / "config.json"
     try:
         stored = json.loads(path.read_text(encoding="utf-8"))
@@ -86,8 +91,8 @@ def _read_identity(folder: Path) -> dict[str, Any]:
     return stored
 
 
-def _check_folder(folder: Path, identity: dict[str, Any],
-                  specs: Sequence[PlannerSpec]) -> bool:
+def check_folder(folder: Path, identity: dict[str, Any],
+                 specs: Sequence[PlannerSpec]) -> bool:
     """Check that ``folder`` may take these results; returns whether config.json exists."""
     if folder.exists() and not folder.is_dir():
         raise EvaluationError(f"out_dir {str(folder)!r} exists and is not a folder")
@@ -96,7 +101,7 @@ def _check_folder(folder: Path, identity: dict[str, Any],
             raise EvaluationError(f"out_dir {str(folder)!r} holds shards/ but no config.json: "
                                   "cannot tell which configuration they belong to")
         return False
-    stored = _read_identity(folder)
+    stored = read_identity(folder)
     # A folder written before a config field existed stored no value for it; the field's
     # default keeps the old behaviour, so compare the stored config with its defaults filled.
     try:
@@ -131,11 +136,13 @@ def _check_folder(folder: Path, identity: dict[str, Any],
     return True
 
 
-def _shard_path(folder: Path, label: str, mission: int) -> Path:
+def shard_path(folder: Path, label: str, mission: int) -> Path:
+    """Where the rows of one mission of one planner label are stored."""
     return folder / "shards" / safe_name(label) / f"mission_{mission:05d}.json"
 
 
-def _trajectory_path(folder: Path, label: str, mission: int) -> Path:
+def trajectory_path(folder: Path, label: str, mission: int) -> Path:
+    """Where the recorded trajectory of one mission of one planner label is stored."""
     return folder / "trajectories" / f"{safe_name(label)}_mission{mission}.npz"
 
 
@@ -150,8 +157,8 @@ def _check_rows(rows: Any, label: str, mission: int, budget: int) -> list[dict[s
     return rows
 
 
-def _stored_planners(folder: Path, exclude: Sequence[str], missions: int,
-                     budget: int) -> dict[str, list[dict[str, Any]]]:
+def stored_planners(folder: Path, exclude: Sequence[str], missions: int,
+                    budget: int) -> dict[str, list[dict[str, Any]]]:
     """Rows of the planners stored in ``folder`` (other than ``exclude``) that hold every one
     of missions 0..missions-1, by label in folder order; incomplete ones are left out."""
     stored: dict[str, list[dict[str, Any]]] = {}
@@ -166,14 +173,15 @@ def _stored_planners(folder: Path, exclude: Sequence[str], missions: int,
         if label in exclude:
             continue
         try:
-            stored[label] = [row for mission in range(missions) for row in _read_shard(
-                _shard_path(folder, label, mission), label, mission, budget)]
+            stored[label] = [row for mission in range(missions) for row in read_shard(
+                shard_path(folder, label, mission), label, mission, budget)]
         except (OSError, UnicodeDecodeError, ValueError, KeyError):
             continue  # missing or damaged missions: not a complete planner of this run
     return stored
 
 
-def _read_shard(path: Path, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
+def read_shard(path: Path, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
+    """The checked rows of a shard (ValueError when it is not that mission's, or malformed)."""
     shard = json.loads(path.read_text(encoding="utf-8"))
     if not isinstance(shard, dict) or shard.get("format") != _FORMAT:
         raise ValueError("not a shard of this format")
@@ -182,7 +190,8 @@ def _read_shard(path: Path, label: str, mission: int, budget: int) -> list[dict[
     return _check_rows(shard.get("rows"), label, mission, budget)
 
 
-def _write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any]) -> None:
+def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any]) -> None:
+    """Store the rows (and the path) of one flown mission, atomically."""
     trajectory = result["trajectory"]
     shard = {
         "format": _FORMAT,
@@ -196,10 +205,11 @@ def _write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str
             "footprints": np.asarray(trajectory["footprints"]).tolist(),
         },
     }
-    write_json(_shard_path(folder, spec.effective_label, mission), shard)
+    write_json(shard_path(folder, spec.effective_label, mission), shard)
 
 
-def _write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
+def write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
+    """Store a recorded mission as a compressed npz, atomically."""
     arrays = {
         "ground_truth": np.asarray(trajectory["ground_truth"], dtype=bool),
         "final_prob": np.asarray(trajectory["final_prob"], dtype=np.float16),
@@ -211,7 +221,8 @@ def _write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
     atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
 
 
-def _read_trajectory(path: Path) -> dict[str, Any]:
+def read_trajectory(path: Path) -> dict[str, Any]:
+    """A recorded mission back from its npz (ValueError when arrays are missing)."""
     with np.load(path, allow_pickle=False) as data:
         missing = {"ground_truth", "final_prob", "positions", "footprints", "area_size",
                    "resolution"} - set(data.files)
@@ -242,7 +253,8 @@ def _format_cell(value: Any) -> str:
     return str(value)
 
 
-def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+def write_results_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    """Write ``results.csv`` (the columns :data:`RESULT_COLUMNS`), atomically."""
     text = io.StringIO()
     writer = csv.writer(text, lineterminator="\n")
     writer.writerow(RESULT_COLUMNS)
@@ -260,7 +272,8 @@ def _parse_cell(column: str, text: str) -> Any:
     return text
 
 
-def _read_csv(path: Path) -> list[dict[str, Any]]:
+def read_results_csv(path: Path) -> list[dict[str, Any]]:
+    """Read ``results.csv`` back, typed (EvaluationError naming the file on a bad one)."""
     try:
         handle = open(path, encoding="utf-8", newline="")
     except FileNotFoundError:

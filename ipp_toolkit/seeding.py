@@ -2,7 +2,8 @@
 
 Each mission has separate streams for terrain, start positions, sensor noise and message
 drops, so that mission k is the same for every planner and any number of workers: planners
-face the same terrain and, where they fly the same path, the same sensor noise.
+face the same terrain and, where they fly the same path, the same sensor noise. A planner is
+reset for mission k with :func:`planner_seed`, a further stream of the same mission.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["NAMESPACES", "MissionStreams", "mission_streams"]
+__all__ = ["NAMESPACES", "MissionStreams", "mission_streams", "planner_seed"]
 
 NAMESPACES = {"train": 0, "validation": 1, "test": 2}
 """Training, in-training evaluation (checkpoint choice) and held-out test (``ipp-compare``)."""
@@ -55,3 +56,16 @@ def mission_streams(namespace: str, seed: int, mission: int) -> MissionStreams:
     root = np.random.SeedSequence([_namespace_id(namespace), int(seed), int(mission)])
     terrain, starts, sensor, drops = root.spawn(4)
     return MissionStreams(terrain, starts, sensor, drops)
+
+
+def planner_seed(seed: int, mission: int, namespace: str = "test") -> int:
+    """The seed a planner is reset with for mission ``mission`` of run ``seed``.
+
+    Derived from ``(namespace, seed, mission)`` only (a stream independent of the mission's
+    terrain, start, sensor and message streams), so it is the same for every planner and any
+    number of workers.
+    """
+    root = mission_streams(namespace, seed, mission).terrain
+    # The terrain stream is child 0 of the mission's root; child 4 is never used by a mission.
+    child = np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key[:-1], 4))
+    return int(child.generate_state(1, np.uint32)[0])

@@ -252,7 +252,7 @@ def compare_main(argv: list[str] | None = None) -> int:
 
 
 
-TRAINERS = {"coma": "coma.learner", "ppo": "baselines.ppo"}
+TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training"}
 
 
 def train_main(argv: list[str] | None = None) -> int:
@@ -379,7 +379,7 @@ def study_main(argv: list[str] | None = None) -> int:
             print(study.table)
             print(f"written: {out}/robustness.md, .csv, .png, .pdf")
         else:
-            from coma.learner import _coerce, _int_list
+            from coma.cli import coerce_value, int_list
 
             from .studies import ablation_study
 
@@ -388,8 +388,8 @@ def study_main(argv: list[str] | None = None) -> int:
                 name, sep, value = item.partition("=")
                 if not sep:
                     raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
-                overrides[name.strip()] = _coerce(value.strip())
-            seeds = None if args.seeds is None else _int_list("--seeds", args.seeds)
+                overrides[name.strip()] = coerce_value(value.strip())
+            seeds = None if args.seeds is None else int_list("--seeds", args.seeds)
             common = dict(missions=args.missions, overrides=overrides, seeds=seeds,
                           train_resolution=args.train_resolution, trials=args.trials,
                           seed=args.seed, out=out, workers=args.workers,

@@ -33,7 +33,8 @@ from .plots import plot_curves, plot_trajectories
 from .tables import Summary, summarise, to_markdown, write_tables
 
 if TYPE_CHECKING:
-    from ipp_toolkit.evaluation import EvaluationResult, PlannerSpec
+    from ipp_toolkit.evaluation import EvaluationResult
+    from ipp_toolkit.planner_specs import PlannerSpec
 
 __all__ = [
     "Comparison",
@@ -181,7 +182,7 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
 
 def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
                     note: Callable[[str], None] | None) -> list[tuple[PlannerSpec, Planner]]:
-    from ipp_toolkit.evaluation import PlannerSpec
+    from ipp_toolkit.planner_specs import PlannerSpec
 
     if planners is None or (isinstance(planners, str) and planners.strip() in ("all",
                                                                                 "default")):

@@ -185,7 +185,7 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
         ValueError: bad input (an unknown planner, no reference among the planners), checked
             on the first cell before anything is written.
     """
-    from ipp_toolkit.evaluation import PlannerSpec
+    from ipp_toolkit.planner_specs import PlannerSpec
 
     names = planners.split(",") if isinstance(planners, str) else list(planners)
     if reference not in [PlannerSpec.parse(n).effective_label for n in names if n.strip()]:

@@ -13,17 +13,12 @@ import torch
 import yaml
 
 from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
-from coma.config import VARIANTS, COMAConfig, preset
-from coma.learner import (
-    TrainingDiverged,
-    collect_rollout,
-    mission_settings,
-    setting_of_update,
-    train,
-)
+from coma.config import VARIANTS, COMAConfig, mission_settings, preset
+from coma.learner import TrainingDiverged, setting_of_update, train
 from coma.networks import bounded_softmax, epsilon_at
 from coma.persistence import check_transfer, load_policy
 from coma.planner import COMAPlanner
+from coma.rollout import collect_rollout
 from ipp_toolkit.evaluation import run_mission
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.mission import MissionGeometry
@@ -325,9 +320,9 @@ def test_nan_loss_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch
     config, env = tiny_coma(missions=6), tiny_env()
     train(config, env, tmp_path, progress=False, tensorboard=False, max_updates=1)
     before = (tmp_path / "last.pt").read_bytes()
-    import coma.learner
+    import coma.rollout
 
-    monkeypatch.setattr(coma.learner, "step_mission", lambda state, actions: float("nan"))
+    monkeypatch.setattr(coma.rollout, "step_mission", lambda state, actions: float("nan"))
     with pytest.raises(TrainingDiverged, match=r"critic loss is nan at update 2.*update 1"):
         train(config, env, tmp_path, resume=True, progress=False, tensorboard=False)
     assert (tmp_path / "last.pt").read_bytes() == before
@@ -460,7 +455,7 @@ def test_shipped_policies_load_by_name_and_fly(name):
 
 
 def test_cli_agents_keeps_the_configs_start_choice(tmp_path):
-    from coma.learner import build_parser, configs_from_args
+    from coma.cli import build_parser, configs_from_args
     from ipp_toolkit.config import config_to_dict
 
     random_starts = config_to_dict(tiny_env().replace(team={"start": "random"}))
@@ -523,7 +518,7 @@ def test_gain_prior_actor_reads_each_options_waypoint():
 def test_gain_prior_policy_starts_at_the_best_expected_gain(tmp_path):
     import json
 
-    from coma.learner import greedy_actions
+    from coma.networks import greedy_actions
     from coma.persistence import build_networks
     from ipp_toolkit.features import actor_observations, footprint_gain
     from ipp_toolkit.mission import reset_mission, step_mission
@@ -578,7 +573,7 @@ def test_residual_penalty_keeps_the_gain_prior_actor_near_its_prior(tmp_path):
 
 
 def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
-    from coma.learner import build_parser, configs_from_args
+    from coma.cli import build_parser, configs_from_args
     from coma.persistence import DEFAULT_SHIPPED, SHIPPED_POLICIES, resolve_policy, shipped_policy
     from ipp_toolkit.planners import make_planner
 
@@ -604,7 +599,7 @@ def test_selection_by_the_worst_gap_to_ig_over_validation_terrains(tmp_path):
     import csv
     import json
 
-    from coma.learner import reference_scores, validation_settings
+    from coma.validation import reference_scores, validation_settings
 
     env = tiny_env(2)
     config = tiny_coma(missions=4, validation_terrains=("split", "blobs"),
@@ -631,7 +626,8 @@ def test_inference_never_imports_training():
     import sys
 
     code = ("import sys, coma.planner; "
-            "print(sorted(m for m in ('coma.learner', 'coma.warm_start') if m in sys.modules))")
+            "print(sorted(m for m in ('coma.learner', 'coma.warm_start', 'coma.rollout', "
+            "'coma.run_files', 'coma.cli') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]"

@@ -16,14 +16,14 @@ from ipp_toolkit.evaluation import (
     RESULT_COLUMNS,
     EvaluationError,
     EvaluationResult,
-    PlannerSpec,
     evaluate,
     load_results,
-    planner_seed,
     run_mission,
 )
 from ipp_toolkit.mission import reset_mission
+from ipp_toolkit.planner_specs import PlannerSpec
 from ipp_toolkit.planners import Planner, available_planners, register_planner
+from ipp_toolkit.seeding import planner_seed
 
 BUDGET = 4
 

@@ -17,12 +17,10 @@ from baselines.ppo import (
     PPOPlanner,
     PPOTrainConfig,
     load_policy,
-    main,
     masked_greedy_actions,
     save_policy,
-    train_ppo,
-    training_env_config,
 )
+from baselines.ppo_training import main, train_ppo, training_env_config
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.evaluation import run_mission
 from ipp_toolkit.io import CheckpointError, save_torch
@@ -75,7 +73,7 @@ def test_save_load_round_trip_gives_identical_actions(tmp_path):
     vec = make_sb3_vec_env(env_config, n_envs=1, seed=0)
     try:
         model = MaskablePPO("MlpPolicy", VecMonitor(vec), n_steps=64, batch_size=128,
-                            policy_kwargs=ppo._policy_kwargs(config), seed=1)
+                            policy_kwargs=ppo.policy_kwargs(config), seed=1)
         model.learn(256)
         batches, mask_batches = [vec.reset()], [vec.action_masks()]
         rng = np.random.default_rng(0)
@@ -149,7 +147,7 @@ def test_planner_refuses_a_model_of_another_observation_shape(tmp_path):
     vec = make_sb3_vec_env(six_planes, n_envs=1, seed=0)
     try:
         model = MaskablePPO("MlpPolicy", VecMonitor(vec), n_steps=64, batch_size=128,
-                            policy_kwargs=ppo._policy_kwargs(config))
+                            policy_kwargs=ppo.policy_kwargs(config))
     finally:
         vec.close()
     path = save_policy(tmp_path / "six.pt", model, config, six_planes)
@@ -208,3 +206,15 @@ def test_shipped_checkpoint_loads_and_flies():
     assert planner.obs_shape == (7, 11, 11)
     assert ppo.DEFAULT_CHECKPOINT.stat().st_size < 2_000_000
     run_mission(small_config(), planner, seed=0, mission=0)
+
+
+def test_planner_never_imports_training():
+    import subprocess
+    import sys
+
+    code = ("import sys, baselines.ppo; "
+            "print(sorted(m for m in ('baselines.ppo_training', 'ipp_toolkit.vec') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coma.learner import build_parser, configs_from_args
+from coma.cli import build_parser, configs_from_args
 from ipp_toolkit.config import EnvConfig, load_config
 from ipp_toolkit.settings import (
     build_env_config,

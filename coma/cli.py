@@ -1,0 +1,176 @@
+"""The ``ipp-train coma`` command: flags to configs, then :func:`coma.learner.train`.
+
+This module owns the command line of COMA training: its flags (:func:`build_parser`), the
+training defaults over the paper's mission (:data:`TRAINING_DEFAULTS`), how flags, a
+``--config`` file and ``--set FIELD=VALUE`` become a :class:`~coma.config.COMAConfig` and an
+:class:`~ipp_toolkit.config.EnvConfig` (:func:`configs_from_args`; :func:`coerce_value` and
+:func:`int_list` also serve ``ipp-study``), and :func:`main` with its exit codes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.settings import build_env_config
+
+from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
+from .learner import TrainingDiverged, train
+from .persistence import DEFAULT_SHIPPED, resolve_policy
+from .validation import validation_settings
+
+__all__ = ["TRAINING_DEFAULTS", "build_parser", "coerce_value", "int_list", "configs_from_args",
+           "main"]
+
+
+TRAINING_DEFAULTS = {"world": {"resolution": 0.5}, "features": {"own_position": True}}
+"""``ipp-train coma``'s defaults over the paper's mission: training at r_M = 0.5 m (the policy
+flies at any resolution) with the own-position plane (docs/departures.md). A ``--config`` file
+wins over them, an explicit flag over the file."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ipp-train coma",
+        description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.")
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
+                        help="hyper-parameter preset (default: cpu)")
+    parser.add_argument("--variant", choices=VARIANTS, help="credit-assignment variant")
+    parser.add_argument("--config", help="YAML mission config (world, team, features, ...) "
+                             "over the training defaults (the paper's mission at r_M 0.5 m "
+                             "with features.own_position on); explicit flags win over it")
+    parser.add_argument("--seed", type=int, help="run seed")
+    parser.add_argument("--out", required=True, help="run folder")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out")
+    parser.add_argument("--missions", type=int, help="training missions in total")
+    parser.add_argument("--width", type=int, help="convolution channels")
+    parser.add_argument("--agents", type=int, help="team size (default: from --config, 4)")
+    parser.add_argument("--comm", type=float, help="communication range in metres")
+    parser.add_argument("--terrain", metavar="KIND",
+                        help="terrain kind of the training missions, e.g. mixture (default: "
+                             "the --config file's, else split)")
+    parser.add_argument("--resolution", type=float, default=None,
+                        help="map resolution for training in metres (default: the --config "
+                             "file's, else 0.5)")
+    parser.add_argument("--warm-start", metavar="PLANNER",
+                        help="first imitate this registered planner (e.g. ig; 'none' to "
+                             "switch the preset's off); not in the paper")
+    parser.add_argument("--team-sizes", metavar="N,N,...",
+                        help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
+                             "randomisation; not in the paper)")
+    parser.add_argument("--comm-ranges", metavar="D,D,...",
+                        help="train on these communication ranges in metres, e.g. 0,25,inf")
+    parser.add_argument("--init", metavar="POLICY",
+                        help="start from this COMA policy file instead of a warm start "
+                             "(fine-tuning), or a shipped one: --init shipped:NAME "
+                             "(paper-actor, prior, mixed; plain 'shipped': coma's default)")
+    parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
+                        help="switch a feature plane of the mission config, e.g. "
+                             "--feature own_position=true (repeatable)")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="any COMAConfig field, e.g. --set lr_actor=1e-4 (repeatable)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return parser
+
+
+def coerce_value(text: str) -> Any:
+    """A ``--set`` value as written: a bool (true/false), an int, a float, else the text."""
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def int_list(flag: str, text: str) -> list[int]:
+    """Integers separated by commas (``--team-sizes 2,4,8``); ValueError naming ``flag``."""
+    try:
+        return [int(item) for item in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{flag} expects integers separated by commas, got {text!r}") from None
+
+
+def _float_list(flag: str, text: str) -> list[float]:
+    try:
+        return [float(item) for item in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{flag} expects numbers (or inf) separated by commas, got "
+                         f"{text!r}") from None
+
+
+def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
+    """The configs a parsed ``ipp-train coma`` command asks for (ValueError on bad input)."""
+    changes: dict[str, Any] = {}
+    for item in args.set:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
+        changes[name.strip()] = coerce_value(value.strip())
+    for name in ("variant", "seed", "missions", "width"):
+        if getattr(args, name) is not None:
+            changes[name] = getattr(args, name)
+    if args.warm_start is not None:
+        changes["warm_start"] = "" if args.warm_start == "none" else args.warm_start
+    if args.team_sizes is not None:
+        changes["team_sizes"] = int_list("--team-sizes", args.team_sizes)
+    if args.comm_ranges is not None:
+        changes["comm_ranges"] = _float_list("--comm-ranges", args.comm_ranges)
+    if args.init is not None:
+        init = f"shipped:{DEFAULT_SHIPPED}" if args.init == "shipped" else args.init
+        changes["init_policy"] = str(resolve_policy(init))
+        if not Path(changes["init_policy"]).is_file():
+            raise ValueError(f"--init {args.init!r}: no such policy file")
+    coma_config = preset(args.preset, **changes)
+    switches: dict[str, bool] = {}
+    for item in args.feature:
+        name, sep, value = item.partition("=")
+        if not sep or value.strip().lower() not in ("true", "false", "1", "0", "on", "off"):
+            raise ValueError(f"--feature expects NAME=true|false, got {item!r}")
+        switches[name.strip()] = value.strip().lower() in ("true", "1", "on")
+    env_config = build_env_config(args.config, defaults=TRAINING_DEFAULTS, agents=args.agents,
+                                  comm=args.comm, resolution=args.resolution,
+                                  terrain=args.terrain, features=switches)
+    return coma_config, env_config
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``ipp-train coma``: returns 0 on success, 1 on divergence, 2 on bad input."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        coma_config, env_config = configs_from_args(args)
+        # An invalid team, range or validation terrain fails here, before anything is written.
+        validation_settings(coma_config, mission_settings(coma_config, env_config))
+        if coma_config.warm_start:
+            from ipp_toolkit.planners import planner_factory
+
+            planner_factory(coma_config.warm_start)  # an unknown name fails before training
+    except ValueError as error:
+        print(f"ipp-train coma: error: {error}", file=sys.stderr)
+        return 2
+    try:
+        result = train(coma_config, env_config, args.out, resume=args.resume,
+                       progress=not args.no_progress)
+    except (FileExistsError, CheckpointError) as error:
+        print(f"ipp-train coma: error: {error}", file=sys.stderr)
+        return 2
+    except TrainingDiverged as error:
+        print(f"ipp-train coma: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"\nipp-train coma: interrupted; continue with --resume --out {args.out} "
+              "(from the last checkpoint)", file=sys.stderr)
+        return 130
+    criterion = ("worst gap to IG's final entropy" if coma_config.selection == "worst_vs_ig"
+                 else "final entropy")
+    print(f"trained {result.updates} updates ({result.missions} missions); best validation "
+          f"{criterion} {result.best_entropy:+.3f}; policy: {result.best_policy}")
+    return 0

@@ -1,0 +1,101 @@
+"""The files of a COMA training run other than the networks: its progress log and its end.
+
+This module owns ``progress.csv`` (one row per update, the columns :data:`CSV_COLUMNS`:
+:func:`write_progress`, :func:`read_progress` for a resume), which configuration fields a
+resumed run must share with its checkpoint (:func:`resume_fields`), and
+:class:`TrainResult`, what :func:`coma.learner.train` returns. The networks' files
+(``last.pt``, ``best.pt``) are written by :mod:`coma.persistence`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ipp_toolkit.io import CheckpointError, atomic_write
+
+from .config import COMAConfig
+from .persistence import load_policy
+
+__all__ = ["CSV_COLUMNS", "TrainResult", "write_progress", "read_progress", "resume_fields",
+           "saved_update"]
+
+
+CSV_COLUMNS = ["update", "missions", "transitions", "eps", "return_mean", "final_entropy_mean",
+               "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
+               "critic_grad_norm", "actor_grad_norm", "transitions_per_s", "wall_s",
+               "eval_return", "eval_entropy_final", "eval_f1_final", "eval_gap_worst",
+               "n_agents", "comm_range"]
+
+
+@dataclass
+class TrainResult:
+    """Where a run left its files and how it ended.
+
+    Attributes:
+        out_dir: the run folder.
+        best_policy: path of the policy with the lowest validation entropy (``best.pt``).
+        last_checkpoint: path of the resumable training checkpoint (``last.pt``).
+        updates: updates done in total.
+        missions: training missions played in total.
+        best_entropy: validation final entropy of the best policy.
+        history: one dict per update (the CSV rows).
+    """
+
+    out_dir: Path
+    best_policy: Path
+    last_checkpoint: Path
+    updates: int
+    missions: int
+    best_entropy: float
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+
+def write_progress(path: Path, rows: list[dict[str, Any]]) -> None:
+    """Write ``progress.csv`` (the columns :data:`CSV_COLUMNS`, None as empty), atomically."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, extrasaction="ignore")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: ("" if row.get(k) is None else row.get(k)) for k in CSV_COLUMNS})
+    data = buffer.getvalue().encode("utf-8")
+    atomic_write(path, lambda handle: handle.write(data))
+
+
+def resume_fields(config: COMAConfig) -> dict[str, Any]:
+    """Fields that must match to resume a run (the total length may be extended)."""
+    values = config.to_dict()
+    values.pop("missions")
+    return values
+
+
+def read_progress(path: Path, up_to_update: int) -> list[dict[str, Any]]:
+    """The rows of ``progress.csv`` up to update ``up_to_update`` (none when it is missing)."""
+    if not path.exists():
+        return []
+    with open(path, newline="") as handle:
+        history = [{k: _parse(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+    return [row for row in history if row["update"] <= up_to_update]
+
+
+def saved_update(path: Path) -> str:
+    """The update a training checkpoint holds, for messages: a number, "none yet" or
+    "unreadable"."""
+    if not path.exists():
+        return "none yet"
+    try:
+        _, data = load_policy(path)
+        return str(data["progress"]["update"])
+    except (CheckpointError, KeyError):
+        return "unreadable"
+
+
+def _parse(text: str) -> Any:
+    if text == "":
+        return None
+    number = float(text)
+    return int(number) if number.is_integer() and "." not in text and "e" not in text \
+        else number

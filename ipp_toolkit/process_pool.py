@@ -1,0 +1,160 @@
+"""The process pool of the evaluation runner: tasks flown in spawned, single-threaded workers.
+
+This module owns how :func:`ipp_toolkit.evaluation.evaluate` runs with ``workers > 1``: a
+"spawn" process pool whose workers each keep one task runner (sent once, at start) and run
+one intra-op thread (:func:`single_thread_environment`, :func:`limit_torch_threads`); which
+planner factories can travel to a worker (:func:`transferable_factory`); and
+:func:`run_parallel`, which stores results as they arrive and, on a failed task, keeps the
+finished ones and raises the first error. The runner itself (what one task does) belongs to
+the evaluation module; any object with ``single_thread`` and ``run(label, mission)`` serves.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import multiprocessing
+import os
+import pickle
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from importlib import metadata
+from typing import Any, Protocol
+
+from .planner_specs import PlannerSpec
+from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
+
+__all__ = ["TaskRunner", "limit_torch_threads", "single_thread_environment",
+           "transferable_factory", "run_parallel"]
+
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+TaskResult = tuple[str, int, dict[str, Any]]
+"""What a task gives back: (planner label, mission index, the mission's result)."""
+
+
+class TaskRunner(Protocol):
+    """Flies one (label, mission) task; picklable, sent to every worker once."""
+
+    single_thread: bool
+
+    def run(self, label: str, mission: int) -> TaskResult: ...
+
+
+def limit_torch_threads() -> None:
+    """One intra-op thread for torch, if a planner imported it (it is never imported here)."""
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        with contextlib.suppress(Exception):
+            if torch.get_num_threads() != 1:
+                torch.set_num_threads(1)
+
+
+
+_WORKER: TaskRunner | None = None
+
+
+
+def _init_worker(runner: TaskRunner) -> None:
+    """Process-pool initializer: one thread per worker, then keep the runner for the tasks."""
+    global _WORKER
+    for name in _THREAD_VARIABLES:
+        os.environ[name] = "1"
+    runner.single_thread = True
+    limit_torch_threads()
+    _WORKER = runner
+
+
+def _worker_task(label: str, mission: int) -> TaskResult:
+    if _WORKER is None:  # pragma: no cover - only if the initializer did not run
+        raise RuntimeError("evaluation worker used without its initializer")
+    return _WORKER.run(label, mission)
+
+
+@contextlib.contextmanager
+def single_thread_environment() -> Iterator[None]:
+    """Set the thread-count variables while worker processes start (they inherit them)."""
+    saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
+    try:
+        for name in _THREAD_VARIABLES:
+            os.environ[name] = "1"
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+def transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
+    """The factory of ``spec`` to send to worker processes (pickled by reference).
+
+    None when a worker finds the planner by itself (an entry point).
+
+    Raises:
+        ValueError: the factory lives where a spawned worker cannot import it (a local
+            scope, or ``__main__`` of an interactive session or notebook).
+    """
+    factory = planner_factory(spec.name)
+    main = sys.modules.get("__main__")
+    importable = not (getattr(factory, "__module__", None) == "__main__"
+                      and getattr(main, "__file__", None) is None)
+    if importable:
+        try:
+            pickle.dumps(factory)
+        except Exception:
+            importable = False
+    if importable:
+        return factory
+    if spec.name in {ep.name for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}:
+        return None
+    raise ValueError(f"planner {spec.name!r} is registered by "
+                     f"{getattr(factory, '__qualname__', factory)!r}, which worker processes "
+                     "cannot import (a local or interactive definition): define it in an "
+                     "importable module, or use workers=1")
+
+
+# --------------------------------------------------------------------------------------------
+# Results
+
+
+def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers: int,
+                 finish: Callable[[str, int, dict[str, Any]], None], bar: Any) -> None:
+    """Fly ``tasks`` in a spawn process pool; ``finish`` stores each result as it arrives.
+
+    On a failed mission the pending tasks are cancelled, the running ones are awaited and
+    stored, and the first error is raised. On KeyboardInterrupt nothing more is stored.
+    """
+    context = multiprocessing.get_context("spawn")
+    executor = concurrent.futures.ProcessPoolExecutor(
+        max_workers=n_workers, mp_context=context, initializer=_init_worker,
+        initargs=(runner,))
+    futures: list[concurrent.futures.Future] = []
+    stored: set[concurrent.futures.Future] = set()
+    error: BaseException | None = None
+    try:
+        with single_thread_environment():  # workers start during the submissions
+            futures = [executor.submit(_worker_task, label, mission)
+                       for label, mission in tasks]
+        for future in concurrent.futures.as_completed(futures):
+            if future.exception() is not None:
+                error = future.exception()
+                break
+            finish(*future.result())
+            stored.add(future)
+            bar.update(1)
+    except BaseException:
+        executor.shutdown(wait=False, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True, cancel_futures=True)
+    if error is not None:
+        if isinstance(error, concurrent.futures.process.BrokenProcessPool):
+            error.add_note("a worker process of the evaluation died: it could not start (e.g. "
+                           "it failed to import a planner) or was killed (e.g. out of memory)")
+        for future in futures:
+            if (future not in stored and future.done() and not future.cancelled()
+                    and future.exception() is None):
+                finish(*future.result())
+                bar.update(1)
+        raise error
