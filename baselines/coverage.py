@@ -10,7 +10,7 @@ from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
 from ipp_toolkit.team import ACTION_NAMES
 
-__all__ = ["CoveragePlanner", "boustrophedon"]
+__all__ = ["CoveragePlanner", "PaperCoveragePlanner", "boustrophedon", "paper_lawnmower_paths"]
 
 # Beyond this team size the segment assignment is greedy instead of exhaustive (8! = 40320
 # permutations is still cheap once per mission; 9! and up is not worth it for a baseline).
@@ -139,6 +139,100 @@ class CoveragePlanner(Planner):
             self.lanes[k] = lane = lane[::-1].copy()
             self._next[k] = 1 if len(lane) > 1 else 0
         return lane[self._next[k]]
+
+
+def paper_lawnmower_paths() -> np.ndarray:
+    """(4, 15, 2) float (x, y) waypoints in metres of the paper authors' four lawnmower paths.
+
+    Their ``lawn_mower.py`` hard-codes them, 5 m apart, all inside x, y in [10, 40] m (so the
+    10 m border strips are never seen):
+
+    * path 1: y = 10 m from x = 10 to 40 m, one step north to (40, 15), y = 20 m back to x = 10;
+    * path 2: path 1 shifted 20 m north (y = 30 m, (40, 35), y = 40 m);
+    * path 3: path 1 mirrored on the diagonal (x = 10 m from y = 10 to 40 m, (15, 40),
+      x = 20 m back to y = 10);
+    * path 4: path 3 shifted 20 m east (x = 30 m, (35, 40), x = 40 m).
+
+    Consecutive waypoints are one 5 m step apart.
+    """
+    sweep = np.arange(10.0, 45.0, 5.0)  # (7,) 10, 15, ..., 40
+    path1 = np.concatenate([np.stack([sweep, np.full(7, 10.0)], axis=1), [[40.0, 15.0]],
+                            np.stack([sweep[::-1], np.full(7, 20.0)], axis=1)])  # (15, 2)
+    path3 = path1[:, ::-1]
+    return np.stack([path1, path1 + [0.0, 20.0], path3, path3 + [20.0, 0.0]])
+
+
+class PaperCoveragePlanner(CoveragePlanner):
+    """The paper authors' coverage baseline: their four fixed lawnmower paths at 5 m.
+
+    The team flies paths ``k mod 4 + 1`` (k = 0..N-1) of :func:`paper_lawnmower_paths`, as a
+    set (step 1 says which UAV flies which): paths 1..N for N <= 4, and beyond that the paths
+    repeat, as in the authors' code, whose paths 5-8 duplicate paths 1-4 (with 8 UAVs every
+    path is flown twice). The
+    authors place each UAV on its path's first waypoint and take 15 readings along it. Here
+    the UAVs start where every planner starts (SPEC §8: 15 m, e.g. the corners (10, 10),
+    (40, 10), (40, 40), (10, 40) of the paths' square for 4 UAVs), so the plan, built at the
+    first :meth:`act`, is:
+
+    1. each UAV's entry is the waypoint of a path nearest its start (2-D Manhattan; the
+       first in path order on a tie), and the paths are assigned to UAVs by minimising the
+       summed distance to the entries (:func:`_assign`; exhaustive for N <= 8). Flying path k
+       with UAV k from its first waypoint would spend up to 10 of the 15 steps in transit;
+       with the fixed starts of 2 and 4 UAVs every UAV starts on a waypoint of its path;
+    2. each path is flown as a loop (its two ends are 10 m apart, so the loop closes through
+       one extra waypoint), from the entry on, every loop counter-clockwise: the paths share
+       stretches of waypoints (path 4's x = 40 m leg holds the short legs of paths 1 and 2;
+       the closed loops of paths 1 and 3 share legs around (10, 10) m), and one direction
+       of travel for all makes UAVs on a shared stretch follow each other instead of meeting
+       head-on, which the one-UAV-per-cell masks would turn into a deadlock (two copies of a
+       path, N > 4, simply follow each other too);
+    3. flying is :class:`CoveragePlanner`'s rule: descend to the survey altitude first, then
+       the next lane waypoint, a valid action when the preferred one is masked; the lane is
+       cut at the budget (16 readings: the start one at 15 m, 10 m, then 14 on the path when
+       the UAV starts on it).
+
+    Non-adaptive; ignores the seed.
+
+    Args:
+        altitude_index: survey flight level, default 0 (5 m, the authors' altitude).
+    """
+
+    name = "coverage_paper"
+
+    def reset(self, config: EnvConfig, seed: int) -> None:
+        """Check that the paths lie on this world's planning grid; forget the last plan."""
+        super().reset(config, seed)
+        cells = paper_lawnmower_paths() / config.world.grid_spacing
+        indices = np.rint(cells).astype(np.int64)
+        if not np.allclose(cells, indices) or indices.max() >= self._grid_points:
+            raise ValueError("coverage_paper needs the authors' paths (x, y in [10, 40] m, "
+                             f"5 m apart) on the planning grid; the world has grid_spacing "
+                             f"{config.world.grid_spacing} m and area_size "
+                             f"{config.world.area_size} m")
+        self._paths = indices  # (4, 15, 2) int (ix, iy)
+
+    def _plan(self, starts: np.ndarray) -> None:
+        """Build one lane per agent from the (N, 3) start positions."""
+        if self._grid_points == 0:
+            raise RuntimeError("call reset(config, seed) before act()")
+        n = len(starts)
+        paths = self._paths[np.arange(n) % len(self._paths)]  # (N, L, 2)
+        length = paths.shape[1]
+        # dist[agent, path, waypoint]: 2-D Manhattan steps from the agent's start.
+        dist = np.abs(starts[:, None, None, :2] - paths[None]).sum(axis=-1)
+        assignment = _assign(dist.min(axis=-1))
+        steps = np.arange(length)
+        self.lanes = []
+        for k in range(n):
+            path = paths[assignment[k]]
+            entry = int(np.argmin(dist[k, assignment[k]]))  # first nearest waypoint
+            # Shoelace: twice the signed area of the closed loop, > 0 when counter-clockwise.
+            x, y = path[:, 0], path[:, 1]
+            counter_clockwise = np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) > 0
+            order = (entry + steps) % length if counter_clockwise else (entry - steps) % length
+            heights = np.full((length, 1), self.altitude_index, dtype=np.int64)
+            self.lanes.append(np.concatenate([path[order], heights], axis=1))
+        self._next = np.zeros(n, dtype=np.int64)
 
 
 def _assign(cost: np.ndarray) -> np.ndarray:

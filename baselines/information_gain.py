@@ -7,12 +7,12 @@ import math
 import numpy as np
 
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import expected_gain
+from ipp_toolkit.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.planners import AgentView, Planner
 from ipp_toolkit.sensor import Camera
 from ipp_toolkit.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS
 
-__all__ = ["InformationGainPlanner", "expected_gain"]
+__all__ = ["InformationGainPlanner", "PaperInformationGainPlanner", "expected_gain"]
 
 Rect = tuple[int, int, int, int]
 
@@ -66,15 +66,23 @@ class InformationGainPlanner(Planner):
     Args:
         overlap_discount: factor in [0, 1] on the gain of cells a heard lower-index teammate
             will already observe (0 = ignore them, 1 = no coordination).
+        outcome_weighting: how the two readings are weighted in the expected gain, one of
+            :data:`ipp_toolkit.mapping.OUTCOME_WEIGHTINGS`: ``predictive`` (default) or
+            ``belief``, the paper authors' form (see :class:`PaperInformationGainPlanner`).
     """
 
     name = "ig"
     needs_observations = False
 
-    def __init__(self, overlap_discount: float = 0.5) -> None:
+    def __init__(self, overlap_discount: float = 0.5,
+                 outcome_weighting: str = "predictive") -> None:
         if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
             raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
+        if outcome_weighting not in OUTCOME_WEIGHTINGS:
+            raise ValueError(f"outcome_weighting must be one of {OUTCOME_WEIGHTINGS}, "
+                             f"got {outcome_weighting!r}")
         self.overlap_discount = float(overlap_discount)
+        self.outcome_weighting = outcome_weighting
         self._config: EnvConfig | None = None
         self._camera: Camera | None = None
 
@@ -140,13 +148,23 @@ class InformationGainPlanner(Planner):
             box = _bounding_box(rects)
             r0, r1, c0, c1 = box
             cells = (slice(r0, r1), slice(c0, c1))
-            gain = expected_gain(view.local_logodds[cells], view.local_prob[cells],
-                                 view.local_entropy[cells], camera.accuracy[altitude],
-                                 camera.delta_logodds[altitude], *weights)
+            gain = self._cell_gains(view, camera, weights, altitude, cells)
             self._discount(gain, box, mate_rects)
             for a, (q0, q1, s0, s1) in zip(group, rects.tolist(), strict=True):
                 values[a] = gain[q0 - r0:q1 - r0, s0 - c0:s1 - c0].sum(dtype=np.float64)
         return values
+
+    def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
+                    altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
+        """(h, w) float32 per-cell value of a reading at ``altitude`` over the ``cells`` box.
+
+        The planner's objective (subclasses change it): here ``expected_gain`` of the
+        agent's local map. The result is a fresh array (it is discounted in place).
+        """
+        return expected_gain(view.local_logodds[cells], view.local_prob[cells],
+                             view.local_entropy[cells], camera.accuracy[altitude],
+                             camera.delta_logodds[altitude], *weights,
+                             outcome_weighting=self.outcome_weighting)
 
     def _discount(self, gain: np.ndarray, box: Rect, mate_rects: np.ndarray) -> None:
         """Scale, in place, the gain of cells inside ``box`` under teammates' next footprints."""
@@ -162,3 +180,30 @@ class InformationGainPlanner(Planner):
         # A mask, not one multiplication per footprint: a cell several teammates will see is
         # still discounted once.
         np.multiply(gain, np.float32(self.overlap_discount), out=gain, where=covered)
+
+
+class PaperInformationGainPlanner(InformationGainPlanner):
+    """``ig`` with the paper authors' outcome weighting (their ``IG_baseline.py``).
+
+    The authors weight the two possible readings of a cell by the current belief p
+    (``p W(p1) (H(p) - H(p1)) + (1 - p) W(p0) (H(p) - H(p0))``) instead of by the predictive
+    probability of the reading, q = p a + (1 - p)(1 - a). The two coincide at p = 0.5
+    (q = 0.5 for any a) and nearly so for the accurate 5 m camera (a = 0.99, q ~ p); they
+    differ most for the noisy 10-15 m readings of cells that already lean either way, where
+    q is pulled towards 0.5 but p is not.
+
+    Everything else is ``ig``'s: the same coordination (index order, heard lower-index
+    teammates, ``overlap_discount``, claimed targets avoided) and the same valid-action rule,
+    so the comparison isolates the outcome weighting. The authors' other differences (their
+    coordination by 3-D candidate collisions with every teammate regardless of range, a
+    masked "up" on all-zero gains) are bugs or design choices ``ig`` does not share; see
+    docs/departures.md.
+
+    Args:
+        overlap_discount: as for :class:`InformationGainPlanner`.
+    """
+
+    name = "ig_paper"
+
+    def __init__(self, overlap_discount: float = 0.5) -> None:
+        super().__init__(overlap_discount, outcome_weighting="belief")

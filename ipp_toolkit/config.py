@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .io import atomic_write, read_yaml
+
 __all__ = [
     "WorldConfig",
     "SensorConfig",
@@ -404,6 +406,12 @@ class FeatureConfig:
             maximises, given to the actor at full map resolution instead of the 5 m block
             means of (b)-(e) (a departure, see docs/departures.md;
             :func:`ipp_toolkit.features.gain_planes`).
+        gain_smoothing: 0 keeps ``ig``'s objective in the ``gain`` planes; > 0 (metres) puts
+            the ``ig_spatial`` objective there instead: the entropy a reading removes from
+            interesting cells, weighted by each cell's probability of being interesting
+            smoothed over its neighbourhood with a Gaussian of this standard deviation
+            (:mod:`ipp_toolkit.interest`; the maps treat cells as independent, real fields
+            are not). Same scale, divided by the largest footprint's cell count.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
     """
@@ -423,9 +431,15 @@ class FeatureConfig:
     all_footprints: bool = True
     other_actions: bool = True
     centred: bool = True
+    gain_smoothing: float = 0.0
     agent_id_scale: int = 8
 
     def __post_init__(self) -> None:
+        if (isinstance(self.gain_smoothing, bool)
+                or not isinstance(self.gain_smoothing, int | float | np.integer | np.floating)
+                or not 0 <= self.gain_smoothing < math.inf):
+            _fail("features", "gain_smoothing", self.gain_smoothing,
+                  "must be a finite number of metres >= 0 (0: ig's objective)")
         if not isinstance(self.agent_id_scale, int | np.integer) or self.agent_id_scale < 1:
             _fail("features", "agent_id_scale", self.agent_id_scale, "must be an integer >= 1")
         if not any(getattr(self, name) for name in ACTOR_PLANES):
@@ -549,24 +563,6 @@ def config_to_dict(config: EnvConfig) -> dict[str, Any]:
             for name in _SECTIONS}
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """A safe YAML loader that refuses a key written twice in one mapping."""
-
-
-def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
-    seen: set[Any] = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node)
-        if key in seen:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r}", key_node.start_mark)
-        seen.add(key)
-    return loader.construct_mapping(node)
-
-
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _strict_mapping)
-
-
 def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
     """The sections a YAML config file writes, as nested dicts, checked but not filled.
 
@@ -575,15 +571,7 @@ def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
             of sections, or has an unknown section or key (the message names the file).
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as err:
-        why = err.strerror if isinstance(err, OSError) else "not a text file"
-        raise ValueError(f"cannot read config file {str(path)!r}: {why}") from err
-    try:
-        values = yaml.load(text, Loader=_StrictLoader)
-    except yaml.YAMLError as err:
-        raise ValueError(f"config file {str(path)!r} is not valid YAML: {err}") from err
+    values = read_yaml(path, "config file")
     if values is None:
         return {}
     if not isinstance(values, Mapping):
@@ -606,7 +594,5 @@ def load_config(path: str | os.PathLike[str]) -> EnvConfig:
 
 def save_config(config: EnvConfig, path: str | os.PathLike[str]) -> None:
     """Write a config as YAML (atomically: a temporary file renamed into place)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False))
-    os.replace(tmp, path)
+    text = yaml.safe_dump(config_to_dict(config), sort_keys=False).encode()
+    atomic_write(path, lambda handle: handle.write(text))

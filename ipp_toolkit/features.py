@@ -14,6 +14,7 @@ import numpy as np
 
 from .config import ACTOR_PLANES, FeatureConfig
 from .gain import FootprintGainCache
+from .interest import interest_smoother
 from .mission import MissionState
 from .team import N_ACTIONS
 
@@ -146,17 +147,30 @@ def footprint_gain(state: MissionState) -> np.ndarray:
     The sums are kept on the state and updated only where the maps changed since the last
     call (:class:`~ipp_toolkit.gain.FootprintGainCache`).
 
+    With ``features.gain_smoothing > 0`` the sums are the ``ig_spatial`` objective instead:
+    :func:`~ipp_toolkit.mapping.interesting_gain` weighted by the smoothed probability of the
+    interesting class (:mod:`ipp_toolkit.interest`), divided by the same cell count (at most
+    1; slightly negative where only cells believed uninteresting are left).
+
     Returns:
         (N, Z, G, G) float32.
     """
     reward = state.config.reward
+    smoothing = state.config.features.gain_smoothing
+    objective = "interesting" if smoothing > 0 else "ig"
     cache = state.gain_cache
-    if cache is None or cache.maps is not state.maps:
+    if cache is None or cache.maps is not state.maps or cache.objective != objective:
         cache = state.gain_cache = FootprintGainCache(
             state.maps, state.n_agents, state.geometry.camera,
-            (reward.weight_interesting, reward.weight_uninteresting))
-    scale = max(reward.weight_interesting, reward.weight_uninteresting, 1e-12)
-    sums = cache.sums()
+            (reward.weight_interesting, reward.weight_uninteresting), objective)
+    if smoothing > 0:
+        world = state.config.world
+        smoother = interest_smoother(world.map_cells, world.resolution, smoothing)
+        sums = cache.weighted_sums(smoother(state.maps.prob[:state.n_agents]))
+        scale = 1.0
+    else:
+        sums = cache.sums()
+        scale = max(reward.weight_interesting, reward.weight_uninteresting, 1e-12)
     return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
 
 

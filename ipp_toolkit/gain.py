@@ -20,18 +20,48 @@ exactly inside every refreshed region.
 
 The result equals a full recomputation up to float64 summation order (checked over whole
 missions in ``tests/test_gain.py``).
+
+Two per-cell objectives are kept this way (``objective``): ``"ig"``, the ``ig`` planner's
+:func:`~ipp_toolkit.mapping.expected_gain`, and ``"interesting"``,
+:func:`~ipp_toolkit.mapping.interesting_gain` (the entropy a reading removes from a cell
+that is interesting). The second is meant to be weighted by how likely each cell is to be
+interesting (:mod:`ipp_toolkit.interest`); that weight moves everywhere at every step, so
+:meth:`FootprintGainCache.weighted_sums` multiplies and sums whole maps (two matrix products
+per map and altitude), while the per-cell gains under it are still kept incrementally.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+
 import numpy as np
 
-from .mapping import BeliefMaps, expected_gain
+from .mapping import BeliefMaps, expected_gain, interesting_gain
 from .sensor import Camera
 
-__all__ = ["FootprintGainCache", "footprint_sums", "recomputed_footprint_sums"]
+__all__ = ["FootprintGainCache", "OBJECTIVES", "cell_objective", "footprint_sums",
+           "recomputed_footprint_sums"]
 
 Rect = tuple[int, int, int, int]
+#: (logodds, prob, entropy, accuracy, delta_logodds) -> per-cell gain, all (..., h, w) float32.
+CellGain = Callable[..., np.ndarray]
+#: The per-cell objectives a :class:`FootprintGainCache` can keep.
+OBJECTIVES = ("ig", "interesting")
+
+
+def cell_objective(objective: str, weights: tuple[float, float]) -> CellGain:
+    """The per-cell gain function named ``objective`` (see :data:`OBJECTIVES`).
+
+    ``weights`` are the reward's class weights (interesting, uninteresting); only ``"ig"``
+    reads them.
+    """
+    if objective == "ig":
+        return partial(expected_gain, weight_interesting=weights[0],
+                       weight_uninteresting=weights[1])
+    if objective == "interesting":
+        return interesting_gain
+    raise ValueError(f"unknown gain objective {objective!r}; expected one of {OBJECTIVES}")
 
 
 def footprint_sums(cells: np.ndarray, rects: np.ndarray) -> np.ndarray:
@@ -53,16 +83,22 @@ def footprint_sums(cells: np.ndarray, rects: np.ndarray) -> np.ndarray:
 
 
 def recomputed_footprint_sums(maps: BeliefMaps, n_maps: int, camera: Camera,
-                              weights: tuple[float, float]) -> np.ndarray:
+                              weights: tuple[float, float], objective: str = "ig",
+                              cell_weight: np.ndarray | None = None) -> np.ndarray:
     """(n_maps, Z, G, G) float64 footprint sums computed from the whole maps, from scratch.
 
     The reference :class:`FootprintGainCache` must equal (and the cost it avoids: three
-    ``expected_gain`` passes over every cell of every map).
+    per-cell gain passes over every cell of every map). ``cell_weight`` (n_maps, H, W)
+    multiplies the per-cell gain first (the reference of
+    :meth:`FootprintGainCache.weighted_sums`).
     """
+    gain = cell_objective(objective, weights)
     out = np.empty((n_maps, len(camera.accuracy)) + camera.rects.shape[1:3], dtype=np.float64)
     for iz in range(len(camera.accuracy)):
-        cells = expected_gain(maps.logodds[:n_maps], maps.prob[:n_maps], maps.entropy[:n_maps],
-                              camera.accuracy[iz], camera.delta_logodds[iz], *weights)
+        cells = gain(maps.logodds[:n_maps], maps.prob[:n_maps], maps.entropy[:n_maps],
+                     camera.accuracy[iz], camera.delta_logodds[iz])
+        if cell_weight is not None:
+            cells = cells * cell_weight
         out[:, iz] = footprint_sums(cells, camera.rects[iz])
     return out
 
@@ -107,6 +143,7 @@ class FootprintGainCache:
         n_maps: how many maps (the first ones: the agents' local maps) to follow.
         camera: footprints, accuracies and log-odds increments per altitude.
         weights: the reward's class weights (interesting, uninteresting).
+        objective: the per-cell gain kept (:data:`OBJECTIVES`).
 
     Attributes:
         cells: (n_maps, Z, H, W) float32 per-cell expected gain.
@@ -115,10 +152,11 @@ class FootprintGainCache:
     """
 
     def __init__(self, maps: BeliefMaps, n_maps: int, camera: Camera,
-                 weights: tuple[float, float]) -> None:
+                 weights: tuple[float, float], objective: str = "ig") -> None:
         self.maps = maps
         self.camera = camera
-        self.weights = weights
+        self.objective = objective
+        gain_of = cell_objective(objective, weights)
         self.n_altitudes = len(camera.accuracy)
         size = maps.logodds.shape[1]
         grid = camera.rects.shape[1]
@@ -132,13 +170,19 @@ class FootprintGainCache:
         area = ((camera.rects[..., 1] - camera.rects[..., 0])
                 * (camera.rects[..., 3] - camera.rects[..., 2]))  # (Z, G, G)
         for iz in range(self.n_altitudes):
-            gain = expected_gain(prior, prior_prob, prior_entropy, camera.accuracy[iz],
-                                 camera.delta_logodds[iz], *weights)[0, 0, 0]
+            gain = gain_of(prior, prior_prob, prior_entropy, camera.accuracy[iz],
+                           camera.delta_logodds[iz])[0, 0, 0]
             self.cells[:, iz] = gain
             self.totals[:, iz] = area[iz] * np.float64(gain)
         self.row_bounds, self.col_bounds = _separable_bounds(camera.rects)
         self.owner = np.zeros(n_maps, dtype=np.int64)  # all identical at the prior
-        self.table = _GainTable(maps, camera, weights)
+        self.table = _GainTable(maps, camera, gain_of)
+        # 0/1 row and column memberships of every footprint over the whole map, for
+        # weighted_sums: (Z, G, H) and (Z, W, G).
+        self.rows_full = np.stack([_overlap_matrix(b, 0, size) for b in self.row_bounds]
+                                  ).astype(np.float32)
+        self.cols_full_t = np.stack([_overlap_matrix(b, 0, size).T for b in self.col_bounds]
+                                    ).astype(np.float32)
         self.seen = 0
         self.update()
 
@@ -146,6 +190,21 @@ class FootprintGainCache:
         """(n_maps, Z, G, G) float64 footprint sums of the current beliefs."""
         self.update()
         return self.totals[self.owner]
+
+    def weighted_sums(self, cell_weight: np.ndarray) -> np.ndarray:
+        """(n_maps, Z, G, G) float64 footprint sums of ``cell_weight`` times the per-cell gain.
+
+        Args:
+            cell_weight: (n_maps, H, W) float32 weight of every cell of every map.
+        """
+        self.update()
+        n_maps = len(self.owner)
+        if cell_weight.shape != (n_maps,) + self.cells.shape[2:]:
+            raise ValueError(f"cell_weight must have shape {(n_maps,) + self.cells.shape[2:]}, "
+                             f"got {cell_weight.shape}")
+        weighted = self.cells[self.owner]  # a copy: (n_maps, Z, H, W)
+        weighted *= cell_weight[:, None]
+        return (self.rows_full @ weighted @ self.cols_full_t).astype(np.float64)
 
     def update(self) -> None:
         """Fold the maps' changes since the last call into the cache."""
@@ -220,17 +279,17 @@ class _GainTable:
     A cell's probability and entropy are functions of its log-odds, so its expected gain at
     altitude z is too; and log-odds are sums of a few reading increments, so a mission sees
     few distinct values (hundreds to thousands against ~30,000 cells under one footprint).
-    A new value is computed once with :func:`~ipp_toolkit.mapping.expected_gain` on the
+    A new value is computed once with the objective's per-cell function on the
     maps' own cached probability and entropy of a cell holding it, so a looked-up gain is bit
     for bit the one computed cell by cell. Values are found through a hash of their bit
     pattern (one multiply, one shift, two gathers per cell); the few cells whose value is new
     or shares its slot with another value go through a dict.
     """
 
-    def __init__(self, maps: BeliefMaps, camera: Camera, weights: tuple[float, float]):
+    def __init__(self, maps: BeliefMaps, camera: Camera, gain_of: CellGain):
         self.maps = maps
         self.camera = camera
-        self.weights = weights
+        self.gain_of = gain_of
         self.slot = np.full(1 << _HASH_BITS, -1, dtype=np.int64)  # hash -> value index
         self.index_of: dict[int, int] = {}  # bit pattern -> value index (every value)
         self.bits = np.empty(0, dtype=np.uint32)  # bit pattern of each value index
@@ -268,8 +327,8 @@ class _GainTable:
             entropy = self.maps.entropy[cells].ravel()[rows]
             keys = unique[new].view(np.float32)
             camera = self.camera
-            gains = np.stack([expected_gain(keys, prob, entropy, camera.accuracy[iz],
-                                            camera.delta_logodds[iz], *self.weights)
+            gains = np.stack([self.gain_of(keys, prob, entropy, camera.accuracy[iz],
+                                           camera.delta_logodds[iz])
                               for iz in range(len(camera.accuracy))])
             self.bits = np.concatenate([self.bits, unique[new]])
             self.values = np.concatenate([self.values, gains], axis=1)

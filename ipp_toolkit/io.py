@@ -1,7 +1,8 @@
 """Files that must never be half-written or trusted blindly.
 
 Atomic writes (temporary file in the same folder, then ``os.replace``) for results and
-checkpoints, and the one loader of saved weights: ``torch.load(weights_only=True)`` with a
+checkpoints, a strict YAML reader (a key written twice is refused, not silently the last),
+and the one loader of saved weights: ``torch.load(weights_only=True)`` with a
 format tag, so a corrupt, truncated or foreign file is refused with an error naming it.
 
 torch is imported lazily: the simulator itself never needs it.
@@ -17,7 +18,10 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["CheckpointError", "atomic_write", "write_json", "save_torch", "load_torch"]
+import yaml
+
+__all__ = ["CheckpointError", "atomic_write", "write_json", "save_torch", "load_torch",
+           "read_yaml"]
 
 
 class CheckpointError(ValueError):
@@ -114,3 +118,40 @@ def _non_finite(value: Any, where: str = "") -> str:
         if found:
             return found
     return ""
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """A safe YAML loader that refuses a key written twice in one mapping."""
+
+
+def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    seen: set[Any] = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark)
+        seen.add(key)
+    return loader.construct_mapping(node)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _strict_mapping)
+
+
+def read_yaml(path: str | os.PathLike[str], what: str = "file") -> Any:
+    """Parse a YAML file safely, refusing a key written twice in one mapping.
+
+    Raises:
+        ValueError: the file cannot be read, is not text or is not valid YAML (the message
+            names ``what`` and the file).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        why = err.strerror if isinstance(err, OSError) else "not a text file"
+        raise ValueError(f"cannot read {what} {str(path)!r}: {why}") from err
+    try:
+        return yaml.load(text, Loader=_StrictLoader)
+    except yaml.YAMLError as err:
+        raise ValueError(f"{what} {str(path)!r} is not valid YAML: {err}") from err

@@ -27,6 +27,8 @@ __all__ = [
     "RegionChange",
     "f1_score",
     "expected_gain",
+    "OUTCOME_WEIGHTINGS",
+    "interesting_gain",
 ]
 
 PROB_CLIP = 1e-4
@@ -289,16 +291,25 @@ class BeliefMaps:
 _LOGODDS_CLIP32 = np.float32(LOGODDS_CLIP)
 
 
+OUTCOME_WEIGHTINGS = ("predictive", "belief")
+"""How :func:`expected_gain` weights the two readings: by the predictive distribution of the
+reading (``predictive``, the toolkit's default) or by the current belief p, as the paper
+authors' IG baseline does (``belief``)."""
+
+
 def expected_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
                   accuracy: float, delta_logodds: np.ndarray,
                   weight_interesting: float = 1.0, weight_uninteresting: float = 0.0,
-                  ) -> np.ndarray:
+                  outcome_weighting: str = "predictive") -> np.ndarray:
     """Expected weighted-entropy reduction per cell of one reading at one altitude.
 
     With p the cell's probability, a the accuracy and q = P(reading = 1) = p a + (1-p)(1-a),
     the posteriors are l1 = clip(l + d1) and l0 = clip(l + d0), and the gain is
     ``q W(p1) (H(p) - H(p1)) + (1 - q) W(p0) (H(p) - H(p0))`` in bits, W the class weights of
-    the posterior (as in the reward).
+    the posterior (as in the reward). With ``outcome_weighting="belief"`` the two readings
+    are weighted by the belief instead, ``p W(p1) (...) + (1 - p) W(p0) (...)``: the authors'
+    IG (their ``IG_baseline.py``), which treats the reading as if it were the cell's true
+    state. Only the weights of the two outcomes change; the posteriors stay Bayes' rule.
 
     Element-wise: the three arrays may have any common shape, e.g. (h, w) for one map's
     window or (K, H, W) for a stack of maps.
@@ -310,10 +321,14 @@ def expected_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
         accuracy: probability a that a reading at this altitude is correct.
         delta_logodds: (2,) float32 log-odds increments (d0, d1) of a reading 0 / 1.
         weight_interesting, weight_uninteresting: the reward's class weights.
+        outcome_weighting: one of :data:`OUTCOME_WEIGHTINGS`.
 
     Returns:
         (h, w) float32 expected gain per cell.
     """
+    if outcome_weighting not in OUTCOME_WEIGHTINGS:
+        raise ValueError(f"outcome_weighting must be one of {OUTCOME_WEIGHTINGS}, "
+                         f"got {outcome_weighting!r}")
     a = np.float32(accuracy)
     d0, d1 = (np.float32(d) for d in delta_logodds)
     joint1 = prob * a  # P(cell = 1, reading = 1)
@@ -331,11 +346,51 @@ def expected_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
     np.minimum(l1, _LOGODDS_CLIP32, out=l1)
     l0 = logodds + d0
     np.maximum(l0, -_LOGODDS_CLIP32, out=l0)
+    if outcome_weighting == "belief":
+        # The authors weight reading 1 by P(cell = 1) rather than P(reading = 1); q and
+        # not_q are no longer needed for the posteriors, so they are overwritten in place.
+        np.copyto(q, prob)
+        np.subtract(np.float32(1.0), prob, out=not_q)
     gain1 = entropy - entropy_from_logodds(l1)
     gain1 *= class_weights(p1, weight_interesting, weight_uninteresting)
     gain1 *= q
     gain0 = entropy - entropy_from_logodds(l0)
     gain0 *= class_weights(p0, weight_interesting, weight_uninteresting)
     gain0 *= not_q
+    gain1 += gain0
+    return gain1
+
+
+def interesting_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
+                     accuracy: float, delta_logodds: np.ndarray) -> np.ndarray:
+    """Expected entropy reduction per cell of one reading, given that the cell is interesting.
+
+    The table's metric is the mean entropy over the truly interesting cells, so a reading
+    helps it only where the cell is interesting; there the reading is 1 with probability a:
+    ``a (H(p) - H(p1)) + (1 - a) (H(p) - H(p0))`` in bits, with l1 = clip(l + d1) and
+    l0 = clip(l + d0). Multiplied by the probability that the cell is interesting (e.g. the
+    smoothed one of :class:`~ipp_toolkit.interest.InterestSmoother`) it is the reading's
+    expected contribution to the metric. ``prob`` is unused (same signature as
+    :func:`expected_gain`, so the two are interchangeable per-cell objectives).
+
+    Args:
+        logodds, prob, entropy: (h, w) float32 log-odds, probability and entropy (bits).
+        accuracy: probability a that a reading at this altitude is correct.
+        delta_logodds: (2,) float32 log-odds increments (d0, d1) of a reading 0 / 1.
+
+    Returns:
+        (h, w) float32 expected gain per cell, at most 1; negative where the cell is believed
+        uninteresting (p < 0.5), as a correct reading of 1 there first raises its entropy.
+    """
+    a = np.float32(accuracy)
+    d0, d1 = (np.float32(d) for d in delta_logodds)
+    l1 = logodds + d1
+    np.minimum(l1, _LOGODDS_CLIP32, out=l1)
+    l0 = logodds + d0
+    np.maximum(l0, -_LOGODDS_CLIP32, out=l0)
+    gain1 = entropy - entropy_from_logodds(l1)
+    gain1 *= a
+    gain0 = entropy - entropy_from_logodds(l0)
+    gain0 *= np.float32(1.0) - a
     gain1 += gain0
     return gain1

@@ -10,6 +10,8 @@ import pytest
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.features import footprint_gain, gain_planes
 from ipp_toolkit.gain import FootprintGainCache, footprint_sums, recomputed_footprint_sums
+from ipp_toolkit.interest import InterestSmoother
+from ipp_toolkit.mapping import interesting_gain
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.team import ACTION_NAMES
 
@@ -89,3 +91,67 @@ def test_gain_planes_centre_shows_the_footprint_gain_of_the_own_waypoint():
     c = state.geometry.grid_points // 2
     for k, (x, y, z) in enumerate(state.positions):
         assert planes[k, 0, c, c] == pytest.approx(gain[k, z, y, x], abs=1e-6)
+
+
+@pytest.mark.parametrize("agents, comm", [(4, 25.0), (4, math.inf), (2, 0.0)])
+def test_smoothed_gain_planes_equal_a_full_recomputation(agents, comm):
+    config = EnvConfig().replace(world={"resolution": 0.5},
+                                 team={"n_agents": agents, "comm_range": comm},
+                                 features={"gain": True, "gain_smoothing": 4.0})
+    smoother = InterestSmoother(config.world.map_cells, 0.5, 4.0)
+    rng = np.random.default_rng(3)
+    state = reset_mission(config, seed=2, mission=0, namespace="validation")
+    camera_cells = state.geometry.camera.largest_footprint_cells
+    while True:
+        weight = smoother(state.maps.prob[:agents])
+        full = recomputed_footprint_sums(state.maps, agents, state.geometry.camera, (1.0, 0.0),
+                                         objective="interesting", cell_weight=weight)
+        np.testing.assert_allclose(footprint_gain(state), full / camera_cells, rtol=0, atol=2e-6)
+        if state.done:
+            break
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+
+
+def test_interesting_gain_on_a_hand_sized_case():
+    # Prior cell (l = 0, H = 1 bit), accuracy 0.8: l1 = log 4, l0 = -log 4, H(0.8) = H(0.2).
+    a = 0.8
+    d = np.array([-math.log(4.0), math.log(4.0)], dtype=np.float32)
+    zero = np.zeros((1, 1), dtype=np.float32)
+    gain = interesting_gain(zero, zero + 0.5, zero + 1.0, a, d)
+    h = -(0.8 * math.log2(0.8) + 0.2 * math.log2(0.2))
+    assert gain[0, 0] == pytest.approx(1.0 - h, abs=1e-6)
+    # A cell believed uninteresting (p = 0.2): a correct reading of 1 brings it to 0.5.
+    low = np.full((1, 1), -math.log(4.0), dtype=np.float32)
+    gain = interesting_gain(low, low * 0 + 0.2, low * 0 + h, a, d)
+    h_001 = -(1 / 17 * math.log2(1 / 17) + 16 / 17 * math.log2(16 / 17))  # l = -log 16
+    assert gain[0, 0] == pytest.approx(0.8 * (h - 1.0) + 0.2 * (h - h_001), abs=1e-5)
+    assert gain[0, 0] < 0
+
+
+def test_interest_smoother_keeps_constants_and_spreads_a_hotspot():
+    smoother = InterestSmoother(100, 0.5, 3.0)
+    assert smoother.block == 1
+    flat = np.full((2, 100, 100), 0.3, dtype=np.float32)
+    np.testing.assert_allclose(smoother(flat), 0.3, atol=1e-6)  # the border is renormalised
+    spot = np.zeros((100, 100), dtype=np.float32)
+    spot[50, 50] = 1.0
+    smooth = smoother(spot)
+    assert smooth.sum() == pytest.approx(1.0, abs=1e-3)  # mass kept away from the border
+    assert smooth[50, 50] == smooth.max() and smooth[50, 56] > smooth[50, 62] > 0
+    fine = InterestSmoother(500, 0.1, 3.0)  # 0.5 m blocks of 5 x 5 cells
+    assert fine.block == 5
+    big = np.zeros((500, 500), dtype=np.float32)
+    big[100:400, 100:400] = 1.0  # 30 m square: its centre is 5 sigma inside
+    out = fine(big)
+    assert out.shape == (500, 500) and out[250, 250] > 0.99 and out[0, 0] < 1e-5
+    with pytest.raises(ValueError, match="sigma"):
+        InterestSmoother(100, 0.5, 0.0)
+    with pytest.raises(ValueError, match="100 x 100"):
+        smoother(np.zeros((50, 50), dtype=np.float32))
+
+
+def test_gain_smoothing_is_validated():
+    with pytest.raises(ValueError, match="gain_smoothing"):
+        EnvConfig().replace(features={"gain_smoothing": -1.0})
+    with pytest.raises(ValueError, match="gain_smoothing"):
+        EnvConfig().replace(features={"gain_smoothing": math.inf})

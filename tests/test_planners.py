@@ -97,7 +97,7 @@ def test_planner_options_and_unknown_name():
     assert make_planner("coverage", altitude_index=1).altitude_index == 1
     assert make_planner("ig", overlap_discount=0.25).overlap_discount == 0.25
     with pytest.raises(ValueError, match="unknown planner 'greedy'; registered planners: "
-                                         ".*coverage, ig, .*random"):
+                                         ".*coverage, .*ig, .*random"):
         make_planner("greedy")
     with pytest.raises(ValueError, match="overlap_discount"):
         make_planner("ig", overlap_discount=1.5)

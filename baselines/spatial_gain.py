@@ -1,0 +1,85 @@
+"""Greedy information gain that knows interesting cells come in regions (``ig_spatial``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.interest import interest_smoother
+from ipp_toolkit.mapping import interesting_gain
+from ipp_toolkit.planners import AgentView
+from ipp_toolkit.sensor import Camera
+
+from .information_gain import InformationGainPlanner
+
+__all__ = ["SpatialGainPlanner"]
+
+
+class SpatialGainPlanner(InformationGainPlanner):
+    """``ig`` whose objective uses the spatial correlation of the field.
+
+    ``ig`` values a cell by its expected weighted-entropy reduction on the agent's local map,
+    where cells are independent: a cell nobody measured is at the prior whatever surrounds
+    it. This planner values a cell by ``pi(c) * interesting_gain(c)``: the entropy a reading
+    removes from the cell if it is interesting (:func:`~ipp_toolkit.mapping.interesting_gain`,
+    the table's metric counts only interesting cells) times the probability that it is,
+    estimated from its neighbourhood: the local map's probabilities smoothed by a Gaussian of
+    ``sigma`` metres (:mod:`ipp_toolkit.interest`). Having found part of a hotspot or a
+    boundary, a UAV is drawn to the cells around it; regions measured as uninteresting lose
+    their value. It uses only the agent's own local map, like ``ig``, and keeps ``ig``'s
+    coordination rules (index order, heard lower-index teammates' next footprints discounted
+    by ``overlap_discount``, their targets avoided). Deterministic; the seed is unused.
+
+    The same objective can fill the actor's ``gain`` planes (``features.gain_smoothing``), so
+    a gain-prior COMA actor starts from this planner's choices.
+
+    ``sigma`` default 5 m, chosen on validation missions (r_M = 0.5 m, 4 UAVs, D = 25 m,
+    30 missions per terrain; mean paired difference of final entropy to ``ig`` +- SE):
+
+    ===========  ===============  ===============  ===============  ===============
+    sigma        split            blobs            fractal          real
+    ===========  ===============  ===============  ===============  ===============
+    0 (none)     +0.001 +- 0.005  -0.001 +- 0.003
+    2 m          -0.073 +- 0.013  -0.069 +- 0.013
+    3 m                                            -0.064 +- 0.017  -0.088 +- 0.013
+    5 m          -0.101 +- 0.015  -0.072 +- 0.013  -0.061 +- 0.016  -0.098 +- 0.015
+    8 m                                            -0.042 +- 0.016  -0.088 +- 0.016
+    ===========  ===============  ===============  ===============  ===============
+
+    Without smoothing (sigma 0: pi = p) the objective ties ``ig``: the gain comes from the
+    neighbourhood, not from the changed weighting. Cost: one smoothing of the local map per
+    agent and step (~1 ms at r_M = 0.1 m) on top of ``ig``'s boxes.
+
+    Args:
+        sigma: standard deviation of the smoothing in metres (> 0).
+        overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
+    """
+
+    name = "ig_spatial"
+
+    def __init__(self, sigma: float = 5.0, overlap_discount: float = 0.5) -> None:
+        if not sigma > 0 or not math.isfinite(sigma):
+            raise ValueError(f"sigma must be a positive number of metres, got {sigma!r}")
+        super().__init__(overlap_discount)
+        self.sigma = float(sigma)
+        self._interest: tuple[AgentView, np.ndarray] | None = None
+
+    def reset(self, config: EnvConfig, seed: int) -> None:
+        super().reset(config, seed)
+        self._interest = None
+
+    def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
+                    altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
+        # One smoothing per agent and decision: the up, down and level boxes share it.
+        if self._interest is None or self._interest[0] is not view:
+            assert self._config is not None
+            world = self._config.world
+            smoother = interest_smoother(world.map_cells, world.resolution, self.sigma)
+            self._interest = (view, smoother(view.local_prob))
+        gain = interesting_gain(view.local_logodds[cells], view.local_prob[cells],
+                                view.local_entropy[cells], camera.accuracy[altitude],
+                                camera.delta_logodds[altitude])
+        gain *= self._interest[1][cells]
+        return gain

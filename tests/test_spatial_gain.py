@@ -1,0 +1,65 @@
+"""The ``ig_spatial`` planner: ``ig``'s rules with a neighbourhood-aware objective."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.evaluation import evaluate
+from ipp_toolkit.mapping import entropy_from_logodds
+from ipp_toolkit.planners import AgentView, make_planner
+from ipp_toolkit.sensor import Camera
+from ipp_toolkit.team import ACTION_NAMES
+
+CONFIG = EnvConfig().replace(world={"resolution": 0.5})
+
+
+def lone_view(config: EnvConfig, position: tuple[int, int, int], logodds: np.ndarray,
+              mask: np.ndarray) -> AgentView:
+    logodds = logodds.astype(np.float32)
+    empty = np.zeros((0,), dtype=np.int64)
+    return AgentView(index=0, step=0, budget=15, position=np.array(position),
+                     local_logodds=logodds, local_prob=1 / (1 + np.exp(-logodds)),
+                     local_entropy=entropy_from_logodds(logodds), mask=mask,
+                     teammates=empty, teammate_positions=np.zeros((0, 3), dtype=np.int64),
+                     teammate_footprints=np.zeros((0, 4), dtype=np.int64),
+                     footprint=np.zeros(4, dtype=np.int64), observation=None)
+
+
+def test_a_found_region_draws_ig_spatial_but_not_ig():
+    camera = Camera(CONFIG.world, CONFIG.sensor)
+    position = (5, 5, 0)
+    south = camera.rects[0, 4, 5]  # footprint of the south move's waypoint (row0, row1, ...)
+    logodds = np.zeros((CONFIG.world.map_cells,) * 2)
+    logodds[south[0] - 6:south[0], south[2]:south[3]] = 4.0  # measured interesting, just south
+    mask = np.array([0, 1, 1, 1, 1, 0], dtype=np.int8)  # horizontal moves only
+    view = lone_view(CONFIG, position, logodds, mask)
+    ig, spatial = make_planner("ig"), make_planner("ig_spatial")
+    ig.reset(CONFIG, 0)
+    spatial.reset(CONFIG, 0)
+    # The four horizontal footprints hold only prior cells: ig ties them and takes the first.
+    assert ACTION_NAMES[int(ig.act([view])[0])] == "north"
+    assert ACTION_NAMES[int(spatial.act([view])[0])] == "south"
+
+
+def test_uninteresting_surroundings_push_ig_spatial_away():
+    camera = Camera(CONFIG.world, CONFIG.sensor)
+    north = camera.rects[0, 6, 5]
+    logodds = np.zeros((CONFIG.world.map_cells,) * 2)
+    logodds[north[1]:north[1] + 6, north[2]:north[3]] = -4.0  # measured empty, just north
+    mask = np.array([0, 1, 1, 1, 1, 0], dtype=np.int8)
+    spatial = make_planner("ig_spatial")
+    spatial.reset(CONFIG, 0)
+    action = ACTION_NAMES[int(spatial.act([lone_view(CONFIG, (5, 5, 0), logodds, mask)])[0])]
+    assert action != "north"
+
+
+def test_ig_spatial_flies_valid_deterministic_missions_and_refuses_bad_sigma():
+    config = CONFIG.replace(team={"n_agents": 2, "comm_range": 25.0}, terrain={"kind": "blobs"})
+    runs = [evaluate(config, "ig_spatial", missions=2, seed=4, progress=False) for _ in range(2)]
+    assert [r["entropy"] for r in runs[0].rows] == [r["entropy"] for r in runs[1].rows]
+    finals = [r["entropy"] for r in runs[0].rows if r["step"] == config.team.budget]
+    assert len(finals) == 2 and all(e < 1.0 for e in finals)
+    with pytest.raises(ValueError, match="sigma"):
+        make_planner("ig_spatial", sigma=-1.0)
