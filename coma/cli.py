@@ -17,7 +17,7 @@ from typing import Any
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.settings import build_env_config
+from ipp_toolkit.settings import build_env_config, parse_feature_flags
 
 from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
 from .learner import TrainingDiverged, train
@@ -69,9 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="start from this COMA policy file instead of a warm start "
                              "(fine-tuning), or a shipped one: --init shipped:NAME "
                              "(paper-actor, prior, mixed; plain 'shipped': coma's default)")
-    parser.add_argument("--feature", action="append", default=[], metavar="NAME=BOOL",
-                        help="switch a feature plane of the mission config, e.g. "
-                             "--feature own_position=true (repeatable)")
+    parser.add_argument("--feature", action="append", default=[], metavar="NAME=VALUE",
+                        help="set a feature of the mission config, e.g. --feature "
+                             "own_position=true or --feature gain_smoothing=5 (repeatable)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="any COMAConfig field, e.g. --set lr_actor=1e-4 (repeatable)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -129,12 +129,7 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
         if not Path(changes["init_policy"]).is_file():
             raise ValueError(f"--init {args.init!r}: no such policy file")
     coma_config = preset(args.preset, **changes)
-    switches: dict[str, bool] = {}
-    for item in args.feature:
-        name, sep, value = item.partition("=")
-        if not sep or value.strip().lower() not in ("true", "false", "1", "0", "on", "off"):
-            raise ValueError(f"--feature expects NAME=true|false, got {item!r}")
-        switches[name.strip()] = value.strip().lower() in ("true", "1", "on")
+    switches = parse_feature_flags(args.feature)
     env_config = build_env_config(args.config, defaults=TRAINING_DEFAULTS, agents=args.agents,
                                   comm=args.comm, resolution=args.resolution,
                                   terrain=args.terrain, features=switches)

@@ -133,11 +133,11 @@ def actor_observations(state: MissionState, features: FeatureConfig) -> np.ndarr
     if features.footprints:
         planes.append(_footprint_cover(state, state.heard))
     if features.gain:
-        planes.extend(np.moveaxis(gain_planes(state), 1, 0))
+        planes.extend(np.moveaxis(gain_planes(state, features.gain_smoothing), 1, 0))
     return np.stack(planes, axis=1).astype(np.float32)
 
 
-def footprint_gain(state: MissionState) -> np.ndarray:
+def footprint_gain(state: MissionState, smoothing: float | None = None) -> np.ndarray:
     """Expected gain of a reading from every waypoint, on every agent's local map.
 
     The gain of one reading from waypoint (ix, iy, iz) is the sum over its footprint of
@@ -147,7 +147,9 @@ def footprint_gain(state: MissionState) -> np.ndarray:
     The sums are kept on the state and updated only where the maps changed since the last
     call (:class:`~ipp_toolkit.gain.FootprintGainCache`).
 
-    With ``features.gain_smoothing > 0`` the sums are the ``ig_spatial`` objective instead:
+    With ``smoothing > 0`` (metres; None: the mission's ``features.gain_smoothing``, but a
+    policy passes its own, as it may fly a mission configured otherwise) the sums are the
+    ``ig_spatial`` objective instead:
     :func:`~ipp_toolkit.mapping.interesting_gain` weighted by the smoothed probability of the
     interesting class (:mod:`ipp_toolkit.interest`), divided by the same cell count (at most
     1; slightly negative where only cells believed uninteresting are left).
@@ -156,7 +158,8 @@ def footprint_gain(state: MissionState) -> np.ndarray:
         (N, Z, G, G) float32.
     """
     reward = state.config.reward
-    smoothing = state.config.features.gain_smoothing
+    if smoothing is None:
+        smoothing = state.config.features.gain_smoothing
     objective = "interesting" if smoothing > 0 else "ig"
     cache = state.gain_cache
     if cache is None or cache.maps is not state.maps or cache.objective != objective:
@@ -174,7 +177,7 @@ def footprint_gain(state: MissionState) -> np.ndarray:
     return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
 
 
-def gain_planes(state: MissionState) -> np.ndarray:
+def gain_planes(state: MissionState, smoothing: float | None = None) -> np.ndarray:
     """The ``gain`` planes: :func:`footprint_gain` at the agent's altitude, above and below,
     in an 11 x 11 window centred on the agent.
 
@@ -188,7 +191,7 @@ def gain_planes(state: MissionState) -> np.ndarray:
     Returns:
         (N, 3, G, G) float32 in :data:`GAIN_PLANES` order.
     """
-    gain = footprint_gain(state)
+    gain = footprint_gain(state, smoothing)
     n, z, g = gain.shape[:3]
     c = g // 2
     level = state.positions[:, 2]

@@ -20,10 +20,11 @@ This module also owns the small text forms every command shares: :func:`parse_co
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,7 @@ __all__ = [
     "format_comm",
     "safe_name",
     "named_terrain_kinds",
+    "parse_feature_flags",
 ]
 
 
@@ -139,7 +141,7 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
                      threshold_quantile: float | None = None,
                      resolution: float | None = None,
                      budget: int | None = None, area_size: float | None = None,
-                     features: Mapping[str, bool] | None = None) -> EnvConfig:
+                     features: Mapping[str, bool | int | float] | None = None) -> EnvConfig:
     """The mission config of a command: defaults < ``config`` < explicit keywords.
 
     Args:
@@ -255,3 +257,40 @@ def describe_config(config: EnvConfig) -> str:
             f"D = {format_comm(config.team.comm_range)}, terrain {where}, "
             f"{config.world.area_size:g} m area at r_M = {config.world.resolution:g} m, "
             f"budget {config.team.budget} steps")
+
+
+_TRUE, _FALSE = ("true", "1", "on", "yes"), ("false", "0", "off", "no")
+
+
+def parse_feature_flags(items: Sequence[str]) -> dict[str, bool | int | float]:
+    """``--feature NAME=VALUE`` flags as a ``features`` section, typed by :class:`FeatureConfig`.
+
+    Switches take true/false (also 1/0, on/off, yes/no); ``gain_smoothing`` a number of
+    metres; ``agent_id_scale`` an integer.
+
+    Raises:
+        ValueError: an unknown feature or a value of the wrong kind (the message names it).
+    """
+    kinds = {f.name: f.type for f in dataclasses.fields(FeatureConfig)}
+    parsed: dict[str, bool | int | float] = {}
+    for item in items:
+        name, sep, raw = (part.strip() for part in item.partition("="))
+        if not sep or name not in kinds:
+            known = ", ".join(kinds)
+            raise ValueError(f"--feature expects NAME=VALUE with NAME one of {known}; "
+                             f"got {item!r}")
+        kind = kinds[name]
+        try:
+            if kind in (bool, "bool"):
+                if raw.lower() not in _TRUE + _FALSE:
+                    raise ValueError
+                parsed[name] = raw.lower() in _TRUE
+            elif kind in (int, "int"):
+                parsed[name] = int(raw)
+            else:
+                parsed[name] = float(raw)
+        except ValueError:
+            raise ValueError(f"--feature {item!r}: {name} takes "
+                             f"{'true|false' if kind in (bool, 'bool') else 'a number'}"
+                             ) from None
+    return parsed

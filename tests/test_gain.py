@@ -155,3 +155,19 @@ def test_gain_smoothing_is_validated():
         EnvConfig().replace(features={"gain_smoothing": -1.0})
     with pytest.raises(ValueError, match="gain_smoothing"):
         EnvConfig().replace(features={"gain_smoothing": math.inf})
+
+
+def test_a_policy_gets_its_own_gain_smoothing_on_any_mission():
+    from ipp_toolkit.features import actor_observations
+
+    plain = EnvConfig().replace(world={"resolution": 0.5}, features={"gain": True})
+    smoothed = plain.replace(features={"gain": True, "gain_smoothing": 5.0})
+    state = reset_mission(plain, seed=0, mission=0)
+    reference = reset_mission(smoothed, seed=0, mission=0)
+    for _ in range(3):  # the same valid moves on both (the same starts and terrain)
+        actions = [int(np.flatnonzero(m)[-1]) for m in state.masks()]
+        step_mission(state, actions)
+        step_mission(reference, actions)
+    planes = actor_observations(state, smoothed.features)[:, -3:]
+    np.testing.assert_array_equal(planes, gain_planes(reference))
+    assert not np.array_equal(planes, actor_observations(state, plain.features)[:, -3:])

@@ -183,3 +183,18 @@ def test_ipp_compare_runs_a_raster_thresholded_at_a_quantile(tmp_path, capsys):
                          "--planners", "random", "--workers", "1", "--no-progress",
                          "--out", str(tmp_path / "out")]) == 0
     assert "quantile 0.6" in capsys.readouterr().err
+
+
+def test_feature_flags_are_typed_by_the_feature_config():
+    from ipp_toolkit.settings import parse_feature_flags
+
+    parsed = parse_feature_flags(["gain=true", "own_position=off", "gain_smoothing=5",
+                                  "agent_id_scale=8"])
+    assert parsed == {"gain": True, "own_position": False, "gain_smoothing": 5.0,
+                      "agent_id_scale": 8}
+    config = build_env_config(features=parsed)
+    assert config.features.gain and config.features.gain_smoothing == 5.0
+    for bad, named in (("gain=maybe", "gain"), ("gain_smoothing=wide", "gain_smoothing"),
+                       ("colour=true", "colour"), ("gain", "gain")):
+        with pytest.raises(ValueError, match=named):
+            parse_feature_flags([bad])
