@@ -74,16 +74,30 @@ class InterestSmoother:
         self.matrix = smoothing_matrix(blocks, self.sigma / (self.block * resolution))
 
     def __call__(self, prob: np.ndarray) -> np.ndarray:
+        smooth = self.block_values(prob)
+        if self.block == 1:
+            return smooth
+        return np.repeat(np.repeat(smooth, self.block, axis=-2), self.block, axis=-1)
+
+    def block_values(self, prob: np.ndarray) -> np.ndarray:
+        """(..., size / block, size / block) float32 smoothed value of every block."""
         if prob.shape[-2:] != (self.size, self.size):
             raise ValueError(f"expected maps of {self.size} x {self.size} cells, got shape "
                              f"{prob.shape}")
         b, n = self.block, self.size // self.block
-        lead = prob.shape[:-2]
-        blocks = prob.reshape(lead + (n, b, n, b)).mean(axis=(-3, -1), dtype=np.float32)
-        smooth = self.matrix @ blocks @ self.matrix.T
-        if b == 1:
-            return smooth
-        return np.repeat(np.repeat(smooth, b, axis=-2), b, axis=-1)
+        blocks = prob.reshape(prob.shape[:-2] + (n, b, n, b)).mean(axis=(-3, -1),
+                                                                   dtype=np.float32)
+        return self.matrix @ blocks @ self.matrix.T
+
+    def window(self, block_values: np.ndarray, rows: slice, cols: slice) -> np.ndarray:
+        """The per-cell values of ``block_values`` (one map) inside ``[rows, cols]`` only.
+
+        Equal to ``self(prob)[rows, cols]`` without repeating the whole map back to cells.
+        """
+        b = self.block
+        r = np.arange(rows.start, rows.stop) // b
+        c = np.arange(cols.start, cols.stop) // b
+        return block_values[r[:, None], c[None, :]]
 
 
 @functools.lru_cache(maxsize=16)

@@ -171,3 +171,11 @@ def test_a_policy_gets_its_own_gain_smoothing_on_any_mission():
     planes = actor_observations(state, smoothed.features)[:, -3:]
     np.testing.assert_array_equal(planes, gain_planes(reference))
     assert not np.array_equal(planes, actor_observations(state, plain.features)[:, -3:])
+
+
+def test_interest_window_equals_the_full_map_slice():
+    smoother = InterestSmoother(500, 0.1, 5.0)
+    prob = np.random.default_rng(0).random((500, 500), dtype=np.float32)
+    blocks = smoother.block_values(prob)
+    rows, cols = slice(37, 212), slice(0, 499)
+    np.testing.assert_array_equal(smoother.window(blocks, rows, cols), smoother(prob)[rows, cols])
