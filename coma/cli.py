@@ -24,7 +24,7 @@ from .learner import TrainingDiverged, train
 from .persistence import DEFAULT_SHIPPED, resolve_policy
 from .validation import validation_settings
 
-__all__ = ["TRAINING_DEFAULTS", "build_parser", "coerce_value", "int_list", "configs_from_args",
+__all__ = ["TRAINING_DEFAULTS", "PAPER_TRAINING_DEFAULTS", "build_parser", "coerce_value", "int_list", "configs_from_args",
            "main"]
 
 
@@ -32,6 +32,9 @@ TRAINING_DEFAULTS = {"world": {"resolution": 0.5}, "features": {"own_position": 
 """``ipp-train coma``'s defaults over the paper's mission: training at r_M = 0.5 m (the policy
 flies at any resolution) with the own-position plane (docs/departures.md). A ``--config`` file
 wins over them, an explicit flag over the file."""
+
+PAPER_TRAINING_DEFAULTS = {"world": {"resolution": 0.5}}
+"""With ``--preset paper`` the actor sees the paper's inputs: no own-position plane."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -130,7 +133,8 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
             raise ValueError(f"--init {args.init!r}: no such policy file")
     coma_config = preset(args.preset, **changes)
     switches = parse_feature_flags(args.feature)
-    env_config = build_env_config(args.config, defaults=TRAINING_DEFAULTS, agents=args.agents,
+    defaults = PAPER_TRAINING_DEFAULTS if args.preset == "paper" else TRAINING_DEFAULTS
+    env_config = build_env_config(args.config, defaults=defaults, agents=args.agents,
                                   comm=args.comm, resolution=args.resolution,
                                   terrain=args.terrain, features=switches)
     return coma_config, env_config

@@ -198,3 +198,11 @@ def test_feature_flags_are_typed_by_the_feature_config():
                        ("colour=true", "colour"), ("gain", "gain")):
         with pytest.raises(ValueError, match=named):
             parse_feature_flags([bad])
+
+
+def test_paper_preset_trains_on_the_papers_inputs():
+    _, env = configs_from_args(build_parser().parse_args(["--out", "x", "--preset", "paper"]))
+    assert not env.features.own_position and not env.features.gain
+    _, env = configs_from_args(build_parser().parse_args(
+        ["--out", "x", "--preset", "paper", "--feature", "own_position=true"]))
+    assert env.features.own_position  # an explicit flag still wins
