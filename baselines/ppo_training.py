@@ -295,6 +295,10 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, CheckpointError) as error:
         print(f"ipp-train ppo: error: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"\nipp-train ppo: interrupted; continue with --resume --out {args.out} (from "
+              "the last checkpoint)", file=sys.stderr)
+        return 130
     print(f"saved {path}")
     return 0
 

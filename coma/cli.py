@@ -24,8 +24,8 @@ from .learner import TrainingDiverged, train
 from .persistence import DEFAULT_SHIPPED, resolve_policy
 from .validation import validation_settings
 
-__all__ = ["TRAINING_DEFAULTS", "PAPER_TRAINING_DEFAULTS", "build_parser", "coerce_value", "int_list", "configs_from_args",
-           "main"]
+__all__ = ["TRAINING_DEFAULTS", "PAPER_TRAINING_DEFAULTS", "build_parser", "coerce_value",
+           "int_list", "configs_from_args", "main"]
 
 
 TRAINING_DEFAULTS = {"world": {"resolution": 0.5}, "features": {"own_position": True}}

@@ -16,7 +16,10 @@ import contextlib
 import multiprocessing
 import os
 import pickle
+import signal
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from importlib import metadata
 from typing import Any, Protocol
@@ -52,14 +55,29 @@ def limit_torch_threads() -> None:
 
 
 _WORKER: TaskRunner | None = None
+_PARENT_POLL_S = 1.0
 
+
+def _exit_with_parent(parent: int) -> None:
+    """Leave as soon as the process that started this worker is gone (killed, crashed)."""
+    while True:
+        time.sleep(_PARENT_POLL_S)
+        if os.getppid() != parent:
+            os._exit(1)
 
 
 def _init_worker(runner: TaskRunner) -> None:
-    """Process-pool initializer: one thread per worker, then keep the runner for the tasks."""
+    """Process-pool initializer: one thread per worker, then keep the runner for the tasks.
+
+    Ctrl-C reaches every process of the terminal's group; only the main process handles it
+    (it stops the pool), so a worker ignores it instead of printing its own traceback. A
+    worker whose main process was killed outright exits on its own (a watcher thread).
+    """
     global _WORKER
     for name in _THREAD_VARIABLES:
         os.environ[name] = "1"
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
     runner.single_thread = True
     limit_torch_threads()
     _WORKER = runner
@@ -146,6 +164,7 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
             bar.update(1)
     except BaseException:
         executor.shutdown(wait=False, cancel_futures=True)
+        _stop_workers(executor)
         raise
     executor.shutdown(wait=True, cancel_futures=True)
     if error is not None:
@@ -158,3 +177,16 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
                 finish(*future.result())
                 bar.update(1)
         raise error
+
+
+def _stop_workers(executor: concurrent.futures.ProcessPoolExecutor) -> None:
+    """Terminate the pool's workers now (an interrupt: their running missions are dropped).
+
+    ``shutdown(cancel_futures=True)`` only cancels tasks not yet started; the running ones
+    would hold the terminal until they end. The executor exposes no public way to stop them,
+    so its process table is read defensively.
+    """
+    processes = getattr(executor, "_processes", None) or {}
+    for process in list(processes.values()):
+        with contextlib.suppress(Exception):
+            process.terminate()

@@ -239,6 +239,8 @@ def compare_main(argv: list[str] | None = None) -> int:
             animate=args.animate, namespace=args.namespace)
     except (ValueError, OSError) as err:
         return error(err)
+    except KeyboardInterrupt:
+        return interrupted("ipp-compare", out_dir)
     print(comparison.table)
     print("Planning time per step:")
     width = max(len(label) for label in comparison.summary.planners)
@@ -250,6 +252,16 @@ def compare_main(argv: list[str] | None = None) -> int:
                                                      else ""))
     return 0
 
+
+
+def interrupted(tool: str, out_dir: Path) -> int:
+    """Ctrl-C: one line saying how to continue (exit code 130, as a shell reports SIGINT).
+
+    Every mission is stored atomically as it ends, so the same command flies only the rest.
+    """
+    print(f"\n{tool}: interrupted; the missions already flown are kept in {str(out_dir)!r}: "
+          "run the same command again to continue", file=sys.stderr)
+    return 130
 
 
 TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training"}
@@ -405,4 +417,6 @@ def study_main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
         print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        return interrupted("ipp-study", Path(out))
     return 0

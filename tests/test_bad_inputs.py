@@ -183,3 +183,76 @@ def test_a_killed_compare_resumes_without_loss_or_duplicates(tmp_path):
     keys = [(r["planner"], r["mission"], r["step"]) for r in resumed]
     assert len(keys) == len(set(keys)) == 2 * 40 * 4  # nothing lost, nothing twice
     assert resumed == whole
+
+
+def _children(pid: int) -> list[int]:
+    """PIDs whose parent is ``pid`` (read from /proc)."""
+    from pathlib import Path
+
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    from pathlib import Path
+
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _start_compare(out, argv):
+    import subprocess
+    import sys
+    import time
+
+    script = ("import sys; from reports.cli import compare_main; "
+              "sys.exit(compare_main(sys.argv[1:]))")
+    process = subprocess.Popen([sys.executable, "-c", script, *argv, "--out", str(out)],
+                               start_new_session=True, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if len(list(out.glob("shards/*/mission_*.json"))) >= 4:
+            break
+        time.sleep(0.05)
+    return process
+
+
+@pytest.mark.skipif(not __import__("pathlib").Path("/proc/self/stat").exists(),
+                    reason="reads /proc")
+def test_ctrl_c_prints_one_line_and_a_killed_main_leaves_no_workers(tmp_path):
+    import os
+    import signal
+    import time
+
+    argv = ["--agents", "2", "--resolution", "1.0", "--budget", "3", "--trials", "200",
+            "--planners", "ig,random", "--workers", "2", "--no-progress"]
+    process = _start_compare(tmp_path / "first", argv)
+    workers = _children(process.pid)
+    os.killpg(process.pid, signal.SIGINT)  # what Ctrl-C sends: the whole process group
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert "Traceback" not in err and err.count("interrupted") == 1
+    assert "run the same command again" in err
+    time.sleep(1.0)
+    assert not [pid for pid in workers if _alive(pid)]
+
+    process = _start_compare(tmp_path / "killed", argv)
+    workers = [pid for pid in _children(process.pid) if _alive(pid)]
+    assert workers
+    os.kill(process.pid, signal.SIGKILL)  # the main process only
+    process.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(_alive(pid) for pid in workers):
+        time.sleep(0.1)
+    assert not [pid for pid in workers if _alive(pid)]
