@@ -22,6 +22,7 @@ from ipp_toolkit.settings import build_env_config, parse_feature_flags
 from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
 from .learner import TrainingDiverged, train
 from .persistence import DEFAULT_SHIPPED, resolve_policy
+from .recipes import RECIPES, Stage, recipe
 from .validation import validation_settings
 
 __all__ = ["TRAINING_DEFAULTS", "PAPER_TRAINING_DEFAULTS", "build_parser", "coerce_value",
@@ -41,8 +42,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-train coma",
         description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.")
-    parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
-                        help="hyper-parameter preset (default: cpu)")
+    parser.add_argument("--preset", choices=sorted(PRESETS) + sorted(RECIPES), default="cpu",
+                        help="hyper-parameter preset (default: cpu), or the recipe of a "
+                             "shipped policy (its name in coma=shipped:NAME; every stage, "
+                             "see coma/recipes.py)")
     parser.add_argument("--variant", choices=VARIANTS, help="credit-assignment variant")
     parser.add_argument("--config", help="YAML mission config (world, team, features, ...) "
                              "over the training defaults (the paper's mission at r_M 0.5 m "
@@ -109,8 +112,8 @@ def _float_list(flag: str, text: str) -> list[float]:
                          f"{text!r}") from None
 
 
-def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
-    """The configs a parsed ``ipp-train coma`` command asks for (ValueError on bad input)."""
+def _changes_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The COMAConfig fields the flags set (ValueError on bad input)."""
     changes: dict[str, Any] = {}
     for item in args.set:
         name, sep, value = item.partition("=")
@@ -131,13 +134,52 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
         changes["init_policy"] = str(resolve_policy(init))
         if not Path(changes["init_policy"]).is_file():
             raise ValueError(f"--init {args.init!r}: no such policy file")
-    coma_config = preset(args.preset, **changes)
-    switches = parse_feature_flags(args.feature)
+    return changes
+
+
+def _env_from_args(args: argparse.Namespace,
+                   defaults: dict[str, dict[str, Any]]) -> EnvConfig:
+    return build_env_config(args.config, defaults=defaults, agents=args.agents,
+                            comm=args.comm, resolution=args.resolution, terrain=args.terrain,
+                            features=parse_feature_flags(args.feature))
+
+
+def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
+    """The configs a parsed ``ipp-train coma`` command asks for (ValueError on bad input).
+
+    With a recipe (``--preset`` naming a shipped policy) these are its last stage's.
+    """
+    if args.preset in RECIPES:
+        return stage_configs(args)[-1][1:]
+    coma_config = preset(args.preset, **_changes_from_args(args))
     defaults = PAPER_TRAINING_DEFAULTS if args.preset == "paper" else TRAINING_DEFAULTS
-    env_config = build_env_config(args.config, defaults=defaults, agents=args.agents,
-                                  comm=args.comm, resolution=args.resolution,
-                                  terrain=args.terrain, features=switches)
-    return coma_config, env_config
+    return coma_config, _env_from_args(args, defaults)
+
+
+def stage_configs(args: argparse.Namespace) -> list[tuple[Stage, COMAConfig, EnvConfig]]:
+    """Every stage of the recipe ``args.preset`` with the flags applied to each.
+
+    A stage that starts from the previous one gets its ``init_policy`` when it runs (the
+    file does not exist yet); ``--init`` replaces the first stage's start.
+    """
+    changes = _changes_from_args(args)
+    stages = []
+    for k, stage in enumerate(recipe(args.preset)):
+        fields = {**stage.coma, **changes}
+        if k == 0 and "init_policy" not in changes and stage.init is not None:
+            fields["init_policy"] = str(resolve_policy(stage.init))
+        elif k > 0 and stage.init is not None and stage.init.startswith("previous"):
+            fields.pop("init_policy", None)
+        defaults = {section: {**TRAINING_DEFAULTS.get(section, {}), **values}
+                    for section, values in {**TRAINING_DEFAULTS, **stage.env}.items()}
+        stages.append((stage, preset("cpu", **fields), _env_from_args(args, defaults)))
+    return stages
+
+
+def _stage_folders(out: str, stages: Sequence[Stage]) -> list[Path]:
+    if len(stages) == 1:
+        return [Path(out)]
+    return [Path(out) / f"stage-{k + 1}-{stage.name}" for k, stage in enumerate(stages)]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -145,19 +187,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        coma_config, env_config = configs_from_args(args)
-        # An invalid team, range or validation terrain fails here, before anything is written.
-        validation_settings(coma_config, mission_settings(coma_config, env_config))
-        if coma_config.warm_start:
-            from ipp_toolkit.planners import planner_factory
+        if args.preset in RECIPES:
+            stages = stage_configs(args)
+        else:
+            stages = [(Stage(args.preset), *configs_from_args(args))]
+        for _, coma_config, env_config in stages:
+            # An invalid team, range or validation terrain fails here, before any writing.
+            validation_settings(coma_config, mission_settings(coma_config, env_config))
+            if coma_config.warm_start:
+                from ipp_toolkit.planners import planner_factory
 
-            planner_factory(coma_config.warm_start)  # an unknown name fails before training
+                planner_factory(coma_config.warm_start)  # an unknown name fails here
     except ValueError as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
+    folders = _stage_folders(args.out, [stage for stage, _, _ in stages])
     try:
-        result = train(coma_config, env_config, args.out, resume=args.resume,
-                       progress=not args.no_progress)
+        for k, (stage, coma_config, env_config) in enumerate(stages):
+            if k > 0 and stage.init is not None and stage.init.startswith("previous"):
+                start = "last.pt" if stage.init == "previous:last" else "best.pt"
+                coma_config = coma_config.replace(init_policy=str(folders[k - 1] / start))
+            # A later stage not begun yet starts afresh; the first one must exist to resume.
+            resume = args.resume and (k == 0 or (folders[k] / "last.pt").exists())
+            if len(stages) > 1:
+                print(f"stage {k + 1}/{len(stages)} ({stage.name}): {folders[k]}",
+                      file=sys.stderr)
+            result = train(coma_config, env_config, folders[k], resume=resume,
+                           progress=not args.no_progress)
     except (FileExistsError, CheckpointError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
