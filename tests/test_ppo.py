@@ -218,3 +218,19 @@ def test_planner_never_imports_training():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]"
+
+
+def test_ppo_preset_shipped_gives_the_shipped_runs_flags():
+    import json
+
+    from baselines.ppo_training import _parser
+
+    stored = json.loads(ppo.DEFAULT_CHECKPOINT.with_suffix(".json").read_text())["ppo_config"]
+    args = _parser("shipped").parse_args(["--preset", "shipped"])
+    made = {"n_envs": args.n_envs, "n_steps": args.n_steps, "batch_size": args.batch_size,
+            "lr": args.lr, "ent_coef": args.ent_coef, "width": args.width, "seed": args.seed,
+            "resolution": args.resolution, "n_agents": args.agents, "comm_range": args.comm,
+            "masked": args.masked, "checkpoint_every": args.checkpoint_every}
+    assert made == {k: stored[k] for k in made}
+    assert args.timesteps == 1_738_016  # what the shipped run trained before its time limit
+    assert _parser("shipped").parse_args(["--timesteps", "10"]).timesteps == 10
