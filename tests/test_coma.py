@@ -631,3 +631,37 @@ def test_inference_never_imports_training():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]"
+
+
+def test_coma_sees_what_the_pettingzoo_env_shows_on_the_same_missions():
+    """The learner's rollout and the native API are two drivers of one simulator: the same
+    missions and actions must give the same actor planes, critic planes, masks and rewards."""
+    from coma.persistence import build_networks
+    from coma.rollout import collect_rollout
+    from ipp_toolkit.config import EnvConfig
+    from ipp_toolkit.env import IPPEnv
+    from ipp_toolkit.mission import MissionGeometry
+
+    config = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 2},
+                                 terrain={"kind": "blobs"},
+                                 features={"own_position": True, "gain": True,
+                                           "gain_smoothing": 4.0})
+    networks = build_networks(COMAConfig(width=8, hidden=16, warm_start=""), config)
+    rollout = collect_rollout(networks, config, MissionGeometry(config), seed=5,
+                              first_mission=3, n_missions=2, eps=0.5,
+                              generator=torch.Generator().manual_seed(0))
+    env = IPPEnv(config, namespace="train")
+    for e in range(2):
+        observations, _ = env.reset(seed=5, options={"mission": 3 + e})
+        for t in range(config.team.budget):
+            agents = env.possible_agents
+            planes = np.stack([observations[a]["observation"] for a in agents])
+            np.testing.assert_array_equal(planes, rollout.actor_obs[e, :, t].numpy())
+            masks = np.stack([observations[a]["action_mask"] for a in agents]).astype(bool)
+            np.testing.assert_array_equal(masks, rollout.masks[e, :, t].numpy())
+            actions = rollout.actions[e, :, t].numpy()
+            np.testing.assert_array_equal(env.critic_observations(actions),
+                                          rollout.critic_obs[e, :, t].numpy())
+            observations, rewards, *_ = env.step(dict(zip(agents, actions.tolist(),
+                                                          strict=True)))
+            assert rewards[agents[0]] == pytest.approx(float(rollout.rewards[e, t]), abs=1e-6)
