@@ -4,8 +4,8 @@ Training runs sb3-contrib's ``MaskablePPO`` (default) or plain SB3 ``PPO`` on
 :func:`ipp_toolkit.vec.make_sb3_vec_env`: every agent slot is one SB3 env, every agent gets
 the team reward, and the policy sees only its own (C, 11, 11) actor planes. This module owns
 the training mission (:func:`training_env_config`), the run (:func:`train_ppo`: fresh or
-resumed from ``checkpoint.pt``, its SB3 callbacks for progress, time limit and checkpoints,
-the valid-action fix of plain PPO) and the command line (:func:`main`). The policy's
+resumed from ``checkpoint.pt``, its SB3 callbacks for progress, time limit and checkpoints)
+and the command line (:func:`main`). The policy's
 architecture and files, and the planner that flies it, live in :mod:`baselines.ppo`.
 """
 
@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
@@ -110,8 +109,9 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
 
     The env is ``env_config`` with the team size, range and resolution of ``config``
     (:func:`training_env_config`). Plain PPO (``masked=False``) samples from the unmasked
-    policy; the simulator refuses invalid actions, so such actions are replaced by the first
-    valid one before stepping (and recorded as taken, a known bias of unmasked PPO here).
+    policy; the view holds a UAV whose sampled action is masked in place for the step
+    (:func:`~ipp_toolkit.vec.make_sb3_vec_env`'s ``invalid_action="hold"``), so the action PPO
+    stores is the one executed.
 
     Args:
         config: hyper-parameters.
@@ -174,8 +174,6 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
                     max_grad_norm=config.max_grad_norm, policy_kwargs=policy_kwargs(config),
                     tensorboard_log=str(out_dir / "tb"), seed=env_seed, device="cpu",
                     verbose=0)
-        if not config.masked:
-            _install_valid_action_fix(venv)
         if state is not None:
             model.policy.load_state_dict(state["policy"])
             model.policy.optimizer.load_state_dict(state["optimizer"])
@@ -208,20 +206,6 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
                            train_seconds=round(seconds, 1))
     finally:
         venv.close()
-
-
-def _install_valid_action_fix(venv: Any) -> None:
-    """Plain PPO ignores masks: map each invalid action to the first valid one before stepping."""
-    step_async = venv.step_async
-
-    def fixed(actions: np.ndarray) -> None:
-        actions = np.asarray(actions).reshape(venv.num_envs).copy()
-        masks = venv.action_masks()
-        invalid = ~masks[np.arange(len(actions)), actions]
-        actions[invalid] = masks[invalid].argmax(axis=1)
-        step_async(actions)
-
-    venv.step_async = fixed
 
 
 # --------------------------------------------------------------------------------------------

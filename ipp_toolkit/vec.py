@@ -15,6 +15,13 @@ termination/truncation split and per-env infos.
 * seeds: ``seed(s)`` (or ``PPO(seed=s)``) makes the next reset start copy ``c`` on run
   ``s + c`` (mission 0, then 1, 2, ... at every auto-reset), so copies differ and the same
   seed replays the same missions, with any ``num_cpus``;
+* invalid actions: ``MaskablePPO`` never samples one (it reads the masks); an algorithm that
+  cannot mask (A2C, PPO, DQN, QR-DQN, RecurrentPPO, ...) may. The view's default,
+  ``invalid_action="hold"``, holds such a UAV in place for the step (it still measures), sets
+  ``info["invalid_action"] = True`` for its slot and subtracts ``invalid_penalty`` (default
+  0) from that slot's reward; the action stored by the algorithm is the one executed (a hold
+  is what that action does), so no sample is rewritten behind its back.
+  ``invalid_action="raise"`` keeps the simulator's own rule (an error), as the native API does;
 * the budget end is a true terminal: ``dones`` is True and
   ``info["TimeLimit.truncated"]`` is False, so PPO does not bootstrap past it;
 * ``close()`` stops SuperSuit's worker processes; it also runs at interpreter exit, because
@@ -41,7 +48,7 @@ from .config import EnvConfig, check_int
 from .env import IPPEnv
 from .team import N_ACTIONS
 
-__all__ = ["IPPVecEnv", "make_sb3_vec_env"]
+__all__ = ["IPPVecEnv", "INVALID_ACTION_POLICIES", "make_sb3_vec_env"]
 
 
 class IPPVecEnv(VecEnv):
@@ -55,9 +62,11 @@ class IPPVecEnv(VecEnv):
             ``{"observation": (C, G, G), "action_mask": (6,)}``.
         n_agents: agents per copy N.
         n_copies: copies of the simulator; ``venv.num_envs`` must be ``n_copies * N``.
+        invalid_penalty: subtracted from the reward of a slot whose action was masked (only
+            meaningful when the envs hold invalid actions, ``team.invalid_action="hold"``).
     """
 
-    def __init__(self, venv: Any, n_agents: int, n_copies: int):
+    def __init__(self, venv: Any, n_agents: int, n_copies: int, invalid_penalty: float = 0.0):
         n_agents = check_int("n_agents", n_agents, 1)
         n_copies = check_int("n_copies", n_copies, 1)
         if venv.num_envs != n_agents * n_copies:
@@ -68,9 +77,13 @@ class IPPVecEnv(VecEnv):
         if not isinstance(space, spaces.Dict) or set(space.spaces) != {"observation",
                                                                        "action_mask"}:
             raise ValueError(f"expected Dict(observation, action_mask) observations, got {space}")
+        if not np.isfinite(invalid_penalty) or invalid_penalty < 0:
+            raise ValueError(f"invalid_penalty must be a finite number >= 0, got "
+                             f"{invalid_penalty!r}")
         self.venv = venv
         self.n_agents = n_agents
         self.n_copies = n_copies
+        self.invalid_penalty = float(invalid_penalty)
         self.render_mode = getattr(venv, "render_mode", None)
         super().__init__(n_agents * n_copies, space["observation"], venv.action_space)
         self._masks = np.ones((self.num_envs, N_ACTIONS), dtype=bool)
@@ -169,18 +182,21 @@ class IPPVecEnv(VecEnv):
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
         actions, self._actions = self._actions, None
+        invalid = ~self._masks[np.arange(self.num_envs), np.asarray(actions, dtype=np.int64)]
         obs, rewards, terminated, truncated, infos = self.venv.step(actions)
+        rewards = np.asarray(rewards, dtype=np.float32) - np.float32(self.invalid_penalty) * invalid
         terminated = np.asarray(terminated, dtype=bool)
         truncated = np.asarray(truncated, dtype=bool)
         dones = terminated | truncated
         clean = []
         for slot, info in enumerate(infos):
             info = self._clean_info(info)
+            info["invalid_action"] = bool(invalid[slot])
             if dones[slot]:
                 # The budget end is a true terminal, never a time-limit truncation.
                 info["TimeLimit.truncated"] = bool(truncated[slot] and not terminated[slot])
             clean.append(info)
-        return (self._split(obs), np.asarray(rewards, dtype=np.float32), dones, clean)
+        return (self._split(obs), rewards, dones, clean)
 
     @staticmethod
     def _clean_info(info: dict[str, Any]) -> dict[str, Any]:
@@ -240,8 +256,12 @@ class IPPVecEnv(VecEnv):
         raise TypeError("IPPVecEnv cannot be pickled (it may own worker processes)")
 
 
+INVALID_ACTION_POLICIES = ("hold", "raise")
+
+
 def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 0,
-                     namespace: str = "train") -> IPPVecEnv:
+                     namespace: str = "train", invalid_action: str = "hold",
+                     invalid_penalty: float = 0.0) -> IPPVecEnv:
     """SB3 vector env over ``n_envs`` copies of the simulator, one slot per agent.
 
     Args:
@@ -251,6 +271,11 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
         num_cpus: worker processes (0 or 1: all copies in this process). More than
             ``n_envs`` is capped at ``n_envs``.
         namespace: random-stream namespace of the missions (``train`` for training).
+        invalid_action: what a masked action does in this view: ``hold`` (default: the UAV
+            stays and measures, counted in ``info["invalid_action"]``; every SB3 algorithm
+            trains as is) or ``raise`` (an error, the native API's rule). A config that
+            already says ``team.invalid_action="hold"`` holds either way.
+        invalid_penalty: reward subtracted from a slot whose action was masked (>= 0).
 
     Returns:
         an :class:`IPPVecEnv` with observations (C, G, G) float32, ``Discrete(6)`` actions and
@@ -274,13 +299,18 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
     num_cpus = check_int("num_cpus", num_cpus, 0)
     if not isinstance(namespace, str) or not namespace:
         raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
+    if invalid_action not in INVALID_ACTION_POLICIES:
+        raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
+                         f"{invalid_action!r}")
+    if invalid_action == "hold":
+        config = config.replace(team={"invalid_action": "hold"})
     env = IPPEnv(config, namespace=namespace)
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),
                                  base_class="gymnasium")
     try:
-        vec = IPPVecEnv(venv, config.team.n_agents, n_envs)
+        vec = IPPVecEnv(venv, config.team.n_agents, n_envs, invalid_penalty)
     except BaseException:
         venv.close()
         raise

@@ -177,7 +177,7 @@ def test_no_hang_at_exit_with_worker_processes(crash):
 def test_maskable_ppo_never_takes_a_masked_action():
     from sb3_contrib import MaskablePPO
 
-    vec = make_sb3_vec_env(small_config(n_agents=4), n_envs=2, seed=1)
+    vec = make_sb3_vec_env(small_config(n_agents=4), n_envs=2, seed=1, invalid_action="raise")
     taken = {"steps": 0, "invalid": 0}
     step_async = vec.step_async
 
@@ -191,7 +191,45 @@ def test_maskable_ppo_never_takes_a_masked_action():
     try:
         model = MaskablePPO("MlpPolicy", VecMonitor(vec), n_steps=128, batch_size=256,
                             n_epochs=1, seed=0)
-        model.learn(3072)  # the env would also raise InvalidActionError on a masked action
+        model.learn(3072)  # with invalid_action='raise' a masked action would also raise
     finally:
         vec.close()
     assert taken["steps"] >= 3072 and taken["invalid"] == 0
+
+
+@pytest.mark.parametrize("algo", ["A2C", "DQN"])
+def test_algorithms_that_cannot_mask_train_on_the_default_view(algo):
+    import stable_baselines3
+
+    vec = make_sb3_vec_env(small_config(n_agents=2), n_envs=1, seed=0)
+    try:
+        kwargs = {"learning_starts": 0, "buffer_size": 500} if algo == "DQN" else {"n_steps": 8}
+        model = getattr(stable_baselines3, algo)("MlpPolicy", VecMonitor(vec), seed=0, **kwargs)
+        model.learn(200)  # the untrained policy samples masked actions: they are held
+    finally:
+        vec.close()
+
+
+def test_invalid_actions_are_held_counted_and_penalised():
+    from ipp_toolkit.mission import InvalidActionError
+
+    config = small_config(n_agents=2)
+    vec = make_sb3_vec_env(config, n_envs=1, seed=0, invalid_penalty=0.5)
+    plain = make_sb3_vec_env(config, n_envs=1, seed=0)
+    strict = make_sb3_vec_env(config, n_envs=1, seed=0, invalid_action="raise")
+    try:
+        vec.reset(), plain.reset(), strict.reset()
+        masks = vec.action_masks()
+        assert not masks.all(), "a start position with a masked action is needed"
+        actions = np.array([int(np.flatnonzero(~m)[0]) if not m.all() else 0 for m in masks])
+        invalid = ~masks[np.arange(len(actions)), actions]
+        _, rewards, _, infos = vec.step(actions)
+        _, plain_rewards, _, _ = plain.step(actions)
+        assert [info["invalid_action"] for info in infos] == invalid.tolist()
+        np.testing.assert_allclose(rewards, plain_rewards - 0.5 * invalid, atol=1e-6)
+        with pytest.raises(InvalidActionError, match="masked"):
+            strict.step(actions)
+        with pytest.raises(ValueError, match="invalid_action"):
+            make_sb3_vec_env(config, n_envs=1, seed=0, invalid_action="skip")
+    finally:
+        vec.close(), plain.close(), strict.close()
