@@ -256,3 +256,94 @@ def test_ctrl_c_prints_one_line_and_a_killed_main_leaves_no_workers(tmp_path):
     while time.monotonic() < deadline and any(_alive(pid) for pid in workers):
         time.sleep(0.1)
     assert not [pid for pid in workers if _alive(pid)]
+
+
+def _yaml_file(tmp_path, text: str):
+    path = tmp_path / "mission.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--planners", "ig,astar"], "unknown planner 'astar'"),
+    (["--trials", "0"], "--trials"),
+    (["--comm", "far"], "--comm"),
+    (["--threshold", "3"], "in a raster's units, but the terrain is 'split'"),
+    (["--terrain", "/nonexistent/field.tif", "--threshold", "25"], "/nonexistent/field.tif"),
+    (["--terrain", "fractal", "--threshold-quantile", "1.5"], "threshold_quantile"),
+    (["--namespace", ""], "namespace"),
+    (["--budget", "0"], "budget"),
+    (["--area-size", "-50"], "--area-size"),
+    (["--planners", "coma=/nonexistent/policy.pt"], "/nonexistent/policy.pt"),
+    (["--planners", "ig,ig"], "planner 'ig' is given twice"),
+    (["--config", "{yaml}", "--planners", "ig"], "duplicate key 'n_agents'"),
+])
+def test_compare_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, argv, message):
+    argv = [a.replace("{yaml}", _yaml_file(tmp_path, "team:\n  n_agents: 2\n  n_agents: 4\n"))
+            for a in argv]
+    out = tmp_path / "out"
+    try:
+        code = compare_main(argv + ["--out", str(out), "--trials" if "--trials" not in argv
+                                    else "--seed", "1" if "--trials" not in argv else "0"])
+    except SystemExit as exit_:  # argparse refuses malformed flags itself
+        code = exit_.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("team: [1, 2]\n", "team"),
+    ("robots: {n: 2}\n", "robots"),
+    ("team: {n_agent: 2}\n", "n_agent"),
+    ("team: {n_agents: two}\n", "n_agents"),
+    ("world: {resolution: 0}\n", "resolution"),
+    ("sensor: {altitudes: [5, 10]}\n", "sensor"),
+    ("terrain: {kind: mixture, mixture: {split: -1}}\n", "mixture"),
+    (": : :\n", "not valid YAML"),
+])
+def test_bad_config_files_name_the_key_and_the_file(tmp_path, text, message):
+    from ipp_toolkit.config import load_config
+
+    path = _yaml_file(tmp_path, text)
+    with pytest.raises(ValueError, match=message) as error:
+        load_config(path)
+    assert path in str(error.value)
+
+
+@pytest.mark.parametrize("call, message", [
+    ("EnvConfig().replace(team={'n_agents': 0})", "n_agents"),
+    ("EnvConfig().replace(features={'gain_smoothing': float('nan')})", "gain_smoothing"),
+    ("evaluate(EnvConfig(), 'ig', missions=0)", "missions"),
+    ("evaluate(EnvConfig(), 'ig', seed=-1)", "seed"),
+    ("make_planner('ig', overlap_discount=2.0)", "overlap_discount"),
+    ("make_planner('ig_spatial', sigma=0.0)", "sigma"),
+    ("make_sb3_vec_env(EnvConfig(), n_envs=0, seed=0)", "n_envs"),
+    ("make_sb3_vec_env(EnvConfig(), n_envs=1, seed=0, invalid_action='skip')",
+     "invalid_action"),
+    ("IPPEnv(EnvConfig()).reset(seed=-3)", "seed"),
+    ("IPPEnv(EnvConfig()).reset(seed=0, options={'mission': -1})", "mission"),
+])
+def test_python_api_bad_input_raises_value_error_naming_it(call, message):
+    from ipp_toolkit.config import EnvConfig  # noqa: F401 - used by the calls
+    from ipp_toolkit.env import IPPEnv  # noqa: F401
+    from ipp_toolkit.evaluation import evaluate  # noqa: F401
+    from ipp_toolkit.planners import make_planner  # noqa: F401
+    from ipp_toolkit.vec import make_sb3_vec_env  # noqa: F401
+
+    with pytest.raises(ValueError, match=message):
+        eval(call)
+
+
+def test_a_raster_with_only_nodata_is_refused(tmp_path):
+    import numpy as np
+
+    from ipp_toolkit.config import EnvConfig
+    from ipp_toolkit.mission import reset_mission
+
+    path = tmp_path / "empty.npy"
+    np.save(path, np.full((64, 64), np.nan))
+    config = EnvConfig().replace(world={"resolution": 1.0},
+                                 terrain={"kind": "raster", "raster": str(path), "threshold": 1.0})
+    with pytest.raises(ValueError, match="empty.npy"):
+        reset_mission(config, seed=0, mission=0)
