@@ -347,3 +347,39 @@ def test_a_raster_with_only_nodata_is_refused(tmp_path):
                                  terrain={"kind": "raster", "raster": str(path), "threshold": 1.0})
     with pytest.raises(ValueError, match="empty.npy"):
         reset_mission(config, seed=0, mission=0)
+
+
+def test_a_killed_coma_training_resumes_without_loss_or_duplicates(tmp_path):
+    import csv
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from coma.persistence import load_policy
+
+    out = tmp_path / "run"
+    argv = ["coma", "--out", str(out), "--missions", "24", "--agents", "2", "--resolution",
+            "1.0", "--no-progress", "--warm-start", "none", "--set", "width=8",
+            "--set", "hidden=16", "--set", "missions_per_update=2", "--set", "eval_missions=1",
+            "--set", "minibatch_size=60", "--set", "checkpoint_every=1"]
+    script = "import sys; from reports.cli import train_main; sys.exit(train_main(sys.argv[1:]))"
+    process = subprocess.Popen([sys.executable, "-c", script, *argv], start_new_session=True,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        progress = out / "progress.csv"
+        if progress.exists() and len(progress.read_text().splitlines()) >= 4:
+            break
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    rows_when_killed = len((out / "progress.csv").read_text().splitlines()) - 1
+    assert 0 < rows_when_killed < 12  # killed mid-run
+    assert train_main(argv + ["--resume"]) == 0
+    with open(out / "progress.csv", newline="") as handle:
+        updates = [int(row["update"]) for row in csv.DictReader(handle)]
+    assert updates == list(range(1, 13))  # every update once, in order
+    networks, _ = load_policy(out / "last.pt")
+    assert networks is not None and (out / "best.pt").exists()
