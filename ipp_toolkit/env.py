@@ -4,7 +4,11 @@ Spaces per agent (G = 11 at the defaults, C = number of actor planes switched on
 default):
 
 * observation: ``Dict(observation=Box(-1, 1, (C, G, G), float32),
-  action_mask=Box(0, 1, (6,), int8))``; the mask is also in ``infos[agent]["action_mask"]``.
+  action_mask=Box(0, 1, (6,), int8))``; the mask is there only, not in the infos.
+* infos: flat, numeric and with the same keys at reset and at every step (so TorchRL's
+  ``PettingZooWrapper`` and BenchMARL can turn them into tensors): ``step`` (int),
+  ``blocked`` (bool, held back by the same-target rule this step) and ``entropy``, ``f1``,
+  ``rmse`` (float, of the global map; the same for every agent).
 * action: ``Discrete(6)``: 0 up, 1 north (+y), 2 east (+x), 3 south, 4 west, 5 down.
 * ``state()``: ``Box(0, 1, (C_state, G, G), float32)``, the centralised critic's global planes.
 
@@ -142,8 +146,8 @@ class IPPEnv(ParallelEnv):
                                      self.namespace, self.geometry, self._ground_truth,
                                      self._raster)
         self.agents = list(self.possible_agents)
-        observations, masks = self._observe()
-        return observations, self._infos(masks)
+        observations, _ = self._observe()
+        return observations, self._infos()
 
     def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance all agents by one step.
@@ -183,13 +187,13 @@ class IPPEnv(ParallelEnv):
                                          f"integer in 0..{N_ACTIONS - 1}")
             joint.append(int(action))
         reward = step_mission(self.mission, np.asarray(joint, dtype=np.int64))
-        observations, masks = self._observe()
+        observations, _ = self._observe()
         done = self.mission.done
         agents = list(self.agents)
         rewards = dict.fromkeys(agents, reward)
         terminations = dict.fromkeys(agents, done)
         truncations = dict.fromkeys(agents, False)
-        infos = self._infos(masks)
+        infos = self._infos()
         if done:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
@@ -201,10 +205,12 @@ class IPPEnv(ParallelEnv):
                         for k, agent in enumerate(self.possible_agents)}
         return observations, masks
 
-    def _infos(self, masks: np.ndarray) -> dict[str, dict[str, Any]]:
-        metrics = self.mission.history[-1].as_dict()
-        return {agent: {"action_mask": masks[k].copy(), "blocked": bool(self.mission.blocked[k]),
-                        "step": self.mission.step, "metrics": dict(metrics)}
+    def _infos(self) -> dict[str, dict[str, Any]]:
+        # Flat scalars with fixed keys: TorchRL builds its info spec from the reset infos and
+        # writes every step's values into it (a nested dict or a key missing at reset breaks it).
+        metrics = {key: float(value) for key, value in self.mission.history[-1].as_dict().items()}
+        return {agent: {"step": int(self.mission.step), "blocked": bool(self.mission.blocked[k]),
+                        **metrics}
                 for k, agent in enumerate(self.possible_agents)}
 
     def state(self) -> np.ndarray:

@@ -70,7 +70,9 @@ def simulate_main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     rng = np.random.default_rng(args.seed)
-    rows = [{"step": 0, "reward": "", **infos[env.possible_agents[0]]["metrics"]}]
+    metric_keys = ("entropy", "f1", "rmse")
+    first = infos[env.possible_agents[0]]
+    rows = [{"step": 0, "reward": "", **{key: first[key] for key in metric_keys}}]
     print(f"{config.team.n_agents} UAVs, D = {config.team.comm_range:g} m, "
           f"{config.world.map_cells}^2 map, budget {config.team.budget} steps")
     print(f"{'step':>4} {'reward':>8} {'entropy':>8} {'f1':>6} {'rmse':>6}")
@@ -79,7 +81,8 @@ def simulate_main(argv: list[str] | None = None) -> int:
         actions = {agent: int(rng.choice(np.flatnonzero(observations[agent]["action_mask"])))
                    for agent in env.agents}
         observations, rewards, _, _, infos = env.step(actions)
-        metrics = infos[env.possible_agents[0]]["metrics"]
+        info = infos[env.possible_agents[0]]
+        metrics = {key: info[key] for key in metric_keys}
         reward = rewards[env.possible_agents[0]]
         rows.append({"step": env.mission.step, "reward": reward, **metrics})
         print(f"{env.mission.step:>4} {reward:8.3f} {metrics['entropy']:8.3f} "

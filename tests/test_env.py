@@ -38,7 +38,7 @@ def test_spaces_and_observation_contents():
     for agent in env.agents:
         assert space.contains(obs[agent])
         assert obs[agent]["action_mask"].dtype == np.int8
-        assert (infos[agent]["action_mask"] == obs[agent]["action_mask"]).all()
+        assert (obs[agent]["action_mask"] == env.action_mask(agent)).all()
     planes = obs["uav_0"]["observation"]
     names = actor_plane_names(env.config.features)
     assert planes[names.index("budget")].max() == 1.0
@@ -81,7 +81,33 @@ def test_budget_end_is_terminal_not_truncation():
     assert env.agents == []
     names = actor_plane_names(env.config.features)
     assert obs["uav_0"]["observation"][names.index("budget")].max() == 0.0
-    assert infos["uav_0"]["metrics"]["entropy"] < 1.0
+    assert infos["uav_0"]["entropy"] < 1.0
+
+
+INFO_KEYS = {"step": int, "blocked": bool, "entropy": float, "f1": float, "rmse": float}
+
+
+def test_infos_are_flat_scalars_with_the_same_keys_at_reset_and_step():
+    # TorchRL's PettingZooWrapper (BenchMARL) builds tensors from the infos: no nested dicts,
+    # no key that appears only later, and the mask only in the observation.
+    env = IPPEnv(small_config(n_agents=2))
+    obs, infos = env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    steps = 0
+    while True:
+        assert set(infos) == set(env.possible_agents)
+        for agent, info in infos.items():
+            assert {key: type(value) for key, value in info.items()} == INFO_KEYS
+            assert info["step"] == steps
+            assert info["blocked"] == bool(env.mission.blocked[env.possible_agents.index(agent)])
+        metrics = env.mission.history[-1].as_dict()
+        assert {key: infos["uav_1"][key] for key in metrics} == pytest.approx(metrics)
+        if not env.agents:
+            break
+        actions = {a: int(rng.choice(np.flatnonzero(obs[a]["action_mask"]))) for a in env.agents}
+        obs, _, _, _, infos = env.step(actions)
+        steps += 1
+    assert steps == env.config.team.budget
 
 
 def test_step_errors_name_agent_and_action():

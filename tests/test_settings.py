@@ -140,6 +140,15 @@ def test_ipp_simulate_refuses_an_unwritable_out_before_flying(tmp_path, capsys):
     assert "--out" in err.err and "sub" in err.err and "step" not in err.out
 
 
+def test_ipp_simulate_writes_the_metrics_of_every_step(tmp_path, capsys):
+    assert simulate_main(["--out", str(tmp_path), "--resolution", "1.0", "--agents", "2"]) == 0
+    lines = (tmp_path / "metrics.csv").read_text().splitlines()
+    assert lines[0] == "step,reward,entropy,f1,rmse" and len(lines) == 1 + 16
+    entropy = [float(line.split(",")[2]) for line in lines[1:]]
+    assert 0 < entropy[-1] < entropy[0] <= 1
+    assert (tmp_path / "final.png").exists() and " 15 " in capsys.readouterr().out
+
+
 def test_threshold_quantile_keyword(tmp_path):
     assert build_env_config(terrain="fractal",
                             threshold_quantile=0.8).terrain.threshold_quantile == (0.8, 0.8)

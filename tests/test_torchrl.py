@@ -1,0 +1,64 @@
+"""IPPEnv through TorchRL's PettingZooWrapper (the engine under BenchMARL).
+
+Needs the optional extra ``torchrl`` (``pip install -c constraints.txt -e ".[torchrl]"``);
+skipped without it.
+"""
+
+import warnings
+
+import pytest
+import torch
+
+from ipp_toolkit import EnvConfig, IPPEnv
+
+pytest.importorskip("torchrl", reason="torchrl is not installed (optional extra 'torchrl')")
+
+from torchrl.envs.libs.pettingzoo import PettingZooWrapper  # noqa: E402
+from torchrl.envs.utils import check_env_specs  # noqa: E402
+
+INFO_KEYS = {"step", "blocked", "entropy", "f1", "rmse"}
+
+
+def _wrapped(seed: int = 0) -> PettingZooWrapper:
+    config = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 2})
+    with warnings.catch_warnings():
+        # TorchRL warns that it was tested on another PettingZoo version.
+        warnings.filterwarnings("ignore", message="PettingZoo in TorchRL", category=UserWarning)
+        return PettingZooWrapper(env=IPPEnv(config), return_state=True,
+                                 categorical_actions=True, seed=seed)
+
+
+def test_pettingzoo_wrapper_specs_and_masked_rollout():
+    env = _wrapped()
+    assert env.group_map == {"uav": ["uav_0", "uav_1"]}
+    check_env_specs(env)
+
+    budget = env._env.config.team.budget
+    torch.manual_seed(0)
+    # rand_action samples from the action spec, which the wrapper masks at every step.
+    rollout = env.rollout(budget + 5)
+    n = budget  # the rollout stops at the budget end: every agent is terminated together
+    group = rollout["uav"]
+    assert rollout.batch_size == (n,)
+    assert group["observation", "observation"].shape == (n, 2, 7, 11, 11)
+    assert group["action"].shape == (n, 2) and group["action"].dtype == torch.int64
+    assert group["action_mask"].shape == (n, 2, 6) and group["action_mask"].dtype == torch.bool
+    assert rollout["state"].shape == (n, 5, 11, 11)
+    assert set(group["info"].keys()) == INFO_KEYS
+    assert rollout["next", "uav", "reward"].shape == (n, 2, 1)
+
+    # No masked action was taken (IPPEnv would also have raised on one).
+    taken = group["action_mask"].gather(-1, group["action"].unsqueeze(-1))
+    assert taken.all()
+    # Masks are real: the top or bottom altitude forbids a move at some step.
+    assert not group["action_mask"].all()
+
+    steps = rollout["next", "uav", "info", "step"]
+    assert steps[:, 0].tolist() == list(range(1, n + 1))
+    done = rollout["next", "done"].squeeze(-1)
+    assert done[-1] and not done[:-1].any()
+    assert rollout["next", "uav", "terminated"][-1].all()
+    assert not rollout["next", "uav", "truncated"].any()
+    entropy = rollout["next", "uav", "info", "entropy"][:, 0]
+    assert entropy[-1] < group["info", "entropy"][0, 0]
+    env.close()
