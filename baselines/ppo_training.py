@@ -27,6 +27,7 @@ from tqdm.auto import tqdm
 
 from ipp_toolkit.config import EnvConfig, config_from_dict, start_for_team_size
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
+from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.vec import make_sb3_vec_env
 
@@ -295,9 +296,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ipp-train ppo: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"\nipp-train ppo: interrupted; continue with --resume --out {args.out} (from "
-              "the last checkpoint)", file=sys.stderr)
-        return 130
+        return report_interrupt("ipp-train ppo", f"continue with --resume --out {args.out} "
+                                "(from the last checkpoint)")
     print(f"saved {path}")
     return 0
 

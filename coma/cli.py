@@ -17,6 +17,7 @@ from typing import Any
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config, parse_feature_flags
 
 from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
@@ -221,9 +222,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"ipp-train coma: {error}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"\nipp-train coma: interrupted; continue with --resume --out {args.out} "
-              "(from the last checkpoint)", file=sys.stderr)
-        return 130
+        return report_interrupt("ipp-train coma", f"continue with --resume --out {args.out} "
+                                "(from the last checkpoint)")
     criterion = ("worst gap to IG's final entropy" if coma_config.selection == "worst_vs_ig"
                  else "final entropy")
     print(f"trained {result.updates} updates ({result.missions} missions); best validation "

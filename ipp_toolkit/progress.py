@@ -17,7 +17,7 @@ from typing import IO, Any
 
 from tqdm import tqdm
 
-__all__ = ["LineProgress", "progress_bar"]
+__all__ = ["LineProgress", "progress_bar", "report_interrupt"]
 
 
 class LineProgress:
@@ -80,3 +80,14 @@ def progress_bar(total: int, desc: str, unit: str, initial: int = 0, disable: bo
         return tqdm(total=total, initial=initial, desc=desc, unit=unit, disable=disable,
                     dynamic_ncols=True, file=stream)
     return LineProgress(total, desc, unit, initial=initial, file=stream)
+
+
+def report_interrupt(tool: str, how_to_continue: str) -> int:
+    """Ctrl-C in a long run: one line on stderr saying how to continue; returns 130 (SIGINT).
+
+    Args:
+        tool: the command, e.g. ``ipp-compare``.
+        how_to_continue: the rest of the sentence, e.g. ``continue with --resume --out RUN``.
+    """
+    print(f"\n{tool}: interrupted; {how_to_continue}", file=sys.stderr)
+    return 130

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ipp_toolkit.env import IPPEnv
+from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config, comm_label, describe_config, parse_comm
 
 
@@ -262,9 +263,8 @@ def interrupted(tool: str, out_dir: Path) -> int:
 
     Every mission is stored atomically as it ends, so the same command flies only the rest.
     """
-    print(f"\n{tool}: interrupted; the missions already flown are kept in {str(out_dir)!r}: "
-          "run the same command again to continue", file=sys.stderr)
-    return 130
+    return report_interrupt(tool, f"the missions already flown are kept in {str(out_dir)!r}: "
+                            "run the same command again to continue")
 
 
 TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training"}

@@ -621,18 +621,6 @@ def test_selection_by_the_worst_gap_to_ig_over_validation_terrains(tmp_path):
         tiny_coma(selection="best")
 
 
-def test_inference_never_imports_training():
-    import subprocess
-    import sys
-
-    code = ("import sys, coma.planner; "
-            "print(sorted(m for m in ('coma.learner', 'coma.warm_start', 'coma.rollout', "
-            "'coma.run_files', 'coma.cli') if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout.strip()
-    assert out == "[]"
-
-
 def test_coma_sees_what_the_pettingzoo_env_shows_on_the_same_missions():
     """The learner's rollout and the native API are two drivers of one simulator: the same
     missions and actions must give the same actor planes, critic planes, masks and rewards."""

@@ -68,3 +68,19 @@ def test_registry_errors():
 
     with pytest.raises(TypeError, match="not a Planner"):
         make_planner("test-not-a-planner")
+
+
+@pytest.mark.parametrize("planner_module, training_modules", [
+    ("coma.planner", ("coma.learner", "coma.warm_start", "coma.rollout", "coma.run_files",
+                      "coma.cli")),
+    ("baselines.ppo", ("baselines.ppo_training", "ipp_toolkit.vec")),
+])
+def test_inference_never_imports_training(planner_module, training_modules):
+    import subprocess
+    import sys
+
+    code = (f"import sys, {planner_module}; "
+            f"print(sorted(m for m in {training_modules!r} if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
