@@ -152,7 +152,9 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
     stored: set[concurrent.futures.Future] = set()
     error: BaseException | None = None
     try:
-        with single_thread_environment():  # workers start during the submissions
+        # Workers start during the submissions; they inherit one thread each and an ignored
+        # Ctrl-C (a worker still importing when it comes would otherwise print a traceback).
+        with single_thread_environment(), _children_ignore_sigint():
             futures = [executor.submit(_worker_task, label, mission)
                        for label, mission in tasks]
         for future in concurrent.futures.as_completed(futures):
@@ -177,6 +179,23 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
                 finish(*future.result())
                 bar.update(1)
         raise error
+
+
+@contextlib.contextmanager
+def _children_ignore_sigint() -> Iterator[None]:
+    """Ignore SIGINT while child processes start, so they begin with it ignored.
+
+    An ignored signal stays ignored across exec, and Python keeps it so at start-up. The main
+    process ignores Ctrl-C only for the few milliseconds of the submissions.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _stop_workers(executor: concurrent.futures.ProcessPoolExecutor) -> None:
