@@ -46,12 +46,15 @@ SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 #: Shipped policies by name, as in ``coma=shipped:NAME`` and ``--init shipped:NAME``.
 #: ``prior-mixture``: the ``prior`` policy fine-tuned on the terrain mixture (split, blobs,
 #: fractal, real), selected by its worst gap to IG over those families on validation missions.
+#: ``spatial-mixture``: the gain-prior actor over the ``ig_spatial`` objective
+#: (``features.gain_smoothing`` = 5 m), its residual trained by COMA on the terrain mixture.
 SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
                     "mixed": SHIPPED_MIXED_POLICY,
-                    "prior-mixture": "coma_prior_mixture_4agents_d25.pt"}
+                    "prior-mixture": "coma_prior_mixture_4agents_d25.pt",
+                    "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt"}
 #: The shipped policy the ``coma`` planner flies by default: the best on validation missions
 #: (4 UAVs, 25 m, every terrain family at r_M = 0.5 m; docs/generalisation.md).
-DEFAULT_SHIPPED = "prior-mixture"
+DEFAULT_SHIPPED = "spatial-mixture"
 
 
 @dataclass

@@ -436,7 +436,8 @@ def test_warm_start_settings_come_from_the_coma_config(tmp_path):
         tiny_coma(warm_start_epochs=0)
 
 
-@pytest.mark.parametrize("name", ["paper-actor", "mixed", "prior", "prior-mixture"])
+@pytest.mark.parametrize("name", ["paper-actor", "mixed", "prior", "prior-mixture",
+                                  "spatial-mixture"])
 def test_shipped_policies_load_by_name_and_fly(name):
     from ipp_toolkit.planners import make_planner
 
@@ -581,7 +582,7 @@ def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
     assert resolve_policy("runs/x/best.pt") == Path("runs/x/best.pt")
     with pytest.raises(ValueError, match="unknown shipped policy 'nope'; shipped policies: "
                                          "shipped:paper-actor, shipped:prior, shipped:mixed, "
-                                         "shipped:prior-mixture"):
+                                         "shipped:prior-mixture, shipped:spatial-mixture"):
         resolve_policy("shipped:nope")
     default = make_planner("coma")
     assert Path(default.checkpoint) == resolve_policy(f"shipped:{DEFAULT_SHIPPED}")
