@@ -211,15 +211,19 @@ def _alive(pid: int) -> bool:
 
 
 def _start_compare(out, argv):
+    import signal
     import subprocess
     import sys
     import time
 
     script = ("import sys; from reports.cli import compare_main; "
               "sys.exit(compare_main(sys.argv[1:]))")
+    # The child must take Ctrl-C as a terminal would: a test run started in the background
+    # (nohup, `&`) passes SIGINT down as ignored, and Python keeps it ignored.
     process = subprocess.Popen([sys.executable, "-c", script, *argv, "--out", str(out)],
                                start_new_session=True, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE, text=True)
+                               stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and process.poll() is None:
         if len(list(out.glob("shards/*/mission_*.json"))) >= 4:
