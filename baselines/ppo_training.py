@@ -255,8 +255,9 @@ def _parser(preset: str = "default") -> argparse.ArgumentParser:
     parser.add_argument("--resolution", type=float, default=None,
                         help=f"training map resolution in metres per cell (default: the "
                              f"--config file's, else {defaults.resolution:g})")
-    parser.add_argument("--num-cpus", type=int, default=defaults.num_cpus,
-                        help="SuperSuit worker processes (0: none)")
+    parser.add_argument("--workers", "--num-cpus", dest="num_cpus", type=int,
+                        default=defaults.num_cpus, metavar="N",
+                        help="SuperSuit worker processes (0: none; --num-cpus is the old name)")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
                         help="agent-transitions between checkpoints")
     parser.add_argument("--masked", action=argparse.BooleanOptionalAction,

@@ -222,3 +222,10 @@ def test_ppo_preset_shipped_gives_the_shipped_runs_flags():
     assert made == {k: stored[k] for k in made}
     assert args.timesteps == 1_738_016  # what the shipped run trained before its time limit
     assert _parser("shipped").parse_args(["--timesteps", "10"]).timesteps == 10
+
+
+def test_ppo_parallelism_flag_is_workers_with_the_old_name_kept():
+    from baselines.ppo_training import _parser
+
+    assert _parser().parse_args(["--workers", "2"]).num_cpus == 2
+    assert _parser().parse_args(["--num-cpus", "3"]).num_cpus == 3
