@@ -248,7 +248,9 @@ def test_ctrl_c_prints_one_line_and_a_killed_main_leaves_no_workers(tmp_path):
     assert process.returncode == 130
     assert "Traceback" not in err and err.count("interrupted") == 1
     assert "run the same command again" in err
-    time.sleep(1.0)
+    deadline = time.monotonic() + 10  # terminated workers are gone within moments
+    while time.monotonic() < deadline and any(_alive(pid) for pid in workers):
+        time.sleep(0.1)
     assert not [pid for pid in workers if _alive(pid)]
 
     process = _start_compare(tmp_path / "killed", argv)
