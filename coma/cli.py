@@ -18,7 +18,7 @@ from typing import Any
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.progress import report_interrupt
-from ipp_toolkit.settings import build_env_config, parse_feature_flags
+from ipp_toolkit.settings import build_env_config, merge_sections, parse_feature_flags
 
 from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
 from .learner import TrainingDiverged, train
@@ -171,8 +171,7 @@ def stage_configs(args: argparse.Namespace) -> list[tuple[Stage, COMAConfig, Env
             fields["init_policy"] = str(resolve_policy(stage.init))
         elif k > 0 and stage.init is not None and stage.init.startswith("previous"):
             fields.pop("init_policy", None)
-        defaults = {section: {**TRAINING_DEFAULTS.get(section, {}), **values}
-                    for section, values in {**TRAINING_DEFAULTS, **stage.env}.items()}
+        defaults = merge_sections(TRAINING_DEFAULTS, stage.env)
         stages.append((stage, preset("cpu", **fields), _env_from_args(args, defaults)))
     return stages
 

@@ -146,8 +146,7 @@ class IPPEnv(ParallelEnv):
                                      self.namespace, self.geometry, self._ground_truth,
                                      self._raster)
         self.agents = list(self.possible_agents)
-        observations, _ = self._observe()
-        return observations, self._infos()
+        return self._observe(), self._infos()
 
     def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance all agents by one step.
@@ -187,7 +186,7 @@ class IPPEnv(ParallelEnv):
                                          f"integer in 0..{N_ACTIONS - 1}")
             joint.append(int(action))
         reward = step_mission(self.mission, np.asarray(joint, dtype=np.int64))
-        observations, _ = self._observe()
+        observations = self._observe()
         done = self.mission.done
         agents = list(self.agents)
         rewards = dict.fromkeys(agents, reward)
@@ -198,12 +197,12 @@ class IPPEnv(ParallelEnv):
             self.agents = []
         return observations, rewards, terminations, truncations, infos
 
-    def _observe(self) -> tuple[dict[str, dict[str, np.ndarray]], np.ndarray]:
+    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
         planes = actor_observations(self.mission, self.config.features)
         masks = self.mission.masks()
         observations = {agent: {"observation": planes[k], "action_mask": masks[k]}
                         for k, agent in enumerate(self.possible_agents)}
-        return observations, masks
+        return observations
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         # Flat scalars with fixed keys: TorchRL builds its info spec from the reset infos and

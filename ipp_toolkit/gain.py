@@ -202,9 +202,13 @@ class FootprintGainCache:
         if cell_weight.shape != (n_maps,) + self.cells.shape[2:]:
             raise ValueError(f"cell_weight must have shape {(n_maps,) + self.cells.shape[2:]}, "
                              f"got {cell_weight.shape}")
-        weighted = self.cells[self.owner]  # a copy: (n_maps, Z, H, W)
-        weighted *= cell_weight[:, None]
-        return (self.rows_full @ weighted @ self.cols_full_t).astype(np.float64)
+        # Maps that share one belief (every map at D = inf) share one product: their cells
+        # and so their weights are identical.
+        owners, inverse = np.unique(self.owner, return_inverse=True)
+        weighted = self.cells[owners]  # a copy: (n_owners, Z, H, W)
+        weighted *= cell_weight[owners, None]
+        sums = self.rows_full @ weighted @ self.cols_full_t
+        return sums[inverse].astype(np.float64)
 
     def update(self) -> None:
         """Fold the maps' changes since the last call into the cache."""

@@ -50,6 +50,7 @@ __all__ = [
     "safe_name",
     "named_terrain_kinds",
     "parse_feature_flags",
+    "merge_sections",
 ]
 
 
@@ -84,7 +85,7 @@ def named_terrain_kinds() -> tuple[str, ...]:
     return tuple(kind for kind in terrain_kinds() if kind != "raster")
 
 
-def _merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
+def merge_sections(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
     """Section-wise merge of two nested config dicts; ``top`` wins key by key."""
     merged = {name: dict(values) for name, values in base.items()}
     for name, values in top.items():
@@ -174,7 +175,7 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
     else:
         given = {}
         source = ""
-    layered = _merge(defaults or {}, given)
+    layered = merge_sections(defaults or {}, given)
     if agents is not None and (isinstance(agents, bool) or int(agents) != agents or agents < 1):
         raise ValueError(f"agents must be an integer >= 1, got {agents!r}")
     if comm is not None:
@@ -203,7 +204,7 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
         terrain_section["threshold_quantile"] = None
     if terrain_section:
         flags["terrain"] = terrain_section
-    layered = _merge(layered, flags)
+    layered = merge_sections(layered, flags)
     try:
         draft = config_from_dict(_with_team_rules(layered, team_from_flag=agents is not None,
                                                   start_given="start" in given.get("team", {})))
@@ -239,7 +240,7 @@ def _with_team_rules(layered: dict[str, Any], team_from_flag: bool,
     scale = features.get("agent_id_scale", FeatureConfig.agent_id_scale)
     if features.get("agent_id", True) and isinstance(scale, int) and n_agents > scale:
         rules["features"] = {"agent_id_scale": n_agents}
-    return _merge(layered, rules)
+    return merge_sections(layered, rules)
 
 
 def describe_config(config: EnvConfig) -> str:

@@ -60,11 +60,11 @@ def test_position_window_shows_heard_teammates():
     assert np.count_nonzero(position > 0) == 1
     env.mission.positions[1, :2] = [4, 3]  # (20, 15): 2 east, 1 north of uav_0
     env.mission.heard[:] = True
-    obs, _ = env._observe()
+    obs = env._observe()
     position = obs["uav_0"]["observation"][names.index("position")]
     assert position[6, 7] == pytest.approx(1.0)
     env.mission.heard[0, 1] = False
-    obs, _ = env._observe()
+    obs = env._observe()
     assert obs["uav_0"]["observation"][names.index("position")][6, 7] == 0
 
 
