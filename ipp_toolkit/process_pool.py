@@ -27,7 +27,7 @@ from typing import Any, Protocol
 from .planner_specs import PlannerSpec
 from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
-__all__ = ["TaskRunner", "limit_torch_threads", "single_thread_environment",
+__all__ = ["TaskRunner", "guard_worker", "limit_torch_threads", "single_thread_environment",
            "transferable_factory", "run_parallel"]
 
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -66,18 +66,32 @@ def _exit_with_parent(parent: int) -> None:
             os._exit(1)
 
 
-def _init_worker(runner: TaskRunner) -> None:
+def guard_worker(parent: int) -> None:
+    """In a pool worker: ignore Ctrl-C (the main process handles it) and exit with ``parent``.
+
+    Call it first thing in a pool's initializer, with the main process's PID passed in its
+    ``initargs``. It exits at once when that process is already gone.
+    """
+    if os.getppid() != parent:
+        os._exit(1)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
+
+
+def _init_worker(runner: TaskRunner, parent: int) -> None:
     """Process-pool initializer: one thread per worker, then keep the runner for the tasks.
 
     Ctrl-C reaches every process of the terminal's group; only the main process handles it
     (it stops the pool), so a worker ignores it instead of printing its own traceback. A
-    worker whose main process was killed outright exits on its own (a watcher thread).
+    worker whose main process (``parent``) was killed outright exits on its own (a watcher
+    thread). ``parent`` comes from the main process, not from ``os.getppid()`` here: a worker
+    still starting when the main process died has already been handed to another parent,
+    and would wait for tasks forever (every worker holds the task queue's write end).
     """
     global _WORKER
+    guard_worker(parent)
     for name in _THREAD_VARIABLES:
         os.environ[name] = "1"
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
     runner.single_thread = True
     limit_torch_threads()
     _WORKER = runner
@@ -147,7 +161,7 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
     context = multiprocessing.get_context("spawn")
     executor = concurrent.futures.ProcessPoolExecutor(
         max_workers=n_workers, mp_context=context, initializer=_init_worker,
-        initargs=(runner,))
+        initargs=(runner, os.getpid()))
     futures: list[concurrent.futures.Future] = []
     stored: set[concurrent.futures.Future] = set()
     error: BaseException | None = None

@@ -169,11 +169,15 @@ def _train_runs(tasks: list[tuple[str, dict, dict, str, bool]], workers: int) ->
     """Train every task (in ``workers`` spawned processes when > 1); label -> best.pt."""
     import concurrent.futures
     import multiprocessing
+    import os
+
+    from ipp_toolkit.process_pool import guard_worker
 
     if workers > 1 and len(tasks) > 1:
         context = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(min(workers, len(tasks)),
-                                                    mp_context=context) as pool:
+        with concurrent.futures.ProcessPoolExecutor(
+                min(workers, len(tasks)), mp_context=context, initializer=guard_worker,
+                initargs=(os.getpid(),)) as pool:
             paths = list(pool.map(_train_run, tasks))
     else:
         paths = [_train_run(task) for task in tasks]

@@ -264,6 +264,18 @@ def test_ctrl_c_prints_one_line_and_a_killed_main_leaves_no_workers(tmp_path):
     assert not [pid for pid in workers if _alive(pid)]
 
 
+def test_a_worker_starting_after_its_main_process_died_exits_at_once():
+    """A pool worker still importing when the main process is killed is already an orphan
+    when its initializer runs: it must leave, not wait for tasks that never come."""
+    import subprocess
+    import sys
+
+    script = ("import os, time; from ipp_toolkit.process_pool import guard_worker; "
+              "guard_worker(os.getppid() + 1 if os.getppid() > 1 else 2); time.sleep(30)")
+    finished = subprocess.run([sys.executable, "-c", script], timeout=20)
+    assert finished.returncode == 1
+
+
 def _yaml_file(tmp_path, text: str):
     path = tmp_path / "mission.yaml"
     path.write_text(text)
