@@ -12,7 +12,7 @@ from ipp_toolkit.mapping import interesting_gain
 from ipp_toolkit.planners import AgentView
 from ipp_toolkit.sensor import Camera
 
-from .information_gain import InformationGainPlanner
+from .information_gain import CellGain, InformationGainPlanner
 
 __all__ = ["SpatialGainPlanner"]
 
@@ -71,6 +71,9 @@ class SpatialGainPlanner(InformationGainPlanner):
         super().reset(config, seed)
         self._interest = None
 
+    def _cell_objective(self, weights: tuple[float, float]) -> CellGain:
+        return interesting_gain
+
     def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
                     altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
         # One smoothing per agent and decision: the up, down and level boxes share it.
@@ -80,8 +83,6 @@ class SpatialGainPlanner(InformationGainPlanner):
             smoother = interest_smoother(world.map_cells, world.resolution, self.sigma)
             self._interest = (view, smoother.block_values(view.local_prob), smoother)
         _, blocks, smoother = self._interest
-        gain = interesting_gain(view.local_logodds[cells], view.local_prob[cells],
-                                view.local_entropy[cells], camera.accuracy[altitude],
-                                camera.delta_logodds[altitude])
+        gain = super()._cell_gains(view, camera, weights, altitude, cells)
         gain *= smoother.window(blocks, *cells)
         return gain

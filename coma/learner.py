@@ -33,6 +33,7 @@ from ipp_toolkit.config import EnvConfig, config_to_dict
 from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, write_json
 from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.process_pool import limit_blas_threads
 from ipp_toolkit.progress import progress_bar
 from ipp_toolkit.team import N_ACTIONS
 
@@ -302,6 +303,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         FileExistsError: ``out_dir`` holds a run and ``resume`` is false.
     """
     torch.set_num_threads(1)
+    limit_blas_threads()
     out = Path(out_dir)
     last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
     settings = mission_settings(coma_config, env_config)

@@ -39,7 +39,12 @@ from .io import write_json
 from .mission import MissionGeometry, MissionState, reset_mission, step_mission
 from .planner_specs import PlannerSpec, as_specs
 from .planners import Planner, PlannerFactory, agent_views, make_planner, planner_factory
-from .process_pool import limit_torch_threads, run_parallel, transferable_factory
+from .process_pool import (
+    limit_blas_threads,
+    limit_torch_threads,
+    run_parallel,
+    transferable_factory,
+)
 from .progress import progress_bar
 from .result_store import (
     RESULT_COLUMNS,
@@ -456,9 +461,10 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     with progress_bar(len(labels) * missions, "evaluate", "missions",
                       initial=len(labels) * missions - len(tasks), disable=not progress) as bar:
         if local_runner is not None:
-            for label, mission in tasks:
-                finish(*local_runner.run(label, mission))
-                bar.update(1)
+            with limit_blas_threads():
+                for label, mission in tasks:
+                    finish(*local_runner.run(label, mission))
+                    bar.update(1)
         elif tasks:
             runner = _Runner(config, seed, namespace, entries, record)
             run_parallel(runner, tasks, n_workers, finish, bar)

@@ -268,75 +268,34 @@ class FootprintGainCache:
             self.totals[k, iz] += rows @ delta[iz] @ cols.T
 
 
-_HASH_BITS = 18
-_HASH_MULTIPLIER = np.uint32(2654435761)  # Knuth's multiplicative hash
-
-
-def _hash(bits: np.ndarray) -> np.ndarray:
-    """Slot of each float32 bit pattern in a table of 2**_HASH_BITS slots."""
-    return (bits * _HASH_MULTIPLIER) >> np.uint32(32 - _HASH_BITS)
-
-
 class _GainTable:
-    """The per-cell expected gain as a function of the cell's log-odds, one row per altitude.
+    """The per-cell expected gain per altitude of every log-odds value of the maps' table.
 
-    A cell's probability and entropy are functions of its log-odds, so its expected gain at
-    altitude z is too; and log-odds are sums of a few reading increments, so a mission sees
-    few distinct values (hundreds to thousands against ~30,000 cells under one footprint).
-    A new value is computed once with the objective's per-cell function on the
-    maps' own cached probability and entropy of a cell holding it, so a looked-up gain is bit
-    for bit the one computed cell by cell. Values are found through a hash of their bit
-    pattern (one multiply, one shift, two gathers per cell); the few cells whose value is new
-    or shares its slot with another value go through a dict.
+    A cell's gain at altitude z is a function of its log-odds (through its probability and
+    entropy), so it is computed once per value of the maps'
+    :class:`~ipp_toolkit.value_table.ValueTable`, with the objective's per-cell function on
+    the table's own probability and entropy (the maps' caches hold the same numbers), and
+    looked up through the maps' ``value_index``: a looked-up gain is bit for bit the one
+    computed cell by cell.
     """
 
     def __init__(self, maps: BeliefMaps, camera: Camera, gain_of: CellGain):
         self.maps = maps
         self.camera = camera
         self.gain_of = gain_of
-        self.slot = np.full(1 << _HASH_BITS, -1, dtype=np.int64)  # hash -> value index
-        self.index_of: dict[int, int] = {}  # bit pattern -> value index (every value)
-        self.bits = np.empty(0, dtype=np.uint32)  # bit pattern of each value index
         self.values = np.empty((len(camera.accuracy), 0), dtype=np.float32)
 
     def lookup(self, k: int, region: Rect) -> np.ndarray:
         """(Z, rows, cols) float32 expected gain of map ``k``'s cells inside ``region``."""
         r0, r1, c0, c1 = region
-        cells = (k, slice(r0, r1), slice(c0, c1))
-        bits = self.maps.logodds[cells].ravel().view(np.uint32)
-        index = self.slot[_hash(bits)]
-        found = index >= 0
-        found[found] = self.bits[index[found]] == bits[found]
-        if not found.all():
-            self._resolve(k, cells, bits, index, ~found)
-        return self.values[:, index].reshape(-1, r1 - r0, c1 - c0)
-
-    def _resolve(self, k: int, cells: tuple, bits: np.ndarray, index: np.ndarray,
-                 missing: np.ndarray) -> None:
-        """Fill ``index`` where ``missing``, adding the values not seen before."""
-        where = np.flatnonzero(missing)
-        unique, first, inverse = np.unique(bits[where], return_index=True,
-                                           return_inverse=True)
-        resolved = np.empty(len(unique), dtype=np.int64)
-        new: list[int] = []
-        for j, pattern in enumerate(unique.tolist()):
-            known = self.index_of.get(pattern)
-            if known is None:
-                known = self.index_of[pattern] = len(self.bits) + len(new)
-                new.append(j)
-            resolved[j] = known
-        if new:
-            rows = where[first[new]]
-            prob = self.maps.prob[cells].ravel()[rows]
-            entropy = self.maps.entropy[cells].ravel()[rows]
-            keys = unique[new].view(np.float32)
-            camera = self.camera
-            gains = np.stack([self.gain_of(keys, prob, entropy, camera.accuracy[iz],
-                                           camera.delta_logodds[iz])
-                              for iz in range(len(camera.accuracy))])
-            self.bits = np.concatenate([self.bits, unique[new]])
-            self.values = np.concatenate([self.values, gains], axis=1)
-            slots = _hash(unique[new])
-            free = self.slot[slots] < 0
-            self.slot[slots[free]] = resolved[new][free]
-        index[where] = resolved[inverse]
+        table, known = self.maps.table, self.values.shape[1]
+        if known < len(table):
+            camera, size = self.camera, len(table)
+            logodds = table.values[known:]
+            prob = table.column("prob")[known:size]
+            entropy = table.column("entropy")[known:size]
+            new = np.stack([self.gain_of(logodds, prob, entropy, camera.accuracy[iz],
+                                         camera.delta_logodds[iz])
+                            for iz in range(len(camera.accuracy))])
+            self.values = np.concatenate([self.values, new], axis=1)
+        return self.values[:, self.maps.value_index[k, r0:r1, c0:c1]]

@@ -9,9 +9,12 @@ and of weighted entropy) are maintained incrementally the same way.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
+
+from . import kernels
+from .value_table import ValueTable
 
 __all__ = [
     "PROB_CLIP",
@@ -23,8 +26,10 @@ __all__ = [
     "weighted_entropy",
     "fuse_measurement",
     "BlockGrid",
+    "BELIEF_COLUMNS",
+    "belief_columns",
     "BeliefMaps",
-    "RegionChange",
+    "REGION_STATS",
     "f1_score",
     "expected_gain",
     "OUTCOME_WEIGHTINGS",
@@ -40,6 +45,14 @@ WEIGHT_TIE_TOLERANCE = 1e-3
 
 Rect = tuple[int, int, int, int]
 """A half-open map-cell rectangle (row0, row1, col0, col1)."""
+
+REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
+                "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
+                "new_weighted_entropy")
+"""What :meth:`BeliefMaps.refresh_with_stats` returns, in order: the changes inside the region
+of the sum of H over interesting cells, of the sum of (1 - p)^2 over them, of the true and of
+the predicted positives (p > 0.5), then the sums of W' H (posterior weights, prior entropies),
+of W H before and of W' H' after."""
 
 
 def logit(p: np.ndarray | float) -> np.ndarray:
@@ -135,6 +148,7 @@ class BlockGrid:
                                 grid_points - 1)
         self.map_cells = map_cells
         self.grid_points = grid_points
+        self.block_of_cell = block_of_cell  # (H,) planning-grid block of each row / column
         # edges[k] = first map cell of block k; edges[G] = map_cells.
         self.edges = np.searchsorted(block_of_cell, np.arange(grid_points + 1), side="left")
         if np.any(np.diff(self.edges) <= 0):
@@ -185,21 +199,20 @@ class BlockGrid:
         return np.outer(rows, cols)
 
 
-@dataclass
-class RegionChange:
-    """Old and new cached values inside one rectangle of one map, for incremental statistics.
+BELIEF_COLUMNS = ("prob", "entropy", "weights", "wentropy")
+"""The functions of a cell's log-odds that :attr:`BeliefMaps.table` keeps per value."""
 
-    Every array has the rectangle's shape (rows, cols).
+
+def belief_columns(logodds: np.ndarray, weight_interesting: float = 1.0,
+                   weight_uninteresting: float = 0.0) -> tuple[np.ndarray, ...]:
+    """p = sigmoid(l), H(p) in bits, W(p) and W H of float32 log-odds; each like ``logodds``.
+
+    Named by :data:`BELIEF_COLUMNS`; the one definition of a cell's cached values.
     """
-
-    rect: Rect
-    old_prob: np.ndarray
-    new_prob: np.ndarray
-    old_entropy: np.ndarray
-    new_entropy: np.ndarray
-    new_weights: np.ndarray
-    old_wentropy: np.ndarray
-    new_wentropy: np.ndarray
+    prob = 1.0 / (1.0 + np.exp(-logodds))
+    entropy = entropy_from_logodds(logodds)
+    weights = class_weights(prob, weight_interesting, weight_uninteresting)
+    return prob, entropy, weights, weights * entropy
 
 
 class BeliefMaps:
@@ -207,6 +220,10 @@ class BeliefMaps:
 
     Attributes:
         logodds: (M, H, W) float32, the belief; the only state, everything else is a cache.
+        table: the :class:`~ipp_toolkit.value_table.ValueTable` of every log-odds value the
+            maps hold, with their :data:`BELIEF_COLUMNS`.
+        value_index: (M, H, W) int32, each cell's index into :attr:`table` (as of its last
+            refresh).
         prob: (M, H, W) float32, sigmoid(logodds).
         entropy: (M, H, W) float32, binary entropy in bits.
         wentropy: (M, H, W) float32, weighted entropy W(p) H(p) in bits.
@@ -224,13 +241,15 @@ class BeliefMaps:
         self.weight_interesting = weight_interesting
         self.weight_uninteresting = weight_uninteresting
         self.logodds = np.full((n_maps, size, size), self.prior_logodds, dtype=np.float32)
-        p0 = np.float32(1.0 / (1.0 + np.exp(-self.prior_logodds)))
-        h0 = entropy_from_logodds(np.float32(self.prior_logodds))
+        self.table = ValueTable(partial(belief_columns, weight_interesting=weight_interesting,
+                                        weight_uninteresting=weight_uninteresting),
+                                BELIEF_COLUMNS, first=self.logodds[0, 0, :1])
+        self.value_index = np.zeros((n_maps, size, size), dtype=np.int32)
+        p0, h0, w0, wh0 = (self.table.column(name)[0] for name in BELIEF_COLUMNS)
         self.prior_prob, self.prior_entropy = p0, h0  # the caches' value in every new cell
-        w0 = class_weights(np.float32(p0), weight_interesting, weight_uninteresting)
         self.prob = np.full((n_maps, size, size), p0, dtype=np.float32)
         self.entropy = np.full((n_maps, size, size), h0, dtype=np.float32)
-        self.wentropy = np.full((n_maps, size, size), w0 * h0, dtype=np.float32)
+        self.wentropy = np.full((n_maps, size, size), wh0, dtype=np.float32)
         self.prob_blocks = np.broadcast_to(blocks.block_area * float(p0),
                                            (n_maps,) + blocks.block_area.shape).copy()
         self.wentropy_blocks = np.broadcast_to(blocks.block_area * float(w0 * h0),
@@ -254,30 +273,75 @@ class BeliefMaps:
         region += delta_logodds
         np.clip(region, -LOGODDS_CLIP, LOGODDS_CLIP, out=region)
 
-    def refresh(self, index: int, rect: Rect) -> RegionChange:
+    def refresh(self, index: int, rect: Rect) -> None:
         """Recompute the caches of map ``index`` inside ``rect`` from its log-odds.
 
         Overlapping rectangles may be refreshed one after another: a cell refreshed twice
         contributes a zero change the second time, so block sums and any statistics built
-        from the returned changes stay exact.
+        from the changes (:meth:`refresh_with_stats`) stay exact.
         """
-        r0, r1, c0, c1 = rect
-        self.changes.append((index, (int(r0), int(r1), int(c0), int(c1))))
-        logodds = self.logodds[index, r0:r1, c0:c1]
-        new_prob = 1.0 / (1.0 + np.exp(-logodds))
-        new_entropy = entropy_from_logodds(logodds)
-        new_weights = self.weights(new_prob)
-        new_wentropy = new_weights * new_entropy
+        self._refresh(index, rect, None)
+
+    def refresh_with_stats(self, index: int, rect: Rect, truth: np.ndarray) -> np.ndarray:
+        """:meth:`refresh`, returning how the metric and reward sums moved inside ``rect``.
+
+        Args:
+            truth: (rows, cols) bool ground truth of the rectangle.
+
+        Returns:
+            (len(REGION_STATS),) float64 changes, named by :data:`REGION_STATS`.
+        """
+        return self._refresh(index, rect, truth)
+
+    def _refresh(self, index: int, rect: Rect, truth: np.ndarray | None) -> np.ndarray | None:
+        r0, r1, c0, c1 = (int(v) for v in rect)
+        self.changes.append((index, (r0, r1, c0, c1)))
         cells = (index, slice(r0, r1), slice(c0, c1))
-        change = RegionChange(rect, self.prob[cells].copy(), new_prob, self.entropy[cells].copy(),
-                              new_entropy, new_weights, self.wentropy[cells].copy(), new_wentropy)
+        ids = self.table.indices(self.logodds[cells])
+        if not kernels.AVAILABLE:
+            return self._apply_numpy(index, (r0, r1, c0, c1), ids, truth)
+        prob, entropy, weights, wentropy = (self.table.column(name) for name in BELIEF_COLUMNS)
+        rows, cols = self.blocks.block_of_cell[r0:r1], self.blocks.block_of_cell[c0:c1]
+        caches = (self.value_index[cells], self.prob[cells], self.entropy[cells],
+                  self.wentropy[cells])
+        if truth is None:
+            kernels.apply_values(ids, *caches, prob, entropy, wentropy, rows, cols,
+                                 self.prob_blocks[index], self.wentropy_blocks[index])
+            return None
+        return kernels.apply_values_with_stats(ids, *caches, prob, entropy, weights, wentropy,
+                                               rows, cols, self.prob_blocks[index],
+                                               self.wentropy_blocks[index], truth)
+
+    def _apply_numpy(self, index: int, rect: Rect, new: np.ndarray, truth: np.ndarray | None
+                     ) -> np.ndarray | None:
+        """The caches' update of :meth:`_refresh` in NumPy (the kernels' reference)."""
+        r0, r1, c0, c1 = rect
+        cells = (index, slice(r0, r1), slice(c0, c1))
+        prob, entropy, weights, wentropy = (self.table.column(name) for name in BELIEF_COLUMNS)
+        self.value_index[cells] = new
+        old_prob, old_entropy = self.prob[cells].copy(), self.entropy[cells].copy()
+        old_wentropy = self.wentropy[cells].copy()
+        new_prob, new_entropy, new_wentropy = prob[new], entropy[new], wentropy[new]
+        self.blocks.add_block_sums(self.prob_blocks[index], new_prob - old_prob, rect)
+        self.blocks.add_block_sums(self.wentropy_blocks[index], new_wentropy - old_wentropy,
+                                   rect)
         self.prob[cells] = new_prob
         self.entropy[cells] = new_entropy
         self.wentropy[cells] = new_wentropy
-        self.blocks.add_block_sums(self.prob_blocks[index], new_prob - change.old_prob, rect)
-        self.blocks.add_block_sums(self.wentropy_blocks[index], new_wentropy - change.old_wentropy,
-                                   rect)
-        return change
+        if truth is None:
+            return None
+        # (1 - p')^2 - (1 - p)^2 = (p - p') (2 - p - p')
+        squared_error_change = (old_prob - new_prob) * (2.0 - old_prob - new_prob)
+        old_positive, new_positive = old_prob > 0.5, new_prob > 0.5
+        return np.array([
+            np.sum(new_entropy - old_entropy, where=truth, dtype=np.float64),
+            np.sum(squared_error_change, where=truth, dtype=np.float64),
+            np.count_nonzero(new_positive & truth) - np.count_nonzero(old_positive & truth),
+            np.count_nonzero(new_positive) - np.count_nonzero(old_positive),
+            np.sum(weights[new] * old_entropy, dtype=np.float64),
+            np.sum(old_wentropy, dtype=np.float64),
+            np.sum(new_wentropy, dtype=np.float64),
+        ], dtype=np.float64)
 
     def prob_plane(self, index: int) -> np.ndarray:
         """(G, G) mean probability of map ``index`` per planning-grid block."""

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .config import START_POSITIONS, EnvConfig
-from .mapping import BeliefMaps, BlockGrid, RegionChange
+from .mapping import BeliefMaps, BlockGrid
 from .seeding import MissionStreams, mission_streams
 from .sensor import Camera
 from .team import (
@@ -398,8 +398,9 @@ def _measure_exchange_fuse(state: MissionState) -> float:
     numerator = 0.0
     denominator = state.stats.weighted_entropy
     for i in range(n):
-        change = maps.refresh(g, rects[i])
-        gained, reweighted = _update_global_stats(state, change)
+        r0, r1, c0, c1 = rects[i]
+        sums = maps.refresh_with_stats(g, rects[i], state.ground_truth[r0:r1, c0:c1])
+        gained, reweighted = _fold_region_stats(state.stats, sums)
         numerator += gained
         denominator += reweighted
     reward_cfg = state.config.reward
@@ -408,31 +409,20 @@ def _measure_exchange_fuse(state: MissionState) -> float:
     return float(reward_cfg.alpha * numerator / denominator + reward_cfg.beta)
 
 
-def _update_global_stats(state: MissionState, change: RegionChange) -> tuple[float, float]:
+def _fold_region_stats(stats: _GlobalStats, sums: np.ndarray) -> tuple[float, float]:
     """Fold one refreshed global region into the running sums.
+
+    Args:
+        sums: the region's changes, :data:`ipp_toolkit.mapping.REGION_STATS`.
 
     Returns the region's share of the reward's numerator, sum W'(H - H'), and of the
     correction of its denominator, sum (W' - W) H, with W' the posterior weights.
     """
-    r0, r1, c0, c1 = change.rect
-    truth = state.ground_truth[r0:r1, c0:c1]
-    stats = state.stats
-    old_p, new_p = change.old_prob, change.new_prob
-    old_h, new_h = change.old_entropy, change.new_entropy
-    stats.entropy_interesting += float(np.sum(new_h - old_h, where=truth, dtype=np.float64))
-    # (1 - p')^2 - (1 - p)^2 = (p - p') (2 - p - p')
-    squared_error_change = (old_p - new_p) * (2.0 - old_p - new_p)
-    stats.squared_error_interesting += float(np.sum(squared_error_change, where=truth,
-                                                    dtype=np.float64))
-    old_pred, new_pred = old_p > 0.5, new_p > 0.5
-    stats.true_positive += int(np.count_nonzero(new_pred & truth)
-                               - np.count_nonzero(old_pred & truth))
-    stats.predicted_positive += int(np.count_nonzero(new_pred) - np.count_nonzero(old_pred))
-    # With W' the posterior weights: gained = sum W'(H - H'), reweighted = sum (W' - W) H.
-    reweighted_old = float(np.sum(change.new_weights * old_h, dtype=np.float64))
-    old_went = float(np.sum(change.old_wentropy, dtype=np.float64))
-    new_went = float(np.sum(change.new_wentropy, dtype=np.float64))
-    gained = reweighted_old - new_went
-    reweighted = reweighted_old - old_went
+    (entropy_interesting, squared_error, true_positive, predicted_positive,
+     reweighted_old, old_went, new_went) = sums.tolist()
+    stats.entropy_interesting += entropy_interesting
+    stats.squared_error_interesting += squared_error
+    stats.true_positive += int(true_positive)
+    stats.predicted_positive += int(predicted_positive)
     stats.weighted_entropy += new_went - old_went
-    return gained, reweighted
+    return reweighted_old - new_went, reweighted_old - old_went

@@ -27,8 +27,8 @@ from typing import Any, Protocol
 from .planner_specs import PlannerSpec
 from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
-__all__ = ["TaskRunner", "guard_worker", "limit_torch_threads", "single_thread_environment",
-           "transferable_factory", "run_parallel"]
+__all__ = ["TaskRunner", "guard_worker", "limit_blas_threads", "limit_torch_threads",
+           "single_thread_environment", "transferable_factory", "run_parallel"]
 
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
@@ -42,6 +42,20 @@ class TaskRunner(Protocol):
     single_thread: bool
 
     def run(self, label: str, mission: int) -> TaskResult: ...
+
+
+def limit_blas_threads() -> Any:
+    """One thread for NumPy's BLAS in this process (a context manager restores the old count).
+
+    The toolkit's matrix products are small and many (footprint sums, smoothing): on a
+    2-core machine OpenBLAS's threads made them ten times slower than one thread (measured
+    in docs/performance.md), and processes, not threads, are its parallelism. The CLI, the
+    trainers and the evaluation workers call this; :func:`ipp_toolkit.evaluation.evaluate`
+    uses it as a context manager in the calling process.
+    """
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def limit_torch_threads() -> None:
@@ -93,6 +107,7 @@ def _init_worker(runner: TaskRunner, parent: int) -> None:
     for name in _THREAD_VARIABLES:
         os.environ[name] = "1"
     runner.single_thread = True
+    limit_blas_threads()
     limit_torch_threads()
     _WORKER = runner
 
