@@ -89,7 +89,7 @@ class PPOTrainConfig:
         features_dim: output size of :class:`SmallCNN` (its final linear layer).
         hidden: width of the one hidden layer of the policy and of the value head.
         masked: train with sb3-contrib ``MaskablePPO`` (invalid actions never sampled) instead
-            of plain ``PPO`` (whose invalid samples are replaced by valid ones, see
+            of plain ``PPO`` (a sampled masked action holds the UAV for the step, see
             :func:`baselines.ppo_training.train_ppo`).
         seed: seed of the policy, the sampling and the training missions.
         resolution: map resolution (metres per cell) of the training world; coarser than the
@@ -99,6 +99,8 @@ class PPOTrainConfig:
         num_cpus: SuperSuit worker processes (0: everything in this process, fastest on two
             cores).
         checkpoint_every: agent-transitions between training checkpoints.
+        invalid_penalty: reward subtracted from an agent slot whose (unmasked) action was
+            masked; the UAV holds for that step (plain PPO only: MaskablePPO never picks one).
     """
 
     total_timesteps: int = 200_000
@@ -123,6 +125,7 @@ class PPOTrainConfig:
     comm_range: float = 25.0
     num_cpus: int = 0
     checkpoint_every: int = 20_000
+    invalid_penalty: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "width",
@@ -145,7 +148,7 @@ class PPOTrainConfig:
             value = getattr(self, name)
             if not isinstance(value, int | float) or not 0.0 <= value <= 1.0:
                 raise ValueError(f"invalid PPO config: {name} must lie in [0, 1], got {value!r}")
-        for name in ("ent_coef", "vf_coef"):
+        for name in ("ent_coef", "vf_coef", "invalid_penalty"):
             value = getattr(self, name)
             if not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
                 raise ValueError(f"invalid PPO config: {name} must be a number >= 0, "

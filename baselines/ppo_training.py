@@ -3,47 +3,56 @@
 Training runs sb3-contrib's ``MaskablePPO`` (default) or plain SB3 ``PPO`` on
 :func:`ipp_toolkit.vec.make_sb3_vec_env`: every agent slot is one SB3 env, every agent gets
 the team reward, and the policy sees only its own (C, 11, 11) actor planes. This module owns
-the training mission (:func:`training_env_config`), the run (:func:`train_ppo`: fresh or
-resumed from ``checkpoint.pt``, its SB3 callbacks for progress, time limit and checkpoints)
-and the command line (:func:`main`). The policy's
-architecture and files, and the planner that flies it, live in :mod:`baselines.ppo`.
+the training mission (:func:`training_env_config`), the PPO run (:func:`train_ppo`: fresh or
+resumed from ``checkpoint.pt``; the loop, its callbacks for progress, time limit and
+checkpoints are :mod:`baselines.sb3_runner`'s, shared by every SB3 algorithm) and the command
+line (:func:`main`). ``ipp-train ppo`` is the PPO case of ``ipp-train sb3``
+(:mod:`baselines.sb3_training`): ``ipp-train sb3 --algo MaskablePPO`` runs the same code with
+the same flags, ``--algo PPO`` adds ``--no-masked``. The policy's architecture and files, and
+the planner that flies it, live in :mod:`baselines.ppo`.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import shlex
 import sys
-import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
-import torch
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
-from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecMonitor
-from tqdm.auto import tqdm
 
 from ipp_toolkit.config import EnvConfig, config_from_dict, start_for_team_size
-from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
+from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config
+from ipp_toolkit.team import N_ACTIONS
 from ipp_toolkit.vec import make_sb3_vec_env
 
 from .ppo import (
+    CHECKPOINT_KIND,
     TRAINING_KIND,
     PPOTrainConfig,
     model_payload,
     policy_kwargs,
     policy_metadata,
-    save_policy,
 )
+from .sb3_runner import RunFormat, run_sb3_training
 
-__all__ = ["training_env_config", "train_ppo", "main"]
+__all__ = ["TrainingWorld", "training_env_config", "train_ppo", "main"]
 
 
-def training_env_config(config: PPOTrainConfig, env_config: EnvConfig) -> EnvConfig:
+class TrainingWorld(Protocol):
+    """The training-world fields every trainer config has (PPOTrainConfig, SB3TrainConfig)."""
+
+    n_agents: int
+    comm_range: float
+    resolution: float
+
+
+def training_env_config(config: TrainingWorld, env_config: EnvConfig) -> EnvConfig:
     """``env_config`` with the training team size, range and resolution of ``config``."""
     start = start_for_team_size(env_config.team.start, int(config.n_agents), env_config.world)
     return env_config.replace(world={"resolution": float(config.resolution)},
@@ -55,64 +64,22 @@ def training_env_config(config: PPOTrainConfig, env_config: EnvConfig) -> EnvCon
 # Training
 
 
-def _progress_callback(total: int, initial: int) -> BaseCallback:
-    class TqdmCallback(BaseCallback):
-        """tqdm bar over agent-transitions (SB3's own bar needs ``rich``)."""
-
-        def _on_training_start(self) -> None:
-            self.bar = tqdm(total=total, initial=initial, unit="step", desc="ppo",
-                            dynamic_ncols=True)
-
-        def _on_step(self) -> bool:
-            self.bar.update(self.model.num_timesteps - self.bar.n)
-            return True
-
-        def _on_training_end(self) -> None:
-            self.bar.close()
-
-    return TqdmCallback()
-
-
-def _time_limit_callback(deadline: float) -> BaseCallback:
-    class TimeLimitCallback(BaseCallback):
-        """Stops training once ``deadline`` (a perf_counter time) has passed.
-
-        Returning False from a step ends SB3's rollout and ``learn`` (the partial rollout is
-        not trained on).
-        """
-
-        def _on_step(self) -> bool:
-            return time.perf_counter() < deadline
-
-    return TimeLimitCallback()
-
-
-def _checkpoint_callback(every: int, save: Any) -> BaseCallback:
-    class CheckpointCallback(BaseCallback):
-        """Writes ``checkpoint.pt`` every ``every`` agent-transitions (atomically)."""
-
-        def _on_training_start(self) -> None:
-            self.next_save = (self.model.num_timesteps // every + 1) * every
-
-        def _on_step(self) -> bool:
-            if self.model.num_timesteps >= self.next_save:
-                save()
-                self.next_save = (self.model.num_timesteps // every + 1) * every
-            return True
-
-    return CheckpointCallback()
+def _ppo_run_format() -> RunFormat:
+    return RunFormat(algo_label="PPO", policy_kind=CHECKPOINT_KIND, training_kind=TRAINING_KIND,
+                     metadata=policy_metadata, tb_log_name="ppo")
 
 
 def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path,
               progress: bool = True, resume: bool = False,
-              time_limit_s: float | None = None) -> Path:
+              time_limit_s: float | None = None, command: str | None = None) -> Path:
     """Train a shared PPO policy and write it to ``out_dir/policy.pt``.
 
-    The env is ``env_config`` with the team size, range and resolution of ``config``
+    The PPO case of ``ipp-train sb3`` (:mod:`baselines.sb3_runner` runs it). The env is
+    ``env_config`` with the team size, range and resolution of ``config``
     (:func:`training_env_config`). Plain PPO (``masked=False``) samples from the unmasked
     policy; the view holds a UAV whose sampled action is masked in place for the step
-    (:func:`~ipp_toolkit.vec.make_sb3_vec_env`'s ``invalid_action="hold"``), so the action PPO
-    stores is the one executed.
+    (:func:`~ipp_toolkit.vec.make_sb3_vec_env`'s ``invalid_action="hold"``, minus
+    ``config.invalid_penalty``), so the action PPO stores is the one executed.
 
     Args:
         config: hyper-parameters.
@@ -122,6 +89,7 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         resume: continue from ``out_dir/checkpoint.pt`` (its configs must match).
         time_limit_s: stop after this many seconds of training (this call; a partial rollout
             is dropped) and save what was learnt; None trains for ``total_timesteps``.
+        command: the command line that started the run, recorded in the JSON files.
 
     Returns:
         the path of the saved ``policy.pt``.
@@ -134,79 +102,41 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         raise ValueError(f"config must be a PPOTrainConfig, got {type(config).__name__}")
     if not isinstance(env_config, EnvConfig):
         raise ValueError(f"env_config must be an EnvConfig, got {type(env_config).__name__}")
-    if time_limit_s is not None and (not isinstance(time_limit_s, int | float)
-                                     or not time_limit_s > 0):
-        raise ValueError(f"time_limit_s must be a positive number or None, got {time_limit_s!r}")
-    torch.set_num_threads(1)  # two cores, shared: more threads collapse (see the notes)
     env_cfg = training_env_config(config, env_config)
-    out_dir = Path(out_dir)
-    ckpt_path = out_dir / "checkpoint.pt"
-    state = None
-    if resume:
-        if ckpt_path.is_file():
-            state = load_torch(ckpt_path, TRAINING_KIND)
-            stored = PPOTrainConfig.from_dict(state["ppo_config"])
-            if dataclasses.replace(stored, total_timesteps=config.total_timesteps) != config:
-                raise ValueError(f"cannot resume {str(ckpt_path)!r}: its PPO config "
-                                 f"{stored} differs from the given {config} (only "
-                                 "total_timesteps may change)")
-            if config_from_dict(state["env_config"]) != env_cfg:
-                raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
-                                 "env config")
-        else:
-            raise ValueError(f"nothing to resume: {str(ckpt_path)!r} does not exist (drop "
-                             "--resume to start a new run)")
-    elif ckpt_path.exists() or (out_dir / "policy.pt").exists():
-        raise ValueError(f"{str(out_dir)!r} already holds a PPO run; pass resume=True "
-                         "(--resume) or choose another output folder")
-    out_dir.mkdir(parents=True, exist_ok=True)
 
-    done = int(state["num_timesteps"]) if state is not None else 0
-    # A resumed run starts new missions: copy c continues on run seed + done + c.
-    env_seed = config.seed + done
-    venv = make_sb3_vec_env(env_cfg, config.n_envs, env_seed, num_cpus=config.num_cpus)
-    try:
-        env = VecMonitor(venv)
+    def check_resume(state: dict[str, Any], ckpt_path: Path) -> None:
+        stored = PPOTrainConfig.from_dict(state["ppo_config"])
+        if dataclasses.replace(stored, total_timesteps=config.total_timesteps) != config:
+            raise ValueError(f"cannot resume {str(ckpt_path)!r}: its PPO config "
+                             f"{stored} differs from the given {config} (only "
+                             "total_timesteps may change)")
+        if config_from_dict(state["env_config"]) != env_cfg:
+            raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
+                             "env config")
+
+    def make_env(env_seed: int) -> Any:
+        return make_sb3_vec_env(env_cfg, config.n_envs, env_seed, num_cpus=config.num_cpus,
+                                invalid_penalty=config.invalid_penalty)
+
+    def make_model(env: Any, env_seed: int, tb_dir: str, done: int) -> Any:
         cls = MaskablePPO if config.masked else PPO
-        model = cls("MlpPolicy", env, learning_rate=config.lr, n_steps=config.n_steps,
-                    batch_size=config.batch_size, n_epochs=config.n_epochs, gamma=config.gamma,
-                    gae_lambda=config.gae_lambda, clip_range=config.clip_range,
-                    ent_coef=config.ent_coef, vf_coef=config.vf_coef,
-                    max_grad_norm=config.max_grad_norm, policy_kwargs=policy_kwargs(config),
-                    tensorboard_log=str(out_dir / "tb"), seed=env_seed, device="cpu",
-                    verbose=0)
-        if state is not None:
-            model.policy.load_state_dict(state["policy"])
-            model.policy.optimizer.load_state_dict(state["optimizer"])
-            model.num_timesteps = done
-            model._episode_num = int(state.get("episodes", 0))
-        started = time.perf_counter()
-        elapsed_before = float(state.get("train_seconds", 0.0)) if state is not None else 0.0
+        return cls("MlpPolicy", env, learning_rate=config.lr, n_steps=config.n_steps,
+                   batch_size=config.batch_size, n_epochs=config.n_epochs, gamma=config.gamma,
+                   gae_lambda=config.gae_lambda, clip_range=config.clip_range,
+                   ent_coef=config.ent_coef, vf_coef=config.vf_coef,
+                   max_grad_norm=config.max_grad_norm, policy_kwargs=policy_kwargs(config),
+                   tensorboard_log=tb_dir, seed=env_seed, device="cpu", verbose=0)
 
-        def save_checkpoint() -> None:
-            payload = model_payload(model, config, env_cfg)
-            payload["optimizer"] = model.policy.optimizer.state_dict()
-            payload["episodes"] = int(model._episode_num)
-            payload["train_seconds"] = elapsed_before + time.perf_counter() - started
-            save_torch(ckpt_path, payload, TRAINING_KIND)
-            write_json(ckpt_path.with_suffix(".json"),
-                       policy_metadata(payload, train_seconds=payload["train_seconds"]))
-
-        callbacks = [_checkpoint_callback(config.checkpoint_every, save_checkpoint)]
-        if progress:
-            callbacks.append(_progress_callback(config.total_timesteps, done))
-        if time_limit_s is not None:
-            callbacks.append(_time_limit_callback(started + time_limit_s))
-        remaining = config.total_timesteps - done
-        if remaining > 0:
-            model.learn(total_timesteps=remaining, callback=callbacks,
-                        reset_num_timesteps=state is None, tb_log_name="ppo")
-        save_checkpoint()
-        seconds = elapsed_before + time.perf_counter() - started
-        return save_policy(out_dir / "policy.pt", model, config, env_cfg,
-                           train_seconds=round(seconds, 1))
-    finally:
-        venv.close()
+    extra: dict[str, Any] = {"n_actions": N_ACTIONS}
+    if command is not None:
+        extra["command"] = str(command)
+    return run_sb3_training(
+        out_dir=out_dir, run_format=_ppo_run_format(), seed=config.seed,
+        total_timesteps=config.total_timesteps, checkpoint_every=config.checkpoint_every,
+        make_env=make_env, make_model=make_model,
+        payload=lambda model: model_payload(model, config, env_cfg),
+        check_resume=check_resume, extra_record=extra, progress=progress, resume=resume,
+        time_limit_s=time_limit_s)
 
 
 # --------------------------------------------------------------------------------------------
@@ -224,10 +154,10 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def _parser(preset: str = "default") -> argparse.ArgumentParser:
+def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.ArgumentParser:
     defaults = PPOTrainConfig()
     parser = argparse.ArgumentParser(
-        prog="ipp-train ppo",
+        prog=prog,
         description="Train a shared (parameter-sharing) PPO policy on the simulator.")
     parser.add_argument("--preset", choices=sorted(PPO_PRESETS), default="default",
                         help="start from these flags: 'shipped' retrains the shipped policy "
@@ -260,6 +190,9 @@ def _parser(preset: str = "default") -> argparse.ArgumentParser:
                         help="SuperSuit worker processes (0: none; --num-cpus is the old name)")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
                         help="agent-transitions between checkpoints")
+    parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
+                        metavar="P", help="reward subtracted when plain PPO picks a masked "
+                                          "action (the UAV holds for that step)")
     parser.add_argument("--masked", action=argparse.BooleanOptionalAction,
                         default=defaults.masked, help="MaskablePPO (default) or plain PPO")
     parser.add_argument("--time-limit", type=float, default=None, metavar="MINUTES",
@@ -271,10 +204,22 @@ def _parser(preset: str = "default") -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``ipp-train ppo [options]``; returns 0 on success, 2 on bad input."""
-    known, _ = _parser().parse_known_args(argv)  # exits with status 2 on malformed options
-    args = _parser(known.preset).parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
+         command: str | None = None) -> int:
+    """``ipp-train ppo [options]``; returns 0 on success, 2 on bad input.
+
+    Args:
+        argv: the options (default ``sys.argv[1:]``).
+        prog: the command's name in help and error messages (``ipp-train sb3`` runs the PPO
+            case through here).
+        command: the command line recorded in the run's JSON files (default: ``prog`` and
+            ``argv``).
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if command is None:
+        command = shlex.join([*prog.split(), *argv])
+    known, _ = _parser(prog=prog).parse_known_args(argv)  # exits 2 on malformed options
+    args = _parser(known.preset, prog).parse_args(argv)
     try:
         defaults = PPOTrainConfig()
         env_config = build_env_config(
@@ -287,17 +232,18 @@ def main(argv: list[str] | None = None) -> int:
             batch_size=args.batch_size, lr=args.lr, ent_coef=args.ent_coef, width=args.width,
             masked=args.masked, seed=args.seed, resolution=env_config.world.resolution,
             n_agents=env_config.team.n_agents, comm_range=env_config.team.comm_range,
-            num_cpus=args.num_cpus,
-            checkpoint_every=args.checkpoint_every)
+            num_cpus=args.num_cpus, checkpoint_every=args.checkpoint_every,
+            invalid_penalty=args.invalid_penalty)
         training_env_config(config, env_config)  # validate before any work
         path = train_ppo(config, env_config, args.out, progress=not args.no_progress,
                          resume=args.resume,
-                         time_limit_s=None if args.time_limit is None else args.time_limit * 60)
+                         time_limit_s=None if args.time_limit is None else args.time_limit * 60,
+                         command=command)
     except (ValueError, CheckpointError) as error:
-        print(f"ipp-train ppo: error: {error}", file=sys.stderr)
+        print(f"{prog}: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        return report_interrupt("ipp-train ppo", f"continue with --resume --out {args.out} "
+        return report_interrupt(prog, f"continue with --resume --out {args.out} "
                                 "(from the last checkpoint)")
     print(f"saved {path}")
     return 0

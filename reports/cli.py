@@ -7,7 +7,8 @@ the metrics after every step and write the per-step metrics (CSV) and the final 
 Markdown table (Table I style) and the planning time per step, and write the tables, the
 figures and the raw results (see :func:`compare_main`).
 
-``ipp-train coma|ppo``: train a learned planner (see :func:`train_main`).
+``ipp-train coma|ppo|sb3``: train a learned planner (see :func:`train_main`); ``sb3 --algo
+ALGO`` trains any supported SB3 algorithm (``ppo`` is its PPO case).
 """
 
 from __future__ import annotations
@@ -267,11 +268,14 @@ def interrupted(tool: str, out_dir: Path) -> int:
                             "run the same command again to continue")
 
 
-TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training"}
+TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training", "sb3": "baselines.sb3_training"}
 
 
 def train_main(argv: list[str] | None = None) -> int:
-    """Entry point of ``ipp-train {coma,ppo} ...``: dispatch to the trainer's own ``main``.
+    """Entry point of ``ipp-train {coma,ppo,sb3} ...``: dispatch to the trainer's own ``main``.
+
+    ``ipp-train sb3 --algo PPO|MaskablePPO|A2C|DQN|QRDQN|RecurrentPPO`` trains any supported
+    SB3 algorithm; ``ipp-train ppo`` is the alias of its PPO case.
 
     Returns the trainer's exit code (0 ok, 1 training failed, 2 bad input).
     """
@@ -279,7 +283,7 @@ def train_main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     usage = (f"usage: ipp-train {{{','.join(TRAINERS)}}} [options]   "
-             "(ipp-train coma --help for the options)")
+             "(ipp-train coma --help, ipp-train sb3 --help for the options)")
     if not argv or argv[0] in ("-h", "--help"):
         print(usage)
         return 0 if argv else 2

@@ -74,6 +74,8 @@ def test_registry_errors():
     ("coma.planner", ("coma.learner", "coma.warm_start", "coma.rollout", "coma.run_files",
                       "coma.cli")),
     ("baselines.ppo", ("baselines.ppo_training", "ipp_toolkit.vec")),
+    ("baselines.sb3_planner", ("baselines.sb3_training", "baselines.sb3_runner",
+                               "baselines.ppo_training", "ipp_toolkit.vec")),
 ])
 def test_inference_never_imports_training(planner_module, training_modules):
     import subprocess

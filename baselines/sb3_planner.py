@@ -1,0 +1,100 @@
+"""The ``sb3`` planner: flies a shared policy of any algorithm ``ipp-train sb3`` trains.
+
+``ipp-compare --planners ig,sb3=RUN/policy.pt`` (or ``mine:sb3=RUN/policy.pt``) flies the
+policy of an ``ipp-train sb3`` run of any algorithm (PPO, MaskablePPO, A2C, DQN, QRDQN,
+RecurrentPPO), and the ``ipp-train ppo`` files as well. Inference only: this module never
+imports the training code (:mod:`baselines.sb3_training`, :mod:`baselines.sb3_runner`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
+
+from .sb3_policies import (
+    RECURRENT_ALGORITHMS,
+    LSTMStates,
+    expected_obs_shape,
+    greedy_actions,
+    load_sb3_policy,
+)
+
+__all__ = ["SB3Planner"]
+
+
+class SB3Planner(Planner):
+    """Greedy shared SB3 policy for every agent (one batched forward per step).
+
+    Acts deterministically: the argmax of the valid logits (PPO, MaskablePPO, A2C,
+    RecurrentPPO), Q-values (DQN) or mean quantiles (QRDQN); a masked action is never chosen.
+    A RecurrentPPO policy keeps its LSTM state per agent across the steps of a mission and
+    starts each mission from zeros.
+
+    Args:
+        checkpoint: a ``policy.pt`` (or ``checkpoint.pt``) of ``ipp-train sb3`` or
+            ``ipp-train ppo``.
+        device: torch device of the forward pass.
+
+    Raises:
+        CheckpointError: no checkpoint; a missing, corrupt or foreign one; or one trained for
+            another action count (see :func:`~baselines.sb3_policies.load_sb3_policy`).
+    """
+
+    name = "sb3"
+    needs_observations = True
+
+    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
+        # Batches of N observations: extra intra-op threads only spin on busy cores.
+        torch.set_num_threads(1)
+        if checkpoint is None:
+            raise CheckpointError("the sb3 planner needs a policy file: train one with "
+                                  "`ipp-train sb3 --algo ALGO --out RUN` and pass "
+                                  "sb3=RUN/policy.pt (checkpoint='RUN/policy.pt')")
+        self.checkpoint = Path(checkpoint)
+        self.policy, self.meta = load_sb3_policy(self.checkpoint, device)
+        self.algo: str = self.meta.algo
+        self.obs_shape: tuple[int, int, int] = self.meta.obs_shape
+        self.observation_features = self.meta.env_config.features
+        self.transfer_notes: list[str] = []
+        self._lstm_states: LSTMStates | None = None
+
+    def reset(self, config: EnvConfig, seed: int) -> None:
+        """Start a mission of ``config``: check the transfer and clear the LSTM states.
+
+        The policy observes with its own feature planes (``observation_features``), so a
+        mission config with other feature switches is flown; one whose planes would have
+        another shape (another planning grid), or more agents than the id plane numbers, is
+        refused. ``seed`` is unused: the planner is deterministic.
+
+        Raises:
+            CheckpointError: naming the policy's observation shape and the mission's.
+        """
+        mission_shape = expected_obs_shape(config, self.observation_features)
+        if mission_shape != self.obs_shape:
+            raise CheckpointError(
+                f"{self.algo} policy {str(self.checkpoint)!r} was trained on observations of "
+                f"shape {self.obs_shape}; missions of this config give {mission_shape}")
+        self.transfer_notes = check_policy_transfer(self.meta.env_config, config,
+                                                    str(self.checkpoint))
+        self._lstm_states = None
+
+    def act(self, views: list[AgentView]) -> np.ndarray:
+        """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks."""
+        observations = np.stack([view.observation for view in views])
+        if observations.shape[1:] != self.obs_shape:
+            raise CheckpointError(
+                f"{self.algo} policy {str(self.checkpoint)!r} expects observations of shape "
+                f"{self.obs_shape}, got {observations.shape[1:]}")
+        masks = np.stack([view.mask for view in views])
+        states = self._lstm_states
+        if states is not None and states[0].shape[1] != len(views):
+            states = None  # another team: a new mission without reset()
+        actions, states = greedy_actions(self.policy, self.algo, observations, masks, states)
+        self._lstm_states = states if self.algo in RECURRENT_ALGORITHMS else None
+        return actions

@@ -1,0 +1,376 @@
+"""Shared policies of any supported SB3 algorithm: architecture, files and greedy actions.
+
+The inference side of ``ipp-train sb3`` (:mod:`baselines.sb3_training` trains, this module and
+:mod:`baselines.sb3_planner` fly; neither imports the training code). Supported algorithms
+(:data:`ALGORITHMS`), all with one policy shared by every UAV (parameter sharing) and the
+:class:`~baselines.ppo.SmallCNN` features extractor on the (C, G, G) actor planes:
+
+* PPO, A2C: ``ActorCriticPolicy``; greedy = argmax of the valid logits;
+* MaskablePPO: ``MaskableActorCriticPolicy``; argmax of the valid logits;
+* RecurrentPPO: ``RecurrentActorCriticPolicy``; argmax of the valid logits, with the actor
+  LSTM's state kept per agent across the steps of a mission;
+* DQN: ``DQNPolicy``; argmax of the valid Q-values;
+* QRDQN: ``QRDQNPolicy``; argmax of the valid mean quantiles.
+
+Files: a policy file is a plain state dict saved with :func:`ipp_toolkit.io.save_torch`
+(format ``ipp-toolkit/sb3``; ``ipp-toolkit/sb3-training`` for a resumable checkpoint) holding
+the weights, the algorithm, the observation shape, the action count, the architecture and the
+configs; a JSON record sits beside it. PPO and MaskablePPO runs are written by
+``ipp-train ppo`` (the PPO case of ``ipp-train sb3``) in its ``ipp-toolkit/ppo`` format, which
+:func:`load_sb3_policy` reads as well. No SB3 model zip is ever unpickled: the policy is rebuilt
+from the records and the weights loaded with ``torch.load(weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
+from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
+from sb3_contrib.qrdqn.policies import QRDQNPolicy
+from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
+from stable_baselines3.dqn.policies import DQNPolicy
+
+from ipp_toolkit.config import EnvConfig, config_from_dict
+from ipp_toolkit.features import actor_plane_names
+from ipp_toolkit.io import CheckpointError, load_torch
+from ipp_toolkit.team import N_ACTIONS
+
+from .ppo import CHECKPOINT_KIND as PPO_KIND
+from .ppo import TRAINING_KIND as PPO_TRAINING_KIND
+from .ppo import SmallCNN, masked_greedy_actions
+from .ppo import load_policy as load_ppo_policy
+
+__all__ = [
+    "ALGORITHMS",
+    "MASKED_ALGORITHMS",
+    "RECURRENT_ALGORITHMS",
+    "LSTMStates",
+    "SB3_POLICY_KIND",
+    "SB3_TRAINING_KIND",
+    "PolicyArchitecture",
+    "LoadedPolicy",
+    "canonical_algo",
+    "policy_class",
+    "sb3_policy_kwargs",
+    "build_policy",
+    "expected_obs_shape",
+    "sb3_policy_metadata",
+    "load_sb3_policy",
+    "greedy_actions",
+    "initial_lstm_states",
+]
+
+ALGORITHMS = ("PPO", "MaskablePPO", "A2C", "DQN", "QRDQN", "RecurrentPPO")
+"""Algorithms ``ipp-train sb3 --algo`` trains and the ``sb3`` planner flies (SB3 spelling)."""
+MASKED_ALGORITHMS = ("MaskablePPO",)
+"""Algorithms that read the action masks while training; the others train with the view's
+``invalid_action="hold"`` (a masked action holds the UAV for the step)."""
+RECURRENT_ALGORITHMS = ("RecurrentPPO",)
+"""Algorithms whose policy carries an LSTM state from step to step."""
+SB3_POLICY_KIND = "ipp-toolkit/sb3"
+"""Format tag of the ``policy.pt`` of a non-PPO ``ipp-train sb3`` run."""
+SB3_TRAINING_KIND = "ipp-toolkit/sb3-training"
+"""Format tag of its ``checkpoint.pt`` (policy + optimiser, for resuming)."""
+
+_POLICY_CLASSES: dict[str, type[BasePolicy]] = {
+    "PPO": ActorCriticPolicy,
+    "A2C": ActorCriticPolicy,
+    "MaskablePPO": MaskableActorCriticPolicy,
+    "RecurrentPPO": RecurrentActorCriticPolicy,
+    "DQN": DQNPolicy,
+    "QRDQN": QRDQNPolicy,
+}
+#: ``algo`` values of ``ipp-toolkit/ppo`` files.
+_PPO_FILE_ALGOS = {"ppo": "PPO", "maskable_ppo": "MaskablePPO"}
+_CONTINUOUS_ONLY = ("SAC", "TD3", "DDPG", "TQC", "CROSSQ")
+
+
+def canonical_algo(name: str) -> str:
+    """The SB3 spelling of a supported algorithm name given in any case.
+
+    Raises:
+        ValueError: an unsupported name; the message lists the supported ones.
+    """
+    if isinstance(name, str):
+        for algo in ALGORITHMS:
+            if name.strip().lower() == algo.lower():
+                return algo
+    hint = ""
+    if isinstance(name, str) and name.strip().upper() in _CONTINUOUS_ONLY:
+        hint = f" ({name.strip()} needs continuous actions; the UAVs have 6 discrete ones)"
+    raise ValueError(f"unsupported algorithm {name!r}{hint}; supported: "
+                     f"{', '.join(ALGORITHMS)}")
+
+
+def policy_class(algo: str) -> type[BasePolicy]:
+    """The SB3 policy class that ``algo`` trains and the planner rebuilds."""
+    return _POLICY_CLASSES[canonical_algo(algo)]
+
+
+# --------------------------------------------------------------------------------------------
+# Architecture
+
+
+@dataclass(frozen=True)
+class PolicyArchitecture:
+    """Sizes of a shared policy network (the same features extractor for every algorithm).
+
+    Attributes:
+        width: channels of the two 3x3 conv layers of :class:`~baselines.ppo.SmallCNN`.
+        features_dim: output size of the features extractor.
+        hidden: width of the one hidden layer of each head (policy, value, Q or quantiles).
+        lstm_hidden_size: LSTM size (RecurrentPPO only).
+        n_quantiles: quantiles per action (QRDQN only).
+    """
+
+    width: int = 32
+    features_dim: int = 128
+    hidden: int = 64
+    lstm_hidden_size: int = 64
+    n_quantiles: int = 25
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"invalid architecture: {name} must be an integer >= 1, "
+                                 f"got {value!r}")
+
+    def to_dict(self) -> dict[str, int]:
+        return {name: int(value) for name, value in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> PolicyArchitecture:
+        """Inverse of :meth:`to_dict`; unknown keys are rejected."""
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"invalid architecture: unknown key(s) {unknown}")
+        return cls(**values)
+
+
+def sb3_policy_kwargs(algo: str, architecture: PolicyArchitecture) -> dict[str, Any]:
+    """SB3 ``policy_kwargs`` of ``architecture`` for the policy class of ``algo``."""
+    algo = canonical_algo(algo)
+    kwargs: dict[str, Any] = {
+        "features_extractor_class": SmallCNN,
+        "features_extractor_kwargs": {"width": architecture.width,
+                                      "features_dim": architecture.features_dim},
+    }
+    if algo in ("DQN", "QRDQN"):
+        kwargs["net_arch"] = [architecture.hidden]
+    else:
+        kwargs["net_arch"] = {"pi": [architecture.hidden], "vf": [architecture.hidden]}
+    if algo == "QRDQN":
+        kwargs["n_quantiles"] = architecture.n_quantiles
+    if algo == "RecurrentPPO":
+        kwargs["lstm_hidden_size"] = architecture.lstm_hidden_size
+    return kwargs
+
+
+def build_policy(algo: str, architecture: PolicyArchitecture, obs_shape: tuple[int, ...],
+                 n_actions: int = N_ACTIONS, device: str = "cpu") -> BasePolicy:
+    """A fresh (untrained) policy of ``algo`` for (C, G, G) observations, in eval mode."""
+    observation_space = spaces.Box(-1.0, 1.0, tuple(obs_shape), dtype=np.float32)
+    policy = policy_class(algo)(observation_space, spaces.Discrete(int(n_actions)),
+                                lambda _: 1e-4, **sb3_policy_kwargs(algo, architecture))
+    policy = policy.to(device)
+    policy.set_training_mode(False)
+    return policy
+
+
+def expected_obs_shape(config: EnvConfig, features: Any = None) -> tuple[int, int, int]:
+    """(C, G, G) of the actor planes of ``config``'s missions, observed with ``features``
+    (default: the config's own feature switches)."""
+    features = config.features if features is None else features
+    grid = int(config.world.grid_points)
+    return (len(actor_plane_names(features)), grid, grid)
+
+
+# --------------------------------------------------------------------------------------------
+# Files
+
+
+@dataclass(frozen=True)
+class LoadedPolicy:
+    """What a policy file says about its policy (everything but the weights).
+
+    Attributes:
+        algo: SB3 spelling of the algorithm (see :data:`ALGORITHMS`).
+        obs_shape: (C, G, G) observation shape it was trained on.
+        n_actions: action count it was trained for.
+        architecture: its network sizes.
+        env_config: the training env config (its feature switches are the policy's planes).
+        num_timesteps: agent-transitions it was trained for.
+        format: the file's format tag.
+        record: the file's other records (hyper-parameters, ...), JSON-safe.
+    """
+
+    algo: str
+    obs_shape: tuple[int, int, int]
+    n_actions: int
+    architecture: PolicyArchitecture
+    env_config: EnvConfig
+    num_timesteps: int
+    format: str
+    record: dict[str, Any] = field(default_factory=dict)
+
+
+def sb3_policy_metadata(payload: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """The JSON beside an ``ipp-toolkit/sb3`` file: the payload without weights or optimiser,
+    plus ``extra`` (command line, training seconds)."""
+    meta = {k: v for k, v in payload.items() if k not in ("policy", "optimizer")}
+    return {"format": SB3_POLICY_KIND, **meta, **extra}
+
+
+def _format_tag(path: Path) -> Any:
+    """The format tag of a plain-weights file, or None when it cannot be read as one."""
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:  # noqa: BLE001 - load_torch names the problem just after
+        return None
+    return data.get("format") if isinstance(data, dict) else None
+
+
+def load_sb3_policy(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, LoadedPolicy]:
+    """Rebuild the policy of an ``ipp-train sb3`` (or ``ipp-train ppo``) file and load its weights.
+
+    Reads ``policy.pt`` and ``checkpoint.pt`` files of the formats ``ipp-toolkit/sb3``,
+    ``ipp-toolkit/sb3-training``, ``ipp-toolkit/ppo`` and ``ipp-toolkit/ppo-training``.
+
+    Returns:
+        (policy in eval mode, :class:`LoadedPolicy`).
+
+    Raises:
+        CheckpointError: a missing, empty, corrupt or foreign file; an unsupported algorithm;
+            another action count than the simulator's; an observation shape that its feature
+            planes cannot give; weights that do not fit (each message names the file and, for
+            shapes, both values).
+    """
+    path = Path(path)
+    accepted = (SB3_POLICY_KIND, SB3_TRAINING_KIND, PPO_KIND, PPO_TRAINING_KIND)
+    tag = _format_tag(path) if path.is_file() and path.stat().st_size > 0 else None
+    if tag is None:
+        load_torch(path, SB3_POLICY_KIND)  # raises: missing, empty or corrupt
+    if tag not in accepted:
+        raise CheckpointError(f"checkpoint {str(path)!r} is not a policy of ipp-train sb3 or "
+                              f"ipp-train ppo (format tag: {tag!r}; expected one of "
+                              f"{', '.join(accepted)})")
+    if tag in (PPO_KIND, PPO_TRAINING_KIND):
+        return _load_ppo_file(path, device)
+    data = load_torch(path, tag)
+    missing = [key for key in ("policy", "algo", "obs_shape", "n_actions", "architecture",
+                               "env_config") if key not in data]
+    if missing:
+        raise CheckpointError(f"checkpoint {str(path)!r} lacks {missing}")
+    try:
+        algo = canonical_algo(data["algo"])
+        architecture = PolicyArchitecture.from_dict(data["architecture"])
+        env_config = config_from_dict(data["env_config"])
+        obs_shape = tuple(int(d) for d in data["obs_shape"])
+        n_actions = int(data["n_actions"])
+    except (TypeError, ValueError) as error:
+        raise CheckpointError(f"checkpoint {str(path)!r} holds invalid records: "
+                              f"{error}") from None
+    meta = LoadedPolicy(algo=algo, obs_shape=obs_shape, n_actions=n_actions,  # type: ignore[arg-type]
+                        architecture=architecture, env_config=env_config,
+                        num_timesteps=int(data.get("num_timesteps", 0)), format=tag,
+                        record={k: data[k] for k in ("sb3_config",) if k in data})
+    _check_shapes(path, meta)
+    policy = build_policy(algo, architecture, obs_shape, n_actions, device)
+    try:
+        policy.load_state_dict(data["policy"])
+    except (RuntimeError, TypeError, AttributeError) as error:
+        raise CheckpointError(f"checkpoint {str(path)!r}: the weights do not fit the {algo} "
+                              f"policy its records describe "
+                              f"({str(error).splitlines()[0][:200]})") from None
+    policy.set_training_mode(False)
+    return policy, meta
+
+
+def _load_ppo_file(path: Path, device: str) -> tuple[BasePolicy, LoadedPolicy]:
+    policy, ppo_meta = load_ppo_policy(path, device)
+    config = ppo_meta["ppo_config"]
+    algo = _PPO_FILE_ALGOS.get(ppo_meta["algo"], "MaskablePPO" if config.masked else "PPO")
+    meta = LoadedPolicy(
+        algo=algo, obs_shape=ppo_meta["obs_shape"], n_actions=N_ACTIONS,
+        architecture=PolicyArchitecture(width=config.width, features_dim=config.features_dim,
+                                        hidden=config.hidden),
+        env_config=ppo_meta["env_config"], num_timesteps=ppo_meta["num_timesteps"],
+        format=PPO_KIND, record={"ppo_config": config.to_dict()})
+    _check_shapes(path, meta)
+    return policy, meta
+
+
+def _check_shapes(path: Path, meta: LoadedPolicy) -> None:
+    if meta.n_actions != N_ACTIONS:
+        raise CheckpointError(f"checkpoint {str(path)!r} was trained for {meta.n_actions} "
+                              f"actions; the simulator has {N_ACTIONS}")
+    if len(meta.obs_shape) != 3:
+        raise CheckpointError(f"checkpoint {str(path)!r}: observation shape {meta.obs_shape} "
+                              "is not (C, G, G)")
+    own = expected_obs_shape(meta.env_config)
+    if meta.obs_shape != own:
+        raise CheckpointError(f"checkpoint {str(path)!r} records observations of shape "
+                              f"{meta.obs_shape}, but its env config gives {own}")
+
+
+# --------------------------------------------------------------------------------------------
+# Greedy actions
+
+
+LSTMStates = tuple[torch.Tensor, torch.Tensor]
+
+
+def initial_lstm_states(policy: BasePolicy, batch: int) -> LSTMStates:
+    """Zero (hidden, cell) states of a recurrent policy's actor LSTM for ``batch`` agents,
+    each (n_layers, batch, lstm_hidden_size)."""
+    layers, _, size = policy.lstm_hidden_state_shape
+    zeros = torch.zeros(layers, batch, size, device=policy.device)
+    return zeros, zeros.clone()
+
+
+def _masked_argmax(scores: torch.Tensor, masks: np.ndarray) -> np.ndarray:
+    valid = torch.as_tensor(np.asarray(masks) != 0, device=scores.device)
+    if valid.shape != scores.shape:
+        raise ValueError(f"masks of shape {tuple(valid.shape)} do not fit scores of shape "
+                         f"{tuple(scores.shape)}")
+    return scores.masked_fill(~valid, -math.inf).argmax(dim=1).cpu().numpy().astype(np.int64)
+
+
+def greedy_actions(policy: BasePolicy, algo: str, observations: np.ndarray, masks: np.ndarray,
+                   lstm_states: LSTMStates | None = None) -> tuple[np.ndarray, LSTMStates | None]:
+    """Greedy valid actions of a batch of agents in one forward pass.
+
+    Args:
+        policy: a policy of ``algo`` (from :func:`load_sb3_policy` or a trained model).
+        algo: its algorithm (any case).
+        observations: (B, C, G, G) float32 planes.
+        masks: (B, A) valid actions (nonzero = valid); a masked action is never chosen.
+        lstm_states: RecurrentPPO only: the (hidden, cell) states of the B agents, each
+            (n_layers, B, lstm_hidden_size); None starts from zeros (a mission start).
+
+    Returns:
+        ((B,) int64 actions, the new LSTM states or None for non-recurrent policies).
+    """
+    algo = canonical_algo(algo)
+    if algo in ("PPO", "A2C", "MaskablePPO"):
+        return masked_greedy_actions(policy, observations, masks), None
+    with torch.no_grad():
+        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=policy.device)
+        if algo == "DQN":
+            return _masked_argmax(policy.q_net(obs), masks), None
+        if algo == "QRDQN":
+            return _masked_argmax(policy.quantile_net(obs).mean(dim=1), masks), None
+        if lstm_states is None:
+            lstm_states = initial_lstm_states(policy, obs.shape[0])
+        starts = torch.zeros(obs.shape[0], device=policy.device)
+        distribution, new_states = policy.get_distribution(obs, lstm_states, starts)
+        logits = distribution.distribution.logits
+        return _masked_argmax(logits, masks), (new_states[0], new_states[1])

@@ -1,0 +1,223 @@
+"""The training run every SB3 algorithm shares: files, resume, callbacks and the learn loop.
+
+:func:`run_sb3_training` is the one loop behind ``ipp-train ppo`` (:mod:`baselines.ppo_training`)
+and ``ipp-train sb3`` (:mod:`baselines.sb3_training`). A caller says how to build the vec env
+and the model and what a policy file holds; this module does the rest, identically for every
+algorithm:
+
+* ``OUT/checkpoint.pt`` (+ ``.json``): the policy's state dict, its optimiser state, the step
+  and episode counts and the training seconds, written atomically every
+  ``checkpoint_every`` agent-transitions and at the end; ``resume=True`` carries on from it
+  (its configs must match the given ones);
+* ``OUT/policy.pt`` (+ ``.json``): the final policy (state dict + records), written atomically;
+* ``OUT/tb/``: TensorBoard logs;
+* a tqdm progress bar, and a time limit that stops training and saves what was learnt.
+
+Seeds: a fresh run starts copy c of the simulator on run ``seed + c``; a run resumed after
+``done`` transitions uses ``seed + done`` (new missions, reproducible). Nothing here is
+imported by the planners.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecEnv, VecMonitor
+from tqdm.auto import tqdm
+
+from ipp_toolkit.io import load_torch, save_torch, write_json
+
+__all__ = ["RunFormat", "run_sb3_training", "progress_callback", "time_limit_callback",
+           "checkpoint_callback"]
+
+
+# --------------------------------------------------------------------------------------------
+# Callbacks
+
+
+def progress_callback(total: int, initial: int, desc: str = "ppo") -> BaseCallback:
+    """A tqdm bar over agent-transitions (SB3's own bar needs ``rich``)."""
+
+    class TqdmCallback(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(total=total, initial=initial, unit="step", desc=desc,
+                            dynamic_ncols=True)
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.model.num_timesteps - self.bar.n)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return TqdmCallback()
+
+
+def time_limit_callback(deadline: float) -> BaseCallback:
+    """Stops training once ``deadline`` (a ``time.perf_counter`` time) has passed.
+
+    Returning False from a step ends SB3's rollout (on-policy: the partial rollout is not
+    trained on; off-policy: the collection) and ``learn``.
+    """
+
+    class TimeLimitCallback(BaseCallback):
+        def _on_step(self) -> bool:
+            return time.perf_counter() < deadline
+
+    return TimeLimitCallback()
+
+
+def checkpoint_callback(every: int, save: Callable[[], None]) -> BaseCallback:
+    """Calls ``save`` every ``every`` agent-transitions."""
+
+    class CheckpointCallback(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.next_save = (self.model.num_timesteps // every + 1) * every
+
+        def _on_step(self) -> bool:
+            if self.model.num_timesteps >= self.next_save:
+                save()
+                self.next_save = (self.model.num_timesteps // every + 1) * every
+            return True
+
+    return CheckpointCallback()
+
+
+# --------------------------------------------------------------------------------------------
+# The run
+
+
+@dataclass(frozen=True)
+class RunFormat:
+    """How one trainer names and tags its files.
+
+    Attributes:
+        algo_label: the algorithm in messages ("already holds a PPO run") and the progress bar.
+        policy_kind: format tag of ``policy.pt`` (``ipp_toolkit.io.save_torch``).
+        training_kind: format tag of ``checkpoint.pt``.
+        metadata: ``(payload, extra) -> JSON record`` of a file (the payload without weights).
+        tb_log_name: TensorBoard run name under ``OUT/tb``.
+    """
+
+    algo_label: str
+    policy_kind: str
+    training_kind: str
+    metadata: Callable[..., dict[str, Any]]
+    tb_log_name: str
+
+
+def run_sb3_training(
+    *,
+    out_dir: str | Path,
+    run_format: RunFormat,
+    seed: int,
+    total_timesteps: int,
+    checkpoint_every: int,
+    make_env: Callable[[int], VecEnv],
+    make_model: Callable[[VecEnv, int, str, int], Any],
+    payload: Callable[[Any], dict[str, Any]],
+    check_resume: Callable[[dict[str, Any], Path], None],
+    extra_record: dict[str, Any] | None = None,
+    progress: bool = True,
+    resume: bool = False,
+    time_limit_s: float | None = None,
+) -> Path:
+    """Train (fresh, or resumed from ``out_dir/checkpoint.pt``) and write ``out_dir/policy.pt``.
+
+    Args:
+        out_dir: the run folder (created).
+        run_format: file tags and names of this trainer.
+        seed: the run seed; copy c starts on run ``seed + done + c``.
+        total_timesteps: agent-transitions of the whole run (a resumed run trains the rest).
+        checkpoint_every: agent-transitions between checkpoints.
+        make_env: ``env_seed -> vec env`` (an :class:`ipp_toolkit.vec.IPPVecEnv`; closed here).
+        make_model: ``(env, env_seed, tensorboard folder, done) -> SB3 model`` on that env.
+        payload: ``model -> dict`` of what a policy file holds (weights under ``"policy"``).
+        check_resume: ``(checkpoint payload, path)``; raises ValueError when the stored
+            configs differ from the given ones.
+        extra_record: JSON-safe fields added to both JSON records (e.g. the command line).
+        progress: show a tqdm bar.
+        resume: continue from ``out_dir/checkpoint.pt``.
+        time_limit_s: stop after this many seconds of this call and save what was learnt.
+
+    Returns:
+        the path of ``policy.pt``.
+
+    Raises:
+        ValueError: a bad time limit, an existing run without ``resume``, nothing to resume,
+            or a checkpoint whose configs differ (from ``check_resume``).
+        ipp_toolkit.io.CheckpointError: a corrupt or foreign ``checkpoint.pt``.
+    """
+    if time_limit_s is not None and (isinstance(time_limit_s, bool)
+                                     or not isinstance(time_limit_s, int | float)
+                                     or not time_limit_s > 0):
+        raise ValueError(f"time_limit_s must be a positive number or None, got {time_limit_s!r}")
+    torch.set_num_threads(1)  # two shared cores: more intra-op threads collapse throughput
+    out_dir = Path(out_dir)
+    ckpt_path = out_dir / "checkpoint.pt"
+    extra_record = dict(extra_record or {})
+    state = None
+    if resume:
+        if not ckpt_path.is_file():
+            raise ValueError(f"nothing to resume: {str(ckpt_path)!r} does not exist (drop "
+                             "--resume to start a new run)")
+        state = load_torch(ckpt_path, run_format.training_kind)
+        check_resume(state, ckpt_path)
+    elif ckpt_path.exists() or (out_dir / "policy.pt").exists():
+        raise ValueError(f"{str(out_dir)!r} already holds a {run_format.algo_label} run; pass "
+                         "resume=True (--resume) or choose another output folder")
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    done = int(state["num_timesteps"]) if state is not None else 0
+    # A resumed run starts new missions: copy c continues on run seed + done + c.
+    env_seed = seed + done
+    venv = make_env(env_seed)
+    try:
+        model = make_model(VecMonitor(venv), env_seed, str(out_dir / "tb"), done)
+        if state is not None:
+            model.policy.load_state_dict(state["policy"])
+            model.policy.optimizer.load_state_dict(state["optimizer"])
+            model.num_timesteps = done
+            model._episode_num = int(state.get("episodes", 0))
+        started = time.perf_counter()
+        elapsed_before = float(state.get("train_seconds", 0.0)) if state is not None else 0.0
+
+        def seconds() -> float:
+            return elapsed_before + time.perf_counter() - started
+
+        def save_checkpoint() -> None:
+            data = payload(model)
+            data["optimizer"] = model.policy.optimizer.state_dict()
+            data["episodes"] = int(model._episode_num)
+            data["train_seconds"] = seconds()
+            save_torch(ckpt_path, data, run_format.training_kind)
+            write_json(ckpt_path.with_suffix(".json"),
+                       run_format.metadata(data, train_seconds=data["train_seconds"],
+                                           **extra_record))
+
+        callbacks = [checkpoint_callback(checkpoint_every, save_checkpoint)]
+        if progress:
+            callbacks.append(progress_callback(total_timesteps, done,
+                                               run_format.tb_log_name))
+        if time_limit_s is not None:
+            callbacks.append(time_limit_callback(started + time_limit_s))
+        remaining = total_timesteps - done
+        if remaining > 0:
+            model.learn(total_timesteps=remaining, callback=callbacks,
+                        reset_num_timesteps=state is None, tb_log_name=run_format.tb_log_name)
+        save_checkpoint()
+        final = payload(model)
+        policy_path = out_dir / "policy.pt"
+        save_torch(policy_path, final, run_format.policy_kind)
+        write_json(policy_path.with_suffix(".json"),
+                   run_format.metadata(final, train_seconds=round(seconds(), 1),
+                                       **extra_record))
+        return policy_path
+    finally:
+        venv.close()

@@ -1,0 +1,542 @@
+"""``ipp-train sb3 --algo ALGO``: train any supported SB3 algorithm with parameter sharing.
+
+Every algorithm trains on :func:`ipp_toolkit.vec.make_sb3_vec_env` (one env slot per UAV, one
+policy for all, the team reward for every slot) through the same run loop as
+``ipp-train ppo`` (:func:`baselines.sb3_runner.run_sb3_training`: TensorBoard logs, atomic
+checkpoints, ``--resume``, ``--time-limit``, a progress bar). Only MaskablePPO reads the
+action masks; the others train with the view's ``invalid_action="hold"``: a masked action
+holds the UAV for the step (minus ``invalid_penalty``), so the stored action is the executed
+one.
+
+* ``--algo PPO`` / ``--algo MaskablePPO`` are ``ipp-train ppo`` (``--no-masked`` /
+  ``--masked``): the same code, flags, presets (``--preset shipped``) and files
+  (``ipp-toolkit/ppo``).
+* ``--algo A2C|DQN|QRDQN|RecurrentPPO`` write ``OUT/policy.pt`` in the ``ipp-toolkit/sb3``
+  format (:mod:`baselines.sb3_policies`): the policy's state dict with the algorithm, its
+  hyper-parameters, the observation shape, the action count, the architecture and the env
+  config; ``policy.json`` adds the exact command. Never a pickled SB3 zip.
+
+Off-policy runs (DQN, QRDQN) resume without their replay buffer (it is not saved): a resumed
+run collects ``learning_starts`` transitions again before it trains.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import shlex
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
+from ipp_toolkit.io import CheckpointError, save_torch, write_json
+from ipp_toolkit.progress import report_interrupt
+from ipp_toolkit.settings import build_env_config
+from ipp_toolkit.vec import make_sb3_vec_env
+
+from .ppo import PPOTrainConfig, save_policy
+from .ppo_training import main as ppo_main
+from .ppo_training import train_ppo, training_env_config
+from .sb3_policies import (
+    ALGORITHMS,
+    SB3_POLICY_KIND,
+    SB3_TRAINING_KIND,
+    PolicyArchitecture,
+    canonical_algo,
+    policy_class,
+    sb3_policy_kwargs,
+    sb3_policy_metadata,
+)
+from .sb3_runner import RunFormat, run_sb3_training
+
+__all__ = ["SB3TrainConfig", "ALGORITHM_DEFAULTS", "PPO_ALGORITHMS", "algorithm_class",
+           "coerce_hyperparameter", "sb3_model_payload", "make_sb3_model", "save_sb3_policy",
+           "training_env_config", "train_sb3", "main"]
+
+PPO_ALGORITHMS = ("PPO", "MaskablePPO")
+"""The algorithms ``ipp-train ppo`` trains (``ipp-train sb3`` hands them over to it)."""
+
+_PPO = PPOTrainConfig()
+_PPO_HYPER = {"learning_rate": _PPO.lr, "gamma": _PPO.gamma, "n_steps": _PPO.n_steps,
+              "batch_size": _PPO.batch_size, "n_epochs": _PPO.n_epochs,
+              "gae_lambda": _PPO.gae_lambda, "clip_range": _PPO.clip_range,
+              "ent_coef": _PPO.ent_coef, "vf_coef": _PPO.vf_coef,
+              "max_grad_norm": _PPO.max_grad_norm}
+_DQN_HYPER = {"learning_rate": 1e-4, "gamma": 0.99, "buffer_size": 20_000,
+              "learning_starts": 1_000, "batch_size": 64, "tau": 1.0, "train_freq": 4,
+              "gradient_steps": 1, "target_update_interval": 1_000,
+              "exploration_fraction": 0.2, "exploration_initial_eps": 1.0,
+              "exploration_final_eps": 0.05, "max_grad_norm": 10.0}
+ALGORITHM_DEFAULTS: dict[str, dict[str, int | float]] = {
+    "PPO": dict(_PPO_HYPER),
+    "MaskablePPO": dict(_PPO_HYPER),
+    "RecurrentPPO": {**_PPO_HYPER, "lstm_hidden_size": 64},
+    "A2C": {"learning_rate": 7e-4, "gamma": 0.99, "n_steps": 8, "gae_lambda": 0.95,
+            "ent_coef": 0.01, "vf_coef": 0.5, "max_grad_norm": 0.5},
+    "DQN": dict(_DQN_HYPER),
+    "QRDQN": {**_DQN_HYPER, "n_quantiles": 25},
+}
+"""Every hyper-parameter ``--set NAME=VALUE`` accepts per algorithm, with its default (the
+SB3 constructor argument of that name; ``lstm_hidden_size`` and ``n_quantiles`` size the
+policy). Sized for CPU training on the 11 x 11 planes."""
+_POLICY_OPTIONS = ("lstm_hidden_size", "n_quantiles")
+_INT_MIN = {"n_steps": 1, "batch_size": 2, "n_epochs": 1, "buffer_size": 1,
+            "learning_starts": 0, "train_freq": 1, "gradient_steps": 1,
+            "target_update_interval": 1, "lstm_hidden_size": 1, "n_quantiles": 1}
+_UNIT_INTERVAL = ("gamma", "gae_lambda", "tau", "exploration_fraction",
+                  "exploration_initial_eps", "exploration_final_eps")
+_POSITIVE = ("learning_rate", "clip_range", "max_grad_norm")
+
+
+def algorithm_class(algo: str) -> type:
+    """The SB3 / sb3-contrib algorithm class of ``algo`` (any case)."""
+    algo = canonical_algo(algo)
+    if algo in ("MaskablePPO", "QRDQN", "RecurrentPPO"):
+        import sb3_contrib
+
+        return getattr(sb3_contrib, algo)
+    import stable_baselines3
+
+    return getattr(stable_baselines3, algo)
+
+
+def _check_hyperparameter(algo: str, name: str, value: Any) -> int | float:
+    """``value`` if it is a valid ``name`` of ``algo``; ValueError naming it otherwise."""
+    known = ALGORITHM_DEFAULTS[algo]
+    if name not in known:
+        raise ValueError(f"unknown hyper-parameter {name!r} for {algo}; known: "
+                         f"{', '.join(sorted(known))}")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{algo} hyper-parameter {name} must be a number, got {value!r}")
+    if name in _INT_MIN:
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        if not isinstance(value, int) or value < _INT_MIN[name]:
+            raise ValueError(f"{algo} hyper-parameter {name} must be an integer >= "
+                             f"{_INT_MIN[name]}, got {value!r}")
+        return value
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{algo} hyper-parameter {name} must be finite, got {value!r}")
+    if name in _UNIT_INTERVAL and not 0.0 <= value <= 1.0:
+        raise ValueError(f"{algo} hyper-parameter {name} must lie in [0, 1], got {value!r}")
+    if name in _POSITIVE and value <= 0:
+        raise ValueError(f"{algo} hyper-parameter {name} must be > 0, got {value!r}")
+    if value < 0:
+        raise ValueError(f"{algo} hyper-parameter {name} must be >= 0, got {value!r}")
+    return value
+
+
+def coerce_hyperparameter(algo: str, name: str, text: str) -> int | float:
+    """The value of ``--set NAME=TEXT`` for ``algo``, checked (ValueError naming it)."""
+    algo = canonical_algo(algo)
+    _check_hyperparameter(algo, name, ALGORITHM_DEFAULTS[algo].get(name, 0))  # unknown name
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"--set {name}={text}: not a number") from None
+    return _check_hyperparameter(algo, name, value)
+
+
+# --------------------------------------------------------------------------------------------
+# Configuration
+
+
+@dataclass(frozen=True)
+class SB3TrainConfig:
+    """One ``ipp-train sb3`` run: the algorithm, its hyper-parameters and the training world.
+
+    SB3 timesteps are agent-transitions: one joint step of N agents counts N.
+
+    Attributes:
+        algo: one of :data:`~baselines.sb3_policies.ALGORITHMS` (any case; stored in SB3's
+            spelling).
+        total_timesteps: agent-transitions to train for.
+        n_envs: simulator copies stepped together; SB3 sees ``n_envs * n_agents`` envs.
+        seed: seed of the policy, the sampling and the training missions.
+        width: conv channels of the features extractor.
+        features_dim: output size of the features extractor.
+        hidden: width of the one hidden layer of each head.
+        resolution: map resolution (metres per cell) of the training world.
+        n_agents: team size N during training.
+        comm_range: communication range D (metres, inf allowed) during training.
+        num_cpus: SuperSuit worker processes (0: all copies in this process).
+        checkpoint_every: agent-transitions between checkpoints.
+        invalid_penalty: reward subtracted from a slot whose action was masked (the UAV
+            holds); never happens with MaskablePPO.
+        hyperparameters: the algorithm's hyper-parameters (:data:`ALGORITHM_DEFAULTS` keys);
+            missing ones take the defaults, so the stored dict is complete.
+    """
+
+    algo: str = "MaskablePPO"
+    total_timesteps: int = 200_000
+    n_envs: int = 4
+    seed: int = 0
+    width: int = 32
+    features_dim: int = 128
+    hidden: int = 64
+    resolution: float = 0.5
+    n_agents: int = 4
+    comm_range: float = 25.0
+    num_cpus: int = 0
+    checkpoint_every: int = 20_000
+    invalid_penalty: float = 0.0
+    hyperparameters: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        algo = canonical_algo(self.algo)
+        object.__setattr__(self, "algo", algo)
+        for name in ("total_timesteps", "n_envs", "width", "features_dim", "hidden",
+                     "n_agents", "checkpoint_every"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"invalid SB3 config: {name} must be an integer >= 1, "
+                                 f"got {value!r}")
+        for name in ("seed", "num_cpus"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"invalid SB3 config: {name} must be an integer >= 0, "
+                                 f"got {value!r}")
+        if not isinstance(self.resolution, int | float) or not math.isfinite(self.resolution) \
+                or self.resolution <= 0:
+            raise ValueError(f"invalid SB3 config: resolution must be a positive number, "
+                             f"got {self.resolution!r}")
+        if not isinstance(self.comm_range, int | float) or math.isnan(self.comm_range) \
+                or self.comm_range < 0:
+            raise ValueError(f"invalid SB3 config: comm_range must be >= 0 (inf allowed), "
+                             f"got {self.comm_range!r}")
+        if not isinstance(self.invalid_penalty, int | float) \
+                or not math.isfinite(self.invalid_penalty) or self.invalid_penalty < 0:
+            raise ValueError(f"invalid SB3 config: invalid_penalty must be a number >= 0, "
+                             f"got {self.invalid_penalty!r}")
+        if not isinstance(self.hyperparameters, Mapping):
+            raise ValueError(f"invalid SB3 config: hyperparameters must be a mapping, got "
+                             f"{self.hyperparameters!r}")
+        merged = dict(ALGORITHM_DEFAULTS[algo])
+        for name, value in self.hyperparameters.items():
+            merged[name] = _check_hyperparameter(algo, name, value)
+        object.__setattr__(self, "hyperparameters", merged)
+        if "batch_size" in merged and "n_steps" in merged:
+            rollout = merged["n_steps"] * self.n_envs * self.n_agents
+            if merged["batch_size"] > rollout:
+                raise ValueError(f"invalid SB3 config: batch_size {merged['batch_size']} is "
+                                 f"larger than a rollout (n_steps * n_envs * n_agents = "
+                                 f"{rollout})")
+        self.architecture()  # validates the sizes
+        if algo in PPO_ALGORITHMS:
+            self.to_ppo_config()  # PPOTrainConfig's own checks, before any work
+
+    def architecture(self) -> PolicyArchitecture:
+        """The policy's network sizes."""
+        options = {name: self.hyperparameters[name] for name in _POLICY_OPTIONS
+                   if name in self.hyperparameters}
+        return PolicyArchitecture(width=self.width, features_dim=self.features_dim,
+                                  hidden=self.hidden, **options)
+
+    def algorithm_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of the SB3 algorithm's constructor (hyper-parameters that do not
+        size the policy)."""
+        return {k: v for k, v in self.hyperparameters.items() if k not in _POLICY_OPTIONS}
+
+    def to_ppo_config(self) -> PPOTrainConfig:
+        """The same run as ``ipp-train ppo`` sees it (PPO and MaskablePPO only)."""
+        if self.algo not in PPO_ALGORITHMS:
+            raise ValueError(f"{self.algo} is not trained by ipp-train ppo")
+        hyper = dict(self.hyperparameters)
+        return PPOTrainConfig(
+            total_timesteps=self.total_timesteps, n_envs=self.n_envs, lr=hyper.pop("learning_rate"),
+            masked=self.algo == "MaskablePPO", seed=self.seed, width=self.width,
+            features_dim=self.features_dim, hidden=self.hidden, resolution=self.resolution,
+            n_agents=self.n_agents, comm_range=self.comm_range, num_cpus=self.num_cpus,
+            checkpoint_every=self.checkpoint_every, invalid_penalty=self.invalid_penalty,
+            **hyper)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict (an infinite comm_range becomes the string ``"inf"``)."""
+        values = dataclasses.asdict(self)
+        values["hyperparameters"] = dict(self.hyperparameters)
+        if math.isinf(values["comm_range"]):
+            values["comm_range"] = "inf"
+        return values
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> SB3TrainConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are rejected."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"invalid SB3 config: unknown key(s) {unknown}")
+        values = dict(values)
+        if values.get("comm_range") == "inf":
+            values["comm_range"] = math.inf
+        return cls(**values)
+
+
+# --------------------------------------------------------------------------------------------
+# Training
+
+
+def sb3_model_payload(model: Any, config: SB3TrainConfig,
+                      env_config: EnvConfig) -> dict[str, Any]:
+    """What an ``ipp-toolkit/sb3`` file holds of a model: its policy's state dict and records."""
+    return {
+        "policy": model.policy.state_dict(),
+        "algo": config.algo,
+        "obs_shape": [int(d) for d in model.observation_space.shape],
+        "n_actions": int(model.action_space.n),
+        "architecture": config.architecture().to_dict(),
+        "hyperparameters": dict(config.hyperparameters),
+        "sb3_config": config.to_dict(),
+        "env_config": config_to_dict(env_config),
+        "num_timesteps": int(model.num_timesteps),
+    }
+
+
+def make_sb3_model(config: SB3TrainConfig, env: Any, seed: int | None = None,
+                   tensorboard_log: str | None = None) -> Any:
+    """A fresh SB3 model of ``config.algo`` on ``env`` whose policy the ``sb3`` planner can
+    rebuild (the policy class and sizes of :mod:`baselines.sb3_policies`).
+
+    Args:
+        config: algorithm, hyper-parameters and network sizes.
+        env: the vec env (:func:`ipp_toolkit.vec.make_sb3_vec_env`, possibly wrapped).
+        seed: the model's seed (default ``config.seed``); SB3 also seeds ``env`` with it.
+        tensorboard_log: TensorBoard folder, or None.
+    """
+    algo = config.algo
+    return algorithm_class(algo)(
+        policy_class(algo), env, policy_kwargs=sb3_policy_kwargs(algo, config.architecture()),
+        tensorboard_log=tensorboard_log, seed=config.seed if seed is None else seed,
+        device="cpu", verbose=0, **config.algorithm_kwargs())
+
+
+def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
+                    env_config: EnvConfig, **extra: Any) -> Path:
+    """Write a model's policy for the ``sb3`` planner: ``path`` and its JSON record, atomically.
+
+    PPO and MaskablePPO are written in ``ipp-train ppo``'s format, the others in
+    ``ipp-toolkit/sb3``; ``extra`` (JSON-safe) goes into the JSON record only.
+
+    Args:
+        path: destination ``.pt`` file; the record is ``path.with_suffix(".json")``.
+        model: a model made by :func:`make_sb3_model` (or with the same policy class and
+            ``policy_kwargs``).
+        config: its configuration.
+        env_config: the env config it trained on (its features are the policy's planes).
+    """
+    if config.algo in PPO_ALGORITHMS:
+        return save_policy(path, model, config.to_ppo_config(), env_config, **extra)
+    path = Path(path)
+    payload = sb3_model_payload(model, config, env_config)
+    save_torch(path, payload, SB3_POLICY_KIND)
+    write_json(path.with_suffix(".json"), sb3_policy_metadata(payload, **extra))
+    return path
+
+
+def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path,
+              progress: bool = True, resume: bool = False, time_limit_s: float | None = None,
+              command: str | None = None) -> Path:
+    """Train ``config.algo`` with parameter sharing and write ``out_dir/policy.pt``.
+
+    PPO and MaskablePPO are handed to :func:`baselines.ppo_training.train_ppo` (the
+    ``ipp-toolkit/ppo`` files); the other algorithms write ``ipp-toolkit/sb3`` files. The env
+    is ``env_config`` with the team size, range and resolution of ``config``.
+
+    Args:
+        config: algorithm and hyper-parameters.
+        env_config: the mission configuration to train on.
+        out_dir: output folder (created).
+        progress: show a tqdm bar.
+        resume: continue from ``out_dir/checkpoint.pt`` (its configs must match; only
+            ``total_timesteps`` may change).
+        time_limit_s: stop after this many seconds of this call and save what was learnt.
+        command: the command line that started the run, recorded in the JSON files.
+
+    Returns:
+        the path of the saved ``policy.pt``.
+
+    Raises:
+        ValueError: bad arguments, an existing run without ``resume``, or a checkpoint of
+            other configs.
+    """
+    if not isinstance(config, SB3TrainConfig):
+        raise ValueError(f"config must be an SB3TrainConfig, got {type(config).__name__}")
+    if not isinstance(env_config, EnvConfig):
+        raise ValueError(f"env_config must be an EnvConfig, got {type(env_config).__name__}")
+    if config.algo in PPO_ALGORITHMS:
+        return train_ppo(config.to_ppo_config(), env_config, out_dir, progress=progress,
+                         resume=resume, time_limit_s=time_limit_s, command=command)
+    env_cfg = training_env_config(config, env_config)
+    algo = config.algo
+
+    def check_resume(state: dict[str, Any], ckpt_path: Path) -> None:
+        stored = SB3TrainConfig.from_dict(state["sb3_config"])
+        if dataclasses.replace(stored, total_timesteps=config.total_timesteps) != config:
+            raise ValueError(f"cannot resume {str(ckpt_path)!r}: its SB3 config {stored} "
+                             f"differs from the given {config} (only total_timesteps may "
+                             "change)")
+        if config_from_dict(state["env_config"]) != env_cfg:
+            raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
+                             "env config")
+
+    def make_env(env_seed: int) -> Any:
+        # Only MaskablePPO reads the masks; every algorithm here holds masked actions.
+        return make_sb3_vec_env(env_cfg, config.n_envs, env_seed, num_cpus=config.num_cpus,
+                                invalid_action="hold", invalid_penalty=config.invalid_penalty)
+
+    def make_model(env: Any, env_seed: int, tb_dir: str, done: int) -> Any:
+        model = make_sb3_model(config, env, seed=env_seed, tensorboard_log=tb_dir)
+        if done and "learning_starts" in config.hyperparameters:
+            # The replay buffer is not saved: refill it before training again.
+            model.learning_starts = done + int(config.hyperparameters["learning_starts"])
+        return model
+
+    run_format = RunFormat(algo_label=algo, policy_kind=SB3_POLICY_KIND,
+                           training_kind=SB3_TRAINING_KIND, metadata=sb3_policy_metadata,
+                           tb_log_name=algo.lower())
+    return run_sb3_training(
+        out_dir=out_dir, run_format=run_format, seed=config.seed,
+        total_timesteps=config.total_timesteps, checkpoint_every=config.checkpoint_every,
+        make_env=make_env, make_model=make_model,
+        payload=lambda model: sb3_model_payload(model, config, env_cfg),
+        check_resume=check_resume,
+        extra_record={} if command is None else {"command": str(command)},
+        progress=progress, resume=resume, time_limit_s=time_limit_s)
+
+
+# --------------------------------------------------------------------------------------------
+# Command line
+
+
+def _parser() -> argparse.ArgumentParser:
+    defaults = SB3TrainConfig(algo="A2C")
+    parser = argparse.ArgumentParser(
+        prog="ipp-train sb3",
+        description="Train a shared (parameter-sharing) policy of any supported SB3 algorithm "
+                    "on the simulator. --algo PPO and --algo MaskablePPO run ipp-train ppo "
+                    "and take its options (ipp-train sb3 --algo PPO --help).")
+    parser.add_argument("--algo", required=True, metavar="|".join(ALGORITHMS),
+                        help="the algorithm (any case)")
+    parser.add_argument("--config", help="env config YAML (defaults: the paper's world)")
+    parser.add_argument("--out", default=None,
+                        help="output folder (default runs/sb3-ALGO, lower case)")
+    parser.add_argument("--timesteps", type=int, default=defaults.total_timesteps,
+                        help="agent-transitions to train for")
+    parser.add_argument("--n-envs", type=int, default=defaults.n_envs,
+                        help="simulator copies stepped together")
+    parser.add_argument("--lr", type=float, default=None,
+                        help="learning rate (default: the algorithm's, see --set)")
+    parser.add_argument("--gamma", type=float, default=None, help="discount factor")
+    parser.add_argument("--width", type=int, default=defaults.width,
+                        help="conv channels of the features extractor")
+    parser.add_argument("--features-dim", type=int, default=defaults.features_dim)
+    parser.add_argument("--hidden", type=int, default=defaults.hidden,
+                        help="hidden layer width of each head")
+    parser.add_argument("--seed", type=int, default=defaults.seed)
+    parser.add_argument("--agents", type=int, default=None,
+                        help=f"team size N (default: the --config file's, else "
+                             f"{defaults.n_agents})")
+    parser.add_argument("--comm", type=float, default=None,
+                        help=f"communication range D in metres, inf allowed (default: the "
+                             f"--config file's, else {defaults.comm_range:g})")
+    parser.add_argument("--resolution", type=float, default=None,
+                        help=f"training map resolution in metres per cell (default: the "
+                             f"--config file's, else {defaults.resolution:g})")
+    parser.add_argument("--workers", "--num-cpus", dest="num_cpus", type=int,
+                        default=defaults.num_cpus, metavar="N",
+                        help="SuperSuit worker processes (0: none)")
+    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
+                        help="agent-transitions between checkpoints")
+    parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
+                        metavar="P", help="reward subtracted when a masked action is picked "
+                                          "(the UAV holds for that step)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="an algorithm hyper-parameter (repeatable): "
+                             + "; ".join(f"{algo}: {', '.join(sorted(values))}"
+                                         for algo, values in ALGORITHM_DEFAULTS.items()
+                                         if algo not in PPO_ALGORITHMS))
+    parser.add_argument("--time-limit", type=float, default=None, metavar="MINUTES",
+                        help="stop after this many minutes of training and save")
+    parser.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return parser
+
+
+def _hyperparameters(algo: str, args: argparse.Namespace) -> dict[str, int | float]:
+    """The hyper-parameters given by ``--lr``, ``--gamma`` and ``--set`` (each name once)."""
+    given: dict[str, int | float] = {}
+    items = [f"learning_rate={args.lr!r}"] if args.lr is not None else []
+    items += [f"gamma={args.gamma!r}"] if args.gamma is not None else []
+    for item in [*items, *args.set]:
+        name, sep, text = (part.strip() for part in item.partition("="))
+        if not sep or not name:
+            raise ValueError(f"--set expects NAME=VALUE, got {item!r}")
+        if name in given:
+            raise ValueError(f"hyper-parameter {name!r} is given twice")
+        given[name] = coerce_hyperparameter(algo, name, text)
+    return given
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``ipp-train sb3 --algo ALGO [options]``; returns 0 on success, 2 on bad input."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = shlex.join(["ipp-train", "sb3", *argv])
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--algo")
+    known, rest = pre.parse_known_args(argv)
+    if known.algo is None:
+        if "-h" in argv or "--help" in argv:
+            _parser().print_help()
+            return 0
+        print(f"ipp-train sb3: error: --algo is required; supported: {', '.join(ALGORITHMS)}",
+              file=sys.stderr)
+        return 2
+    try:
+        algo = canonical_algo(known.algo)
+    except ValueError as error:
+        print(f"ipp-train sb3: error: --algo: {error}", file=sys.stderr)
+        return 2
+    if algo in PPO_ALGORITHMS:
+        if any(item.split("=")[0] in ("--masked", "--no-masked") for item in rest):
+            print(f"ipp-train sb3: error: --masked/--no-masked are ipp-train ppo's; here "
+                  f"--algo {algo} chooses (MaskablePPO or PPO)", file=sys.stderr)
+            return 2
+        masked = ["--masked"] if algo == "MaskablePPO" else ["--no-masked"]
+        return ppo_main(rest + masked, prog=f"ipp-train sb3 --algo {algo}", command=command)
+    args = _parser().parse_args(argv)  # exits with status 2 on malformed options
+    out = args.out or f"runs/sb3-{algo.lower()}"
+    try:
+        defaults = SB3TrainConfig(algo=algo)
+        env_config = build_env_config(
+            args.config, agents=args.agents, comm=args.comm, resolution=args.resolution,
+            defaults={"world": {"resolution": defaults.resolution},
+                      "team": {"n_agents": defaults.n_agents,
+                               "comm_range": defaults.comm_range}})
+        config = SB3TrainConfig(
+            algo=algo, total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
+            width=args.width, features_dim=args.features_dim, hidden=args.hidden,
+            resolution=env_config.world.resolution, n_agents=env_config.team.n_agents,
+            comm_range=env_config.team.comm_range, num_cpus=args.num_cpus,
+            checkpoint_every=args.checkpoint_every, invalid_penalty=args.invalid_penalty,
+            hyperparameters=_hyperparameters(algo, args))
+        training_env_config(config, env_config)  # validate before any work
+        path = train_sb3(config, env_config, out, progress=not args.no_progress,
+                         resume=args.resume,
+                         time_limit_s=None if args.time_limit is None else args.time_limit * 60,
+                         command=command)
+    except (ValueError, CheckpointError) as error:
+        print(f"ipp-train sb3: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return report_interrupt("ipp-train sb3", f"continue with the same command plus "
+                                f"--resume --out {out} (from the last checkpoint)")
+    print(f"saved {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
