@@ -32,6 +32,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from tqdm.auto import tqdm
 
 from ipp_toolkit.io import load_torch, save_torch, write_json
+from ipp_toolkit.process_pool import limit_blas_threads
 
 __all__ = ["RunFormat", "run_sb3_training", "progress_callback", "time_limit_callback",
            "checkpoint_callback"]
@@ -159,6 +160,7 @@ def run_sb3_training(
                                      or not time_limit_s > 0):
         raise ValueError(f"time_limit_s must be a positive number or None, got {time_limit_s!r}")
     torch.set_num_threads(1)  # two shared cores: more intra-op threads collapse throughput
+    limit_blas_threads()
     out_dir = Path(out_dir)
     ckpt_path = out_dir / "checkpoint.pt"
     extra_record = dict(extra_record or {})

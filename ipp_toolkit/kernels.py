@@ -19,7 +19,9 @@ compiling them again.
 
 from __future__ import annotations
 
+import importlib.util
 import os
+from typing import Any
 
 import numpy as np
 
@@ -32,129 +34,67 @@ of H over interesting cells, of the sum of (1 - p)^2 over them, of the true and 
 positives, then the sum of W' H (posterior weights, prior entropies), of W H before and of
 W' H' after."""
 
-AVAILABLE = False
-if os.environ.get("IPP_TOOLKIT_NO_NUMBA", "") in ("", "0"):
-    try:
-        import numba
-    except ImportError:  # pragma: no cover - numba is a dependency; this is the fallback
-        numba = None
-    if numba is not None:
-        AVAILABLE = True
+AVAILABLE = (os.environ.get("IPP_TOOLKIT_NO_NUMBA", "") in ("", "0")
+             and importlib.util.find_spec("numba") is not None)
+"""Whether the compiled kernels are used (Numba importable and not switched off)."""
 
-if AVAILABLE:
-    _jit = numba.njit(cache=True, nogil=True, boundscheck=False)
+_module: Any = None
 
-    @_jit
-    def find_or_add(bits, slot, table_bits, size, shift, multiplier, out):  # pragma: no cover
-        """out[i, j] = index of bits[i, j] in an open-addressing table, adding new patterns.
 
-        Args:
-            bits: (rows, cols) uint32 bit patterns (of float32 values; any strides).
-            slot: (2**b,) intp hash slot -> index (-1 empty); at most half full afterwards
-                (the caller reserves room).
-            table_bits: (capacity,) uint32 pattern of each index; new ones appended at
-                ``size``.
-            size: how many patterns the table holds.
-            shift, multiplier: the hash, ``(pattern * multiplier mod 2**32) >> shift``.
-            out: (rows, cols) intp output.
+def _compiled() -> Any:
+    """The compiled kernels, imported (and loaded from Numba's cache) on first use.
 
-        Returns:
-            the new size (new patterns got indices size.. in order of first appearance).
-        """
-        mask = slot.shape[0] - 1
-        rows, cols = bits.shape
-        for i in range(rows):
-            for j in range(cols):
-                pattern = bits[i, j]
-                s = np.intp(np.uint32(pattern * multiplier) >> shift)
-                while True:
-                    index = slot[s]
-                    if index < 0:
-                        table_bits[size] = pattern
-                        slot[s] = size
-                        out[i, j] = size
-                        size += 1
-                        break
-                    if table_bits[index] == pattern:
-                        out[i, j] = index
-                        break
-                    s = (s + 1) & mask
-        return size
+    Importing Numba and loading the kernels takes about a second; a process that never
+    refreshes a map (a CLI refusing a bad flag) does not pay it.
+    """
+    global _module
+    if _module is None:
+        from . import _compiled_kernels
 
-    @_jit
-    def apply_values(ids, value_index, prob, entropy, wentropy, table_prob, table_entropy,
-                     table_wentropy, block_of_row, block_of_col, prob_blocks,
-                     wentropy_blocks):  # pragma: no cover
-        """Write the caches of one rectangle from its value indices; move the block sums.
+        if _compiled_kernels.N_STATS != N_STATS:  # pragma: no cover - a guard for editors
+            raise RuntimeError("ipp_toolkit._compiled_kernels is out of step with kernels")
+        _module = _compiled_kernels
+    return _module
 
-        Args:
-            ids: (rows, cols) intp value index of every cell.
-            value_index, prob, entropy, wentropy: (rows, cols) views of the map's caches.
-            table_prob, table_entropy, table_wentropy: (n,) float32 columns of the table.
-            block_of_row, block_of_col: (rows,), (cols,) planning-grid block of each row and
-                column of the rectangle.
-            prob_blocks, wentropy_blocks: (G, G) float64 block sums of the map, updated.
-        """
-        rows, cols = ids.shape
-        for i in range(rows):
-            block_row = block_of_row[i]
-            for j in range(cols):
-                index = ids[i, j]
-                new_prob = table_prob[index]
-                new_wentropy = table_wentropy[index]
-                block_col = block_of_col[j]
-                prob_blocks[block_row, block_col] += np.float64(new_prob - prob[i, j])
-                wentropy_blocks[block_row, block_col] += np.float64(new_wentropy
-                                                                    - wentropy[i, j])
-                value_index[i, j] = index
-                prob[i, j] = new_prob
-                entropy[i, j] = table_entropy[index]
-                wentropy[i, j] = new_wentropy
 
-    @_jit
-    def apply_values_with_stats(ids, value_index, prob, entropy, wentropy, table_prob,
-                                table_entropy, table_weights, table_wentropy, block_of_row,
-                                block_of_col, prob_blocks, wentropy_blocks,
-                                truth):  # pragma: no cover
-        """:func:`apply_values`, also returning the changes of the metric and reward sums.
+def find_or_add(bits: np.ndarray, slot: np.ndarray, table_bits: np.ndarray, size: int,
+                shift: np.uint32, multiplier: np.uint32, out: np.ndarray) -> int:
+    """out[i, j] = index of bits[i, j] in an open-addressing table, adding new patterns.
 
-        Args:
-            truth: (rows, cols) bool ground truth of the rectangle; the other arguments as
-                in :func:`apply_values`, plus the table's class weights ``table_weights``.
+    Args:
+        bits: (rows, cols) uint32 bit patterns (of float32 values; any strides).
+        slot: (2**b,) intp hash slot -> index (-1 empty); the caller reserves room so that
+            it is at most half full afterwards.
+        table_bits: (capacity,) uint32 pattern of each index; new ones appended at ``size``.
+        size: how many patterns the table holds.
+        shift, multiplier: the hash, ``(pattern * multiplier mod 2**32) >> shift``.
+        out: (rows, cols) intp output.
 
-        Returns:
-            (N_STATS,) float64, see :data:`N_STATS`.
-        """
-        stats = np.zeros(N_STATS)
-        two = np.float32(2.0)
-        half = np.float32(0.5)
-        rows, cols = ids.shape
-        for i in range(rows):
-            block_row = block_of_row[i]
-            for j in range(cols):
-                index = ids[i, j]
-                old_prob = prob[i, j]
-                old_entropy = entropy[i, j]
-                old_wentropy = wentropy[i, j]
-                new_prob = table_prob[index]
-                new_entropy = table_entropy[index]
-                new_wentropy = table_wentropy[index]
-                block_col = block_of_col[j]
-                prob_blocks[block_row, block_col] += np.float64(new_prob - old_prob)
-                wentropy_blocks[block_row, block_col] += np.float64(new_wentropy
-                                                                    - old_wentropy)
-                if truth[i, j]:
-                    stats[0] += np.float64(new_entropy - old_entropy)
-                    stats[1] += np.float64((old_prob - new_prob) * (two - old_prob - new_prob))
-                    stats[2] += int(new_prob > half) - int(old_prob > half)
-                stats[3] += int(new_prob > half) - int(old_prob > half)
-                stats[4] += np.float64(table_weights[index] * old_entropy)
-                stats[5] += np.float64(old_wentropy)
-                stats[6] += np.float64(new_wentropy)
-                value_index[i, j] = index
-                prob[i, j] = new_prob
-                entropy[i, j] = new_entropy
-                wentropy[i, j] = new_wentropy
-        return stats
-else:  # pragma: no cover - exercised with IPP_TOOLKIT_NO_NUMBA=1
-    find_or_add = apply_values = apply_values_with_stats = None
+    Returns:
+        the new size (new patterns got indices ``size..`` in order of first appearance).
+    """
+    return _compiled().find_or_add(bits, slot, table_bits, size, shift, multiplier, out)
+
+
+def apply_values(*arrays: np.ndarray) -> None:
+    """Write the caches of one rectangle from its value indices; move the block sums.
+
+    Args, in order: ids (rows, cols) intp value index of every cell; value_index, prob,
+    entropy, wentropy (rows, cols) views of the map's caches; table_prob, table_entropy,
+    table_wentropy (n,) float32 columns of the table; block_of_row (rows,) and block_of_col
+    (cols,) planning-grid block of each row and column; prob_blocks and wentropy_blocks
+    (G, G) float64 block sums of the map, updated in place.
+    """
+    _compiled().apply_values(*arrays)
+
+
+def apply_values_with_stats(*arrays: np.ndarray) -> np.ndarray:
+    """:func:`apply_values`, also returning the changes of the metric and reward sums.
+
+    Args, in order: as :func:`apply_values` with the table's class weights ``table_weights``
+    after ``table_entropy``, then ``truth`` (rows, cols) bool ground truth of the rectangle.
+
+    Returns:
+        (N_STATS,) float64, see :data:`N_STATS`.
+    """
+    return _compiled().apply_values_with_stats(*arrays)
