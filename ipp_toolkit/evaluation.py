@@ -339,7 +339,9 @@ def load_results(out_dir: str | os.PathLike[str]) -> EvaluationResult:
 def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], missions: int = 50,
              seed: int = 0, workers: int = 1, out_dir: str | os.PathLike[str] | None = None,
              progress: bool = True, namespace: str = "test",
-             record_missions: Sequence[int] = (0,)) -> EvaluationResult:
+             record_missions: Sequence[int] = (0,),
+             on_recorded: Callable[[str, int, dict[str, Any], list[dict[str, Any]]], None]
+             | None = None) -> EvaluationResult:
     """Fly missions ``0 .. missions - 1`` of run ``seed`` with every planner.
 
     Every input is checked before any work or file: planner names (an unknown one raises
@@ -362,6 +364,9 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             ``validation``.
         record_missions: mission indices whose trajectories are kept (and written as npz);
             indices >= ``missions`` are ignored.
+        on_recorded: called in this process as ``on_recorded(label, mission, trajectory,
+            rows)`` as soon as a recorded mission has been flown (not for one read back from
+            ``out_dir``), e.g. to draw it while the other missions fly.
 
     Returns:
         the :class:`EvaluationResult`; its rows are ordered by planner, mission, step.
@@ -457,6 +462,8 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         done[(label, mission)] = result["rows"]
         if result["trajectory"] is not None:
             trajectories[(label, mission)] = result["trajectory"]
+            if on_recorded is not None:
+                on_recorded(label, mission, result["trajectory"], result["rows"])
 
     with progress_bar(len(labels) * missions, "evaluate", "missions",
                       initial=len(labels) * missions - len(tasks), disable=not progress) as bar:

@@ -169,7 +169,8 @@ def footprint_gain(state: MissionState, smoothing: float | None = None) -> np.nd
     if smoothing > 0:
         world = state.config.world
         smoother = interest_smoother(world.map_cells, world.resolution, smoothing)
-        sums = cache.weighted_sums(smoother(state.maps.prob[:state.n_agents]))
+        sums = cache.weighted_sums(smoother.block_values(state.maps.prob[:state.n_agents]),
+                                   smoother.block)
         scale = 1.0
     else:
         sums = cache.sums()

@@ -191,22 +191,28 @@ class FootprintGainCache:
         self.update()
         return self.totals[self.owner]
 
-    def weighted_sums(self, cell_weight: np.ndarray) -> np.ndarray:
-        """(n_maps, Z, G, G) float64 footprint sums of ``cell_weight`` times the per-cell gain.
+    def weighted_sums(self, cell_weight: np.ndarray, block: int = 1) -> np.ndarray:
+        """(n_maps, Z, G, G) float64 footprint sums of a per-cell weight times the per-cell gain.
 
         Args:
-            cell_weight: (n_maps, H, W) float32 weight of every cell of every map.
+            cell_weight: (n_maps, H / block, W / block) float32 weight of every map's cells,
+                constant over ``block`` x ``block`` squares of cells (``block = 1``: one
+                weight per cell); broadcast over the squares, never expanded to cells.
+            block: side in cells of the squares ``cell_weight`` is given on (divides H).
         """
         self.update()
         n_maps = len(self.owner)
-        if cell_weight.shape != (n_maps,) + self.cells.shape[2:]:
-            raise ValueError(f"cell_weight must have shape {(n_maps,) + self.cells.shape[2:]}, "
-                             f"got {cell_weight.shape}")
+        size = self.cells.shape[-1]
+        if block < 1 or size % block or cell_weight.shape != (n_maps,) + (size // block,) * 2:
+            raise ValueError(f"cell_weight must have shape {(n_maps,) + (size // block,) * 2} "
+                             f"for blocks of {block} cells, got {cell_weight.shape}")
         # Maps that share one belief (every map at D = inf) share one product: their cells
         # and so their weights are identical.
         owners, inverse = np.unique(self.owner, return_inverse=True)
-        weighted = self.cells[owners]  # a copy: (n_owners, Z, H, W)
-        weighted *= cell_weight[owners, None]
+        n, blocks = len(owners), size // block
+        cells = self.cells[owners].reshape(n, self.n_altitudes, blocks, block, blocks, block)
+        weight = cell_weight[owners].reshape(n, 1, blocks, 1, blocks, 1)
+        weighted = (cells * weight).reshape(n, self.n_altitudes, size, size)
         sums = self.rows_full @ weighted @ self.cols_full_t
         return sums[inverse].astype(np.float64)
 

@@ -19,10 +19,10 @@ import hashlib
 import json
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import write_json
@@ -50,6 +50,21 @@ build_config = build_env_config
 """The one config builder (:func:`ipp_toolkit.settings.build_env_config`) under its old name."""
 
 
+def draw_trajectory(out_dir: Path, config: EnvConfig, label: str, mission: int,
+                    trajectory: Mapping[str, Any],
+                    final: tuple[float, float] | None) -> list[Path]:
+    """Draw one recorded mission to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``.
+
+    ``final`` is the mission's final (entropy, F1), shown in the title when given.
+    """
+    title = (f"{label}, mission {mission}: {config.team.n_agents} UAVs, "
+             f"D = {format_comm(config.team.comm_range)}")
+    if final is not None:
+        title += f"; final entropy {final[0]:.3f}, F1 {final[1]:.3f}"
+    stem = out_dir / "trajectories" / f"{safe_name(label)}_mission{mission}"
+    return plot_trajectories(trajectory, stem, title)
+
+
 @dataclass
 class Comparison:
     """The outcome of :func:`compare`.
@@ -75,10 +90,13 @@ class Comparison:
     def _repr_markdown_(self) -> str:
         return self.table
 
-    def plot(self, out_dir: str | os.PathLike[str]) -> list[Path]:
+    def plot(self, out_dir: str | os.PathLike[str],
+             drawn: Collection[tuple[str, int]] = ()) -> list[Path]:
         """Draw ``curves.png/.pdf`` and one trajectory figure per recorded mission.
 
-        Trajectory figures go to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``.
+        Trajectory figures go to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``; those
+        of ``drawn`` (label, mission) pairs are already there (:func:`compare` draws them
+        while the other missions fly) and are not drawn again.
 
         Returns:
             every written path.
@@ -90,18 +108,16 @@ class Comparison:
         for (label, mission), trajectory in sorted(self.result.trajectories.items(),
                                                    key=lambda item: (str(item[0][0]),
                                                                      int(item[0][1]))):
-            title = (f"{label}, mission {mission}: {config.team.n_agents} UAVs, "
-                     f"D = {format_comm(config.team.comm_range)}")
-            metrics = final.get((str(label), int(mission)))
-            if metrics is not None:
-                title += f"; final entropy {metrics[0]:.3f}, F1 {metrics[1]:.3f}"
-            stem = out / "trajectories" / f"{safe_name(str(label))}_mission{int(mission)}"
-            paths += plot_trajectories(trajectory, stem, title)
+            if (str(label), int(mission)) in drawn:
+                continue
+            paths += draw_trajectory(out, config, str(label), int(mission), trajectory,
+                                     final.get((str(label), int(mission))))
         return paths
 
-    def write(self, out_dir: str | os.PathLike[str]) -> list[Path]:
+    def write(self, out_dir: str | os.PathLike[str],
+              drawn: Collection[tuple[str, int]] = ()) -> list[Path]:
         """Write ``summary.md/.csv/.tex`` and every figure of :meth:`plot` into ``out_dir``."""
-        return list(write_tables(self.summary, out_dir).values()) + self.plot(out_dir)
+        return list(write_tables(self.summary, out_dir).values()) + self.plot(out_dir, drawn)
 
     def _final_metrics(self) -> dict[tuple[str, int], tuple[float, float]]:
         budget = self.summary.budget
@@ -309,9 +325,19 @@ def compare(agents: int | None = None, comm: float | None = None,
         _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
     from ipp_toolkit.evaluation import evaluate
 
+    drawn: set[tuple[str, int]] = set()
+
+    def draw_now(label: str, mission: int, trajectory: dict[str, Any],
+                 rows: list[dict[str, Any]]) -> None:
+        # Drawn while the workers fly the other missions, not after all of them.
+        if out is not None:
+            draw_trajectory(Path(out), env_config, label, mission, trajectory,
+                            (float(rows[-1]["entropy"]), float(rows[-1]["f1"])))
+            drawn.add((label, mission))
+
     result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
                       workers=int(workers), out_dir=out, progress=progress, namespace=namespace,
-                      record_missions=(0,))
+                      record_missions=(0,), on_recorded=draw_now if workers > 1 else None)
     if out is not None:
         _record_checkpoints(Path(out), checkpoints, write=True)
     summary = summarise(result.rows, reference=reference, checkpoints={
@@ -319,7 +345,7 @@ def compare(agents: int | None = None, comm: float | None = None,
         for label, record in checkpoints.items()})
     comparison = Comparison(result=result, summary=summary)
     if out is not None:
-        comparison.write(out)
+        comparison.write(out, drawn)
         if animate:
             from .animation import animate_mission
 

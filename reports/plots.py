@@ -53,7 +53,7 @@ def save_figure(figure: Figure, stem: str | os.PathLike[str],
     for fmt in formats:
         target = Path(f"{os.fspath(stem)}.{fmt}")
         atomic_write(target, lambda handle, fmt=fmt: figure.savefig(
-            handle, format=fmt, dpi=dpi, bbox_inches="tight"))
+            handle, format=fmt, dpi=dpi))
         paths.append(target)
     return paths
 

@@ -93,12 +93,14 @@ def test_gain_planes_centre_shows_the_footprint_gain_of_the_own_waypoint():
         assert planes[k, 0, c, c] == pytest.approx(gain[k, z, y, x], abs=1e-6)
 
 
-@pytest.mark.parametrize("agents, comm", [(4, 25.0), (4, math.inf), (2, 0.0)])
-def test_smoothed_gain_planes_equal_a_full_recomputation(agents, comm):
-    config = EnvConfig().replace(world={"resolution": 0.5},
+@pytest.mark.parametrize("agents, comm, resolution", [(4, 25.0, 0.5), (4, math.inf, 0.5),
+                                                     (2, 0.0, 0.5), (2, 25.0, 0.25)])
+def test_smoothed_gain_planes_equal_a_full_recomputation(agents, comm, resolution):
+    # At r_M = 0.25 m the smoothing blocks hold 2 x 2 cells: the weight is broadcast over them.
+    config = EnvConfig().replace(world={"resolution": resolution},
                                  team={"n_agents": agents, "comm_range": comm},
                                  features={"gain": True, "gain_smoothing": 4.0})
-    smoother = InterestSmoother(config.world.map_cells, 0.5, 4.0)
+    smoother = InterestSmoother(config.world.map_cells, resolution, 4.0)
     rng = np.random.default_rng(3)
     state = reset_mission(config, seed=2, mission=0, namespace="validation")
     camera_cells = state.geometry.camera.largest_footprint_cells
