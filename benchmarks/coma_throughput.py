@@ -26,6 +26,7 @@ from coma.persistence import build_networks  # noqa: E402
 from coma.rollout import collect_rollout  # noqa: E402
 from ipp_toolkit.config import EnvConfig  # noqa: E402
 from ipp_toolkit.mission import MissionGeometry  # noqa: E402
+from ipp_toolkit.process_pool import limit_blas_threads  # noqa: E402
 
 
 def main() -> None:
@@ -33,11 +34,17 @@ def main() -> None:
     parser.add_argument("--preset", default="cpu", choices=["cpu", "paper"])
     parser.add_argument("--resolution", type=float, default=0.5)
     parser.add_argument("--updates", type=int, default=3)
+    parser.add_argument("--gain", type=float, default=None, metavar="SMOOTHING",
+                        help="with the gain planes: 0 = ig's objective, > 0 = the smoothed "
+                             "objective of the spatial-mixture policy (metres)")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    limit_blas_threads()
     torch.manual_seed(0)
     config = preset(args.preset)
     env = EnvConfig().replace(world={"resolution": args.resolution})
+    if args.gain is not None:
+        env = env.replace(features={"gain": True, "gain_smoothing": args.gain})
     networks = build_networks(config, env)
     optimisers = make_optimisers(networks)
     target = copy.deepcopy(networks.critic)
@@ -54,7 +61,8 @@ def main() -> None:
         rollout_s += middle - start
         update_s += time.perf_counter() - middle
         transitions += rollout.transitions
-    print(f"preset={args.preset} width={config.width} r_M={args.resolution} m, "
+    gain = "" if args.gain is None else f", gain planes (smoothing {args.gain:g} m)"
+    print(f"preset={args.preset} width={config.width} r_M={args.resolution} m{gain}, "
           f"{config.missions_per_update} missions ({transitions // args.updates} "
           f"agent-transitions) per update, {config.epochs} epochs, one thread")
     print(f"  rollout only     {transitions / rollout_s:8.0f} agent-transitions/s")
