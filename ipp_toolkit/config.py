@@ -32,6 +32,7 @@ __all__ = [
     "terrain_kinds",
     "start_for_team_size",
     "fixed_starts_fit",
+    "fixed_start_waypoints",
     "read_config_file",
     "load_config",
     "save_config",
@@ -70,8 +71,11 @@ class WorldConfig:
     Attributes:
         area_size: side of the square area in metres.
         resolution: map cell side r_M in metres; ``area_size / resolution`` must be an integer.
-        grid_spacing: distance between planning waypoints in metres (also the step length).
-        altitudes: the flight levels in metres, lowest first.
+        grid_spacing: horizontal distance between planning waypoints in metres (also the
+            length of a horizontal step).
+        altitudes: the flight levels in metres, lowest first; a vertical action moves one
+            level, whatever the horizontal spacing (the paper's real-world field: 4 m between
+            waypoints, levels at 5, 10 and 15 m).
         prior: prior probability of "interesting" for every map cell.
     """
 
@@ -100,11 +104,6 @@ class WorldConfig:
             _fail("world", "altitudes", self.altitudes, "altitudes must be positive")
         if list(self.altitudes) != sorted(set(self.altitudes)):
             _fail("world", "altitudes", self.altitudes, "must be strictly increasing")
-        steps = np.diff(self.altitudes)
-        if len(steps) and not np.allclose(steps, self.grid_spacing):
-            _fail("world", "altitudes", self.altitudes,
-                  f"must be spaced by grid_spacing ({self.grid_spacing} m): "
-                  "one action moves one step")
         if not 0.0 < self.prior < 1.0:
             _fail("world", "prior", self.prior, "must lie strictly between 0 and 1")
 
@@ -285,18 +284,35 @@ START_POSITIONS: dict[int, tuple[tuple[float, float], ...]] = {
 }
 
 
-def fixed_starts_fit(world: WorldConfig, n_agents: int) -> bool:
-    """Whether ``n_agents`` has documented fixed starts that are waypoints of ``world``."""
+def fixed_start_waypoints(world: WorldConfig, n_agents: int) -> np.ndarray | None:
+    """(n_agents, 2) int waypoint indices (ix, iy) of the fixed starts in ``world``.
+
+    The starts of :data:`START_POSITIONS` are metres of the paper's 50 m field; each
+    coordinate snaps to the nearest waypoint of ``world`` (halves round up) inside its area,
+    so they are unchanged where they are waypoints (the paper's worlds), and in the paper's
+    real-world field (40 m, waypoints every 4 m) (10, 10) becomes (12, 12) and 40 stays 40.
+    None when the team size has no fixed starts or two starts snap to the same waypoint.
+    """
     starts = START_POSITIONS.get(n_agents)
-    return starts is not None and all(
-        max(x, y) <= world.area_size and not x % world.grid_spacing
-        and not y % world.grid_spacing for x, y in starts)
+    if starts is None:
+        return None
+    metres = np.asarray(starts, dtype=np.float64)
+    waypoints = np.clip(np.floor(metres / world.grid_spacing + 0.5), 0,
+                        world.grid_points - 1).astype(np.int64)
+    if len({tuple(w) for w in waypoints.tolist()}) < n_agents:
+        return None
+    return waypoints
+
+
+def fixed_starts_fit(world: WorldConfig, n_agents: int) -> bool:
+    """Whether ``n_agents`` has fixed starts in ``world`` (:func:`fixed_start_waypoints`)."""
+    return fixed_start_waypoints(world, n_agents) is not None
 
 
 def start_for_team_size(start: str, n_agents: int, world: WorldConfig | None = None) -> str:
     """``start`` for a team of ``n_agents``: ``fixed`` falls back to ``random`` for team sizes
     without documented fixed starts (:data:`START_POSITIONS`) or, given ``world``, whose fixed
-    starts are not waypoints of it."""
+    starts do not snap to distinct waypoints of it (:func:`fixed_start_waypoints`)."""
     if start != "fixed":
         return start
     return "fixed" if fixed_starts_fit(world or WorldConfig(), n_agents) else "random"
@@ -472,12 +488,10 @@ class EnvConfig:
         if not any(math.isclose(self.team.start_altitude, a) for a in self.world.altitudes):
             _fail("team", "start_altitude", self.team.start_altitude,
                   f"unknown altitude; choose one of {self.world.altitudes}")
-        if self.team.start == "fixed":
-            for x, y in START_POSITIONS[self.team.n_agents]:
-                if max(x, y) > self.world.area_size or (x % self.world.grid_spacing) or (
-                        y % self.world.grid_spacing):
-                    _fail("team", "start", self.team.start,
-                          f"fixed start ({x}, {y}) is not a waypoint of this world; use random")
+        if self.team.start == "fixed" and not fixed_starts_fit(self.world, self.team.n_agents):
+            _fail("team", "start", self.team.start,
+                  f"the fixed starts {START_POSITIONS.get(self.team.n_agents)} snap to fewer than "
+                  f"{self.team.n_agents} distinct waypoints of this world; use random")
         if self.features.agent_id and self.team.n_agents > self.features.agent_id_scale:
             _fail("features", "agent_id_scale", self.features.agent_id_scale,
                   f"smaller than the team ({self.team.n_agents} agents)")

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import START_POSITIONS, EnvConfig
+from .config import EnvConfig, fixed_start_waypoints
 from .mapping import BeliefMaps, BlockGrid
 from .seeding import MissionStreams, mission_streams
 from .sensor import Camera
@@ -239,8 +239,10 @@ def _start_positions(config: EnvConfig, geometry: MissionGeometry,
     positions = np.empty((n, 3), dtype=np.int64)
     positions[:, 2] = geometry.start_altitude_index
     if team.start == "fixed":
-        xy = np.asarray(START_POSITIONS[n], dtype=np.float64) / world.grid_spacing
-        positions[:, :2] = np.rint(xy).astype(np.int64)
+        waypoints = fixed_start_waypoints(world, n)
+        if waypoints is None:  # EnvConfig refuses such a world; a guard, not a fallback
+            raise ValueError(f"no fixed starts for {n} agents in this world")
+        positions[:, :2] = waypoints
     else:
         g = geometry.grid_points
         cells = streams.generator("starts").choice(g * g, size=n, replace=False)

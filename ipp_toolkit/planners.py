@@ -217,7 +217,9 @@ def check_policy_transfer(trained: EnvConfig, requested: EnvConfig, path: str = 
     :attr:`Planner.observation_features`), so only what those planes cannot express is an
     error: another planning grid, or more agents than the id plane can number. Team size,
     communication range, budget, map resolution, terrain, sensor, reward and the mission's own
-    feature switches may differ: the documented transfer of the paper's robustness study.
+    feature switches may differ: the documented transfer of the paper's robustness study; so
+    may the area and the waypoint spacing when the grid keeps its waypoint count (the paper's
+    real-world field: 40 m with waypoints every 4 m, 11 x 11 like the 50 m field at 5 m).
 
     Returns:
         human-readable notes of the transferred settings (empty if none differ).
@@ -236,7 +238,8 @@ def check_policy_transfer(trained: EnvConfig, requested: EnvConfig, path: str = 
                               f"{requested.team.n_agents} agents")
     notes = []
     for section, name in (("team", "n_agents"), ("team", "comm_range"), ("team", "budget"),
-                          ("world", "resolution")):
+                          ("world", "resolution"), ("world", "area_size"),
+                          ("world", "grid_spacing")):
         old = getattr(getattr(trained, section), name)
         new = getattr(getattr(requested, section), name)
         if old != new:

@@ -142,7 +142,8 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
                      threshold_quantile: float | None = None,
                      resolution: float | None = None,
                      budget: int | None = None, area_size: float | None = None,
-                     features: Mapping[str, bool | int | float] | None = None) -> EnvConfig:
+                     features: Mapping[str, bool | int | float] | None = None,
+                     grid_spacing: float | None = None) -> EnvConfig:
     """The mission config of a command: defaults < ``config`` < explicit keywords.
 
     Args:
@@ -159,6 +160,7 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
         threshold_quantile: the threshold as a quantile q of the values instead (1 - q of the
             cells are interesting): rasters, ``fractal`` and ``real``.
         resolution, budget, area_size: map resolution r_M (m), steps B, side of the area (m).
+        grid_spacing: horizontal distance between waypoints (m); the altitudes stay.
         features: feature switches, e.g. ``{"own_position": True}``.
 
     Raises:
@@ -182,7 +184,9 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
         comm = parse_comm(comm, "comm")
     flags: dict[str, dict[str, Any]] = {}
     world = {key: float(value) for key, value in (("resolution", resolution),
-                                                 ("area_size", area_size)) if value is not None}
+                                                 ("area_size", area_size),
+                                                 ("grid_spacing", grid_spacing))
+             if value is not None}
     if world:
         flags["world"] = world
     team: dict[str, Any] = {}
@@ -257,6 +261,7 @@ def describe_config(config: EnvConfig) -> str:
     return (f"{config.team.n_agents} UAVs ({config.team.start} starts), "
             f"D = {format_comm(config.team.comm_range)}, terrain {where}, "
             f"{config.world.area_size:g} m area at r_M = {config.world.resolution:g} m, "
+            f"waypoints every {config.world.grid_spacing:g} m, "
             f"budget {config.team.budget} steps")
 
 

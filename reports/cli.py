@@ -191,6 +191,10 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="number of steps B (None: the config's, 15)")
     parser.add_argument("--area-size", type=_positive_float, default=None, metavar="METRES",
                         help="side of the square area in metres (None: the config's, 50)")
+    parser.add_argument("--grid-spacing", type=_positive_float, default=None, metavar="METRES",
+                        help="distance between waypoints in metres (None: the config's, 5); "
+                             "the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
+                             "waypoints")
     parser.add_argument("--namespace", choices=("test", "validation"), default="test",
                         help="fly the held-out test missions, or the validation missions to "
                              "select policies on (the default --out then starts with "
@@ -225,7 +229,7 @@ def compare_main(argv: list[str] | None = None) -> int:
             args.config, agents=args.agents, comm=args.comm, terrain=args.terrain,
             threshold=args.threshold, threshold_quantile=args.threshold_quantile,
             resolution=args.resolution, budget=args.budget,
-            area_size=args.area_size)
+            area_size=args.area_size, grid_spacing=args.grid_spacing)
     except (ValueError, OSError) as err:
         return error(err)
     out = args.out

@@ -278,14 +278,16 @@ def compare(agents: int | None = None, comm: float | None = None,
             config: EnvConfig | str | os.PathLike[str] | None = None,
             resolution: float | None = None, budget: int | None = None,
             progress: bool = True, area_size: float | None = None,
+            grid_spacing: float | None = None,
             note: Callable[[str], None] | None = None, animate: bool = False,
             reference: str = "ig", namespace: str = "test") -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
-        agents, comm, terrain, threshold, config, resolution, budget, area_size: the
-            configuration, see :func:`ipp_toolkit.settings.build_env_config` (None: the
-            config's value, else the paper's: 4 UAVs, D = 25 m, ``split``).
+        agents, comm, terrain, threshold, config, resolution, budget, area_size,
+            grid_spacing: the configuration, see
+            :func:`ipp_toolkit.settings.build_env_config` (None: the config's value, else the
+            paper's: 4 UAVs, D = 25 m, ``split``).
         planners: see :func:`resolve_planners`; None: every available registered planner.
         trials: number of test missions (>= 1).
         seed: run seed of the missions.
@@ -317,7 +319,7 @@ def compare(agents: int | None = None, comm: float | None = None,
         raise ValueError(f"namespace must be 'test' or 'validation', got {namespace!r}")
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
-                                  area_size=area_size)
+                                  area_size=area_size, grid_spacing=grid_spacing)
     built = _built_planners(planners, note)
     specs = [spec for spec, _ in built]
     checkpoints = planner_checkpoints(built)

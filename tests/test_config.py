@@ -62,7 +62,7 @@ def test_missing_file(tmp_path):
     ({"terrain": {"kind": "mountains"}}, r"terrain.kind = 'mountains': unknown terrain kind"),
     ({"terrain": {"kind": "raster"}}, r"terrain.raster = None"),
     ({"world": {"resolution": 0.3}}, r"world.resolution = 0.3"),
-    ({"world": {"altitudes": (5.0, 12.0, 15.0)}}, r"world.altitudes"),
+    ({"world": {"altitudes": (5.0, 15.0, 10.0)}}, r"world.altitudes.*increasing"),
     ({"sensor": {"accuracy": (0.99, 0.4, 0.6)}}, r"sensor.accuracy"),
     ({"sensor": {"accuracy": (0.99, 0.7)}}, r"sensor.accuracy.*one value per altitude"),
     ({"reward": {"alpha": -1.0}}, r"reward.alpha = -1.0"),
@@ -76,3 +76,23 @@ def test_invalid_config_names_field_and_value(sections, match):
 def test_env_rejects_non_config():
     with pytest.raises(ValueError, match="config must be an EnvConfig"):
         IPPEnv({"team": {}})
+
+
+def test_altitudes_are_independent_of_the_waypoint_spacing_and_fixed_starts_snap():
+    from ipp_toolkit.config import fixed_start_waypoints
+
+    # The paper's real-world field: 40 m at r_M = 8 cm, waypoints every 4 m, levels 5/10/15 m.
+    field = EnvConfig().replace(world={"area_size": 40.0, "resolution": 0.08,
+                                       "grid_spacing": 4.0})
+    assert field.world.grid_points == 11 and field.world.map_cells == 500
+    assert field.world.altitudes == (5.0, 10.0, 15.0)
+    # (10, 10) m lies halfway between waypoints 8 and 12 m: halves round up; 40 m is one.
+    metres = fixed_start_waypoints(field.world, 4) * 4.0
+    assert metres.tolist() == [[12, 12], [40, 12], [40, 40], [12, 40]]
+    # Where the starts are waypoints (the paper's worlds) they do not move.
+    paper = fixed_start_waypoints(EnvConfig().world, 8) * 5.0
+    assert paper.tolist() == [[10, 10], [40, 10], [40, 40], [10, 40], [25, 10], [40, 25],
+                              [25, 40], [10, 25]]
+    # Starts that would share a waypoint are refused, never silently made random.
+    with pytest.raises(ValueError, match="team.start = 'fixed'.*distinct waypoints"):
+        EnvConfig().replace(world={"area_size": 10.0, "resolution": 0.5, "grid_spacing": 10.0})

@@ -50,7 +50,11 @@ def test_tool_defaults_lose_to_the_file_only_where_it_writes_the_key(tmp_path):
 def test_team_without_fixed_starts_gets_random_starts(tmp_path):
     assert build_env_config(agents=3).team.start == "random"
     assert build_env_config(_yaml(tmp_path, "team: {n_agents: 3}\n")).team.start == "random"
-    assert build_env_config(agents=4, area_size=20.0, resolution=0.5).team.start == "random"
+    # Fixed starts snap to the nearest waypoints (40 m -> 20 m in a 20 m area) ...
+    assert build_env_config(agents=4, area_size=20.0, resolution=0.5).team.start == "fixed"
+    # ... unless two would share one: then the default start is random.
+    assert build_env_config(agents=4, area_size=10.0, resolution=0.5,
+                            grid_spacing=10.0).team.start == "random"
     assert build_env_config(agents=12).features.agent_id_scale == 12
     explicit = _yaml(tmp_path, "team: {n_agents: 3, start: fixed}\n", "fixed.yaml")
     with pytest.raises(ValueError, match=r"team\.start.*fixed\.yaml"):
