@@ -197,7 +197,7 @@ class FootprintGainCache:
         Args:
             cell_weight: (n_maps, H / block, W / block) float32 weight of every map's cells,
                 constant over ``block`` x ``block`` squares of cells (``block = 1``: one
-                weight per cell); broadcast over the squares, never expanded to cells.
+                weight per cell).
             block: side in cells of the squares ``cell_weight`` is given on (divides H).
         """
         self.update()
@@ -209,10 +209,11 @@ class FootprintGainCache:
         # Maps that share one belief (every map at D = inf) share one product: their cells
         # and so their weights are identical.
         owners, inverse = np.unique(self.owner, return_inverse=True)
-        n, blocks = len(owners), size // block
-        cells = self.cells[owners].reshape(n, self.n_altitudes, blocks, block, blocks, block)
-        weight = cell_weight[owners].reshape(n, 1, blocks, 1, blocks, 1)
-        weighted = (cells * weight).reshape(n, self.n_altitudes, size, size)
+        weight = cell_weight if len(owners) == n_maps else cell_weight[owners]
+        if block > 1:  # two repeats of the small array beat broadcasting over 5 x 5 squares
+            weight = np.repeat(np.repeat(weight, block, axis=-2), block, axis=-1)
+        cells = self.cells if len(owners) == n_maps else self.cells[owners]
+        weighted = cells * weight[:, None]
         sums = self.rows_full @ weighted @ self.cols_full_t
         return sums[inverse].astype(np.float64)
 
