@@ -306,6 +306,10 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     limit_blas_threads()
     out = Path(out_dir)
     last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
+    if env_config.team.has_failures:
+        raise ValueError("team.failures / team.random_failures: COMA does not train with UAV "
+                         "failures yet (a failed UAV's transitions would be recorded); "
+                         "evaluate a trained policy on them with ipp-compare instead")
     settings = mission_settings(coma_config, env_config)
     geometries = [MissionGeometry(config) for config in settings]
     checks = validation_settings(coma_config, settings)

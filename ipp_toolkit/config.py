@@ -332,6 +332,12 @@ class TeamConfig:
         message_drop: probability that one message (sender, receiver, step) is lost.
         invalid_action: ``raise`` (a masked action is an error) or ``hold`` (the UAV stays and
             still measures; the no-mask ablation).
+        failures: ``(agent, step)`` pairs: that UAV fails at that step (1..budget): from then
+            on it neither moves, senses nor communicates, and no longer holds its cell; what
+            it measured before stays in its teammates' maps. Beyond the paper.
+        random_failures: that many further UAVs fail, each drawn with its step (uniform in
+            1..budget) from the mission's own ``failures`` stream. At least one UAV always
+            survives.
     """
 
     n_agents: int = 4
@@ -341,6 +347,8 @@ class TeamConfig:
     comm_range: float = 25.0
     message_drop: float = 0.0
     invalid_action: str = "raise"
+    failures: tuple[tuple[int, int], ...] = ()
+    random_failures: int = 0
 
     def __post_init__(self) -> None:
         if isinstance(self.comm_range, str):
@@ -366,6 +374,34 @@ class TeamConfig:
             _fail("team", "message_drop", self.message_drop, "must lie in [0, 1]")
         if self.invalid_action not in ("raise", "hold"):
             _fail("team", "invalid_action", self.invalid_action, "choose 'raise' or 'hold'")
+        self._check_failures()
+
+    def _check_failures(self) -> None:
+        try:
+            pairs = tuple((int(agent), int(step)) for agent, step in self.failures)
+            if any(isinstance(v, bool) or int(v) != v for pair in self.failures for v in pair):
+                raise ValueError
+        except (TypeError, ValueError):
+            _fail("team", "failures", self.failures, "must be a list of [agent, step] pairs")
+        object.__setattr__(self, "failures", pairs)
+        agents = [agent for agent, _ in pairs]
+        if any(not 0 <= a < self.n_agents for a in agents) or len(set(agents)) < len(agents):
+            _fail("team", "failures", self.failures,
+                  f"agents must be distinct indices in 0..{self.n_agents - 1}")
+        if any(not 1 <= step <= self.budget for _, step in pairs):
+            _fail("team", "failures", self.failures, f"steps must lie in 1..{self.budget}")
+        if isinstance(self.random_failures, bool) or not isinstance(
+                self.random_failures, int | np.integer) or self.random_failures < 0:
+            _fail("team", "random_failures", self.random_failures, "must be an integer >= 0")
+        if len(pairs) + self.random_failures >= self.n_agents:
+            _fail("team", "random_failures", self.random_failures,
+                  f"with {len(pairs)} given failures it leaves no UAV of {self.n_agents} "
+                  "flying; at least one must survive")
+
+    @property
+    def has_failures(self) -> bool:
+        """Whether any UAV fails during a mission."""
+        return bool(self.failures) or self.random_failures > 0
 
 
 @dataclass(frozen=True)

@@ -68,6 +68,10 @@ class IPPEnv(ParallelEnv):
         self.config = config if config is not None else EnvConfig()
         if not isinstance(self.config, EnvConfig):
             raise ValueError(f"config must be an EnvConfig, got {type(self.config).__name__}")
+        if self.config.team.has_failures:
+            raise ValueError("team.failures / team.random_failures: UAV failures are flown by "
+                             "planners (ipp-compare, evaluate) but not yet through the "
+                             "PettingZoo and SB3 views; remove them from this config")
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode {render_mode!r} is not supported; "
                              f"choose from {self.metadata['render_modes']}")

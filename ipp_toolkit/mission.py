@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .config import EnvConfig, fixed_start_waypoints
-from .mapping import BeliefMaps, BlockGrid
+from .mapping import BeliefMaps, BlockGrid, Rect
 from .seeding import MissionStreams, mission_streams
 from .sensor import Camera
 from .team import (
@@ -130,6 +130,9 @@ class MissionState:
         last_actions: (N,) int, actions of the last step (-1 before the first step).
         blocked: (N,) bool, held back by the same-target rule at the last step.
         reward: team reward of the last step (0 after reset).
+        alive: (N,) bool, UAVs still flying (``team.failures``): a failed one neither moves,
+            senses nor communicates.
+        failure_step: (N,) int, the step at which each UAV fails (budget + 1: never).
         history: metrics after every step, s = 0..step.
         gain_cache: the footprint gain cache of the local maps
             (:class:`ipp_toolkit.gain.FootprintGainCache`), built on first use by
@@ -150,6 +153,8 @@ class MissionState:
     last_actions: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     blocked: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     reward: float = 0.0
+    alive: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    failure_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     history: list[Metrics] = field(default_factory=list)
     _drop_rng: np.random.Generator | None = None
     gain_cache: Any = field(default=None, repr=False, compare=False)
@@ -173,8 +178,9 @@ class MissionState:
         return self.n_agents
 
     def masks(self) -> np.ndarray:
-        """(N, 6) int8 valid actions at the current positions."""
-        return action_masks(self.positions, self.geometry.grid_points, self.geometry.n_altitudes)
+        """(N, 6) int8 valid actions at the current positions (failed UAVs hold no cell)."""
+        return action_masks(self.positions, self.geometry.grid_points, self.geometry.n_altitudes,
+                            self.alive)
 
     def positions_m(self) -> np.ndarray:
         """(N, 3) float current positions in metres."""
@@ -251,6 +257,20 @@ def _start_positions(config: EnvConfig, geometry: MissionGeometry,
     return positions
 
 
+def _failure_steps(config: EnvConfig, streams: MissionStreams) -> np.ndarray:
+    """(N,) int step at which each UAV fails (``team.failures``), budget + 1 for never."""
+    team = config.team
+    steps = np.full(team.n_agents, team.budget + 1, dtype=np.int64)
+    for agent, step in team.failures:
+        steps[agent] = step
+    if team.random_failures:
+        rng = streams.generator("failures")
+        spared = np.flatnonzero(steps > team.budget)
+        chosen = rng.choice(spared, size=team.random_failures, replace=False)
+        steps[chosen] = rng.integers(1, team.budget + 1, size=team.random_failures)
+    return steps
+
+
 def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str = "train",
                   geometry: MissionGeometry | None = None,
                   ground_truth: np.ndarray | None = None,
@@ -298,6 +318,9 @@ def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str
         last_actions=np.full(n, -1, dtype=np.int64),
         blocked=np.zeros(n, dtype=bool),
         measurement_planes=np.zeros((n,) + geometry.blocks.block_area.shape),
+        alive=np.ones(n, dtype=bool),
+        failure_step=_failure_steps(config, streams),
+        footprints=np.zeros((n, 4), dtype=np.int64),
         _drop_rng=streams.generator("drops"),
     )
     _measure_exchange_fuse(state)
@@ -305,19 +328,24 @@ def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str
     return state
 
 
-def _check_actions(state: MissionState, actions: np.ndarray) -> np.ndarray:
-    """Validate a joint action; returns (N,) bool, the agents that try to move."""
+def _check_actions(state: MissionState, actions: np.ndarray, alive: np.ndarray) -> np.ndarray:
+    """Validate a joint action; returns (N,) bool, the agents that try to move.
+
+    A UAV that is not ``alive`` (failed by this step) does not move; its action is ignored.
+    """
     masks = state.masks()
     n = state.n_agents
     if actions.shape != (n,):
         raise InvalidActionError(f"expected one action per agent, shape ({n},), got shape "
                                  f"{actions.shape}")
-    moving = np.ones(n, dtype=bool)
+    moving = alive.copy()
     for k, action in enumerate(actions.tolist()):
         if not 0 <= action < N_ACTIONS:
             raise InvalidActionError(f"agent {agent_label(k)!r}: action {action!r} is out of "
                                      f"range; valid indices are 0..{N_ACTIONS - 1} "
                                      f"{ACTION_NAMES}")
+        if not alive[k]:
+            continue
         if not masks[k, action]:
             if state.config.team.invalid_action == "hold":
                 moving[k] = False
@@ -356,8 +384,10 @@ def step_mission(state: MissionState, actions: np.ndarray | list[int]) -> float:
                 raise TypeError
     except (TypeError, ValueError):
         raise InvalidActionError(f"actions must be integers, got {actions!r}") from None
-    moving = _check_actions(state, actions.astype(np.int64))
-    state.positions, state.blocked = resolve_moves(state.positions, actions, moving)
+    alive = state.failure_step > state.step + 1  # a UAV failing at this step is out already
+    moving = _check_actions(state, actions.astype(np.int64), alive)
+    state.alive = alive
+    state.positions, state.blocked = resolve_moves(state.positions, actions, moving, alive)
     state.last_actions = actions.astype(np.int64)
     state.step += 1
     state.reward = _measure_exchange_fuse(state)
@@ -370,13 +400,16 @@ def _measure_exchange_fuse(state: MissionState) -> float:
     geometry, camera, blocks = state.geometry, state.geometry.camera, state.geometry.blocks
     n = state.n_agents
     team = state.config.team
-    rects, deltas = [], []
-    for k in range(n):
+    rects: list[Rect | None] = [None] * n
+    deltas: list[np.ndarray | None] = [None] * n
+    flying = np.flatnonzero(state.alive).tolist()
+    footprints = state.footprints.copy()  # a new array: snapshots may hold the old one
+    for k in flying:
         ix, iy, iz = (int(v) for v in state.positions[k])
         rect = camera.footprint((ix, iy, iz))
         reading = camera.read(state.ground_truth, rect, iz, state.streams.sensor(state.step, k))
-        rects.append(rect)
-        deltas.append(camera.reading_logodds(reading, iz))
+        rects[k] = rect
+        deltas[k] = camera.reading_logodds(reading, iz)
         # (d): W(z) H(z) per cell; z is p(h) or 1 - p(h), so H(z) is one number per altitude.
         h = float(camera.reading_entropy[iz])
         weights = np.where(reading, state.maps.weight_interesting * h,
@@ -384,22 +417,24 @@ def _measure_exchange_fuse(state: MissionState) -> float:
         plane = np.zeros(blocks.block_area.shape)
         blocks.add_block_sums(plane, weights, rect)
         state.measurement_planes[k] = plane / blocks.block_area
-    state.footprints = np.asarray(rects, dtype=np.int64).reshape(n, 4)
+        footprints[k] = rect
+    state.footprints = footprints
+    state.measurement_planes[~state.alive] = 0.0  # a failed UAV's last reading is gone
     state.heard = communication_matrix(geometry.positions_m(state.positions), team.comm_range,
-                                       team.message_drop, state._drop_rng)
+                                       team.message_drop, state._drop_rng, state.alive)
     maps = state.maps
-    for k in range(n):
-        senders = np.flatnonzero(state.heard[k])
+    for k in flying:
+        senders = [i for i in np.flatnonzero(state.heard[k]).tolist() if rects[i] is not None]
         for i in senders:
             maps.add_evidence(k, rects[i], deltas[i])
         for i in senders:
             maps.refresh(k, rects[i])
     g = state.global_index
-    for i in range(n):
+    for i in flying:
         maps.add_evidence(g, rects[i], deltas[i])
     numerator = 0.0
     denominator = state.stats.weighted_entropy
-    for i in range(n):
+    for i in flying:
         r0, r1, c0, c1 = rects[i]
         sums = maps.refresh_with_stats(g, rects[i], state.ground_truth[r0:r1, c0:c1])
         gained, reweighted = _fold_region_stats(state.stats, sums)

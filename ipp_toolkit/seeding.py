@@ -1,9 +1,10 @@
 """Random streams of a mission, derived from (namespace, seed, mission index).
 
-Each mission has separate streams for terrain, start positions, sensor noise and message
-drops, so that mission k is the same for every planner and any number of workers: planners
-face the same terrain and, where they fly the same path, the same sensor noise. A planner is
-reset for mission k with :func:`planner_seed`, a further stream of the same mission.
+Each mission has separate streams for terrain, start positions, sensor noise, message
+drops and UAV failures, so that mission k is the same for every planner and any number of
+workers: planners face the same terrain and, where they fly the same path, the same sensor
+noise. A planner is reset for mission k with :func:`planner_seed`, a further stream of the
+same mission.
 """
 
 from __future__ import annotations
@@ -36,9 +37,10 @@ class MissionStreams:
     starts: np.random.SeedSequence
     sensor_root: np.random.SeedSequence
     drops: np.random.SeedSequence
+    failures: np.random.SeedSequence
 
     def generator(self, name: str) -> np.random.Generator:
-        """A fresh Generator of the ``terrain``, ``starts`` or ``drops`` stream."""
+        """A fresh Generator of the ``terrain``, ``starts``, ``drops`` or ``failures`` stream."""
         return np.random.Generator(np.random.PCG64(getattr(self, name)))
 
     def sensor(self, step: int, agent: int) -> np.random.Generator:
@@ -49,13 +51,15 @@ class MissionStreams:
 
 
 def mission_streams(namespace: str, seed: int, mission: int) -> MissionStreams:
-    """The four independent streams of mission ``mission`` of run ``seed`` in ``namespace``."""
+    """The independent streams of mission ``mission`` of run ``seed`` in ``namespace``."""
     for name, value in (("seed", seed), ("mission", mission)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
             raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
     root = np.random.SeedSequence([_namespace_id(namespace), int(seed), int(mission)])
     terrain, starts, sensor, drops = root.spawn(4)
-    return MissionStreams(terrain, starts, sensor, drops)
+    # Child 4 is the planner's (planner_seed); child 5 the UAV failures.
+    failures = np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, 5))
+    return MissionStreams(terrain, starts, sensor, drops, failures)
 
 
 def planner_seed(seed: int, mission: int, namespace: str = "test") -> int:

@@ -29,16 +29,19 @@ ACTION_DELTAS = np.array(
 N_ACTIONS = len(ACTION_NAMES)
 
 
-def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int) -> np.ndarray:
+def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int,
+                 active: np.ndarray | None = None) -> np.ndarray:
     """Valid actions of every agent.
 
     An action is invalid if it leaves the area or the altitude range, or moves into a 2-D
-    cell currently held by another agent (up and down keep the agent's own cell).
+    cell currently held by another active agent (up and down keep the agent's own cell).
 
     Args:
         positions: (N, 3) int waypoint indices (ix, iy, iz).
         grid_points: waypoints per side G.
         n_altitudes: number of flight levels Z.
+        active: (N,) bool, agents still flying (all when omitted); a failed UAV holds no
+            cell.
 
     Returns:
         (N, 6) int8 mask, 1 = valid.
@@ -49,7 +52,8 @@ def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int) -> n
     inside &= (targets[..., 2] >= 0) & (targets[..., 2] < n_altitudes)
     # owner[iy, ix] = index of the agent holding that 2-D cell, -1 if free.
     owner = np.full((grid_points, grid_points), -1, dtype=np.int64)
-    owner[positions[:, 1], positions[:, 0]] = np.arange(len(positions))
+    holders = np.arange(len(positions)) if active is None else np.flatnonzero(active)
+    owner[positions[holders, 1], positions[holders, 0]] = holders
     tx = np.clip(targets[..., 0], 0, grid_points - 1)
     ty = np.clip(targets[..., 1], 0, grid_points - 1)
     holder = owner[ty, tx]
@@ -58,7 +62,8 @@ def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int) -> n
 
 
 def resolve_moves(positions: np.ndarray, actions: np.ndarray,
-                  moving: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  moving: np.ndarray | None = None,
+                  active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Apply a joint action under the same-target rule.
 
     When several agents choose the same 2-D target cell, the lowest index moves and the
@@ -70,6 +75,8 @@ def resolve_moves(positions: np.ndarray, actions: np.ndarray,
         actions: (N,) int action indices, assumed valid.
         moving: (N,) bool, agents that try to move (False = hold, e.g. an invalid action
             under ``invalid_action="hold"``); all True when omitted.
+        active: (N,) bool, agents still flying (all when omitted); the others should not be
+            ``moving`` and take part in no same-target contest.
 
     Returns:
         new positions (N, 3) int and ``blocked`` (N,) bool: held back by the same-target rule.
@@ -80,6 +87,9 @@ def resolve_moves(positions: np.ndarray, actions: np.ndarray,
     moving = np.ones(n, dtype=bool) if moving is None else np.asarray(moving, dtype=bool)
     targets = np.where(moving[:, None], positions + ACTION_DELTAS[actions], positions)
     cell_ids = targets[:, 1] * (1 << 20) + targets[:, 0]
+    if active is not None:  # a failed UAV holds no cell: it never wins nor blocks one
+        inactive = ~np.asarray(active, dtype=bool)
+        cell_ids[inactive] = -1 - np.flatnonzero(inactive)
     # np.unique returns the first occurrence in index order, i.e. the lowest agent index.
     _, first = np.unique(cell_ids, return_index=True)
     winner = np.zeros(n, dtype=bool)
@@ -101,7 +111,8 @@ def positions_in_metres(positions: np.ndarray, spacing: float,
 
 def communication_matrix(positions_m: np.ndarray, comm_range: float,
                          message_drop: float = 0.0,
-                         rng: np.random.Generator | None = None) -> np.ndarray:
+                         rng: np.random.Generator | None = None,
+                         active: np.ndarray | None = None) -> np.ndarray:
     """Who hears whom after a step.
 
     Agent k receives agent i's latest measurement iff ||p_i - p_k||_2 <= D (3-D distance)
@@ -112,6 +123,8 @@ def communication_matrix(positions_m: np.ndarray, comm_range: float,
         comm_range: D in metres; 0 = none, inf = everyone.
         message_drop: probability that one (sender, receiver) message is lost.
         rng: stream for message drops; required when ``message_drop > 0``.
+        active: (N,) bool, agents still flying (all when omitted); a failed UAV neither
+            sends nor receives.
 
     Returns:
         (N, N) bool, ``heard[k, i]`` = agent k holds agent i's latest measurement.
@@ -124,5 +137,8 @@ def communication_matrix(positions_m: np.ndarray, comm_range: float,
         if rng is None:
             raise ValueError("communication_matrix needs an rng when message_drop > 0")
         heard &= rng.random((n, n)) >= message_drop
+    if active is not None:
+        active = np.asarray(active, dtype=bool)
+        heard &= active[:, None] & active[None, :]
     np.fill_diagonal(heard, True)
     return heard
