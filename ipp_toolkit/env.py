@@ -13,7 +13,12 @@ default):
 * ``state()``: ``Box(0, 1, (C_state, G, G), float32)``, the centralised critic's global planes.
 
 Every agent gets the same team reward. After ``budget`` steps every agent is terminated (a
-true terminal, not a truncation). Seeding: ``reset(seed=s)`` starts mission 0 of run ``s``;
+true terminal, not a truncation). A UAV that fails (``team.failures``) is terminated at the
+step it fails (PettingZoo's convention for an agent leaving: its last observation and reward
+come with the termination, then it is gone from ``agents``); the others fly on. With
+``keep_failed=True`` (the SB3 view, which needs fixed slots) it stays instead, SuperSuit's
+"black death": zero observation planes, an all-valid mask, reward 0, its actions ignored,
+until the mission ends. Seeding: ``reset(seed=s)`` starts mission 0 of run ``s``;
 later ``reset()`` calls without a seed run missions 1, 2, ... of the same run, and
 ``reset(options={"mission": k})`` jumps to mission k, so evaluations can replay a mission.
 """
@@ -57,6 +62,8 @@ class IPPEnv(ParallelEnv):
         namespace: random-stream namespace: ``train``, ``validation`` or ``test``.
         ground_truth: (H, W) bool terrain used for every mission instead of the generator.
         raster: (h, w) array for ``terrain.kind = "raster"`` instead of the file.
+        keep_failed: keep failed UAVs as inert agents instead of terminating them (see the
+            module docstring).
     """
 
     metadata = {"name": "ipp_v0", "render_modes": ["rgb_array"], "is_parallelizable": True,
@@ -64,14 +71,11 @@ class IPPEnv(ParallelEnv):
 
     def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
                  namespace: str = "train", ground_truth: np.ndarray | None = None,
-                 raster: np.ndarray | None = None):
+                 raster: np.ndarray | None = None, keep_failed: bool = False):
         self.config = config if config is not None else EnvConfig()
         if not isinstance(self.config, EnvConfig):
             raise ValueError(f"config must be an EnvConfig, got {type(self.config).__name__}")
-        if self.config.team.has_failures:
-            raise ValueError("team.failures / team.random_failures: UAV failures are flown by "
-                             "planners (ipp-compare, evaluate) but not yet through the "
-                             "PettingZoo and SB3 views; remove them from this config")
+        self.keep_failed = bool(keep_failed)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode {render_mode!r} is not supported; "
                              f"choose from {self.metadata['render_modes']}")
@@ -150,13 +154,14 @@ class IPPEnv(ParallelEnv):
                                      self.namespace, self.geometry, self._ground_truth,
                                      self._raster)
         self.agents = list(self.possible_agents)
-        return self._observe(), self._infos()
+        return self._observe(self.agents), self._infos(self.agents)
 
     def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance all agents by one step.
 
         Args:
-            actions: one action index per live agent.
+            actions: one action index per live agent (failed ones kept by ``keep_failed``
+                included; their actions are ignored).
 
         Returns:
             observations, rewards, terminations, truncations and infos per agent.
@@ -177,7 +182,7 @@ class IPPEnv(ParallelEnv):
         missing = [agent for agent in self.agents if agent not in actions]
         if missing:
             raise InvalidActionError(f"no action for agent(s) {missing}")
-        joint = []
+        joint = np.zeros(len(self.possible_agents), dtype=np.int64)  # gone agents: ignored
         for agent in self.agents:
             action = actions[agent]
             if isinstance(action, np.ndarray):
@@ -188,33 +193,39 @@ class IPPEnv(ParallelEnv):
             if isinstance(action, bool) or not isinstance(action, int | np.integer):
                 raise InvalidActionError(f"agent {agent!r}: action {action!r} must be an "
                                          f"integer in 0..{N_ACTIONS - 1}")
-            joint.append(int(action))
-        reward = step_mission(self.mission, np.asarray(joint, dtype=np.int64))
-        observations = self._observe()
-        done = self.mission.done
+            joint[self._index[agent]] = int(action)
+        was_alive = self.mission.alive.copy()
+        reward = step_mission(self.mission, joint)
         agents = list(self.agents)
-        rewards = dict.fromkeys(agents, reward)
-        terminations = dict.fromkeys(agents, done)
+        observations = self._observe(agents)
+        done = self.mission.done
+        alive = self.mission.alive
+        rewards = {agent: reward if was_alive[self._index[agent]] else 0.0 for agent in agents}
+        terminations = {agent: done or not (self.keep_failed or alive[self._index[agent]])
+                        for agent in agents}
         truncations = dict.fromkeys(agents, False)
-        infos = self._infos()
-        if done:
-            self.agents = []
+        infos = self._infos(agents)
+        self.agents = [agent for agent in agents if not terminations[agent]]
         return observations, rewards, terminations, truncations, infos
 
-    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
+    def _observe(self, agents: list[str] | None = None) -> dict[str, dict[str, np.ndarray]]:
+        agents = self.agents if agents is None else agents
         planes = actor_observations(self.mission, self.config.features)
         masks = self.mission.masks()
-        observations = {agent: {"observation": planes[k], "action_mask": masks[k]}
-                        for k, agent in enumerate(self.possible_agents)}
-        return observations
+        failed = ~self.mission.alive
+        if failed.any():  # a failed UAV observes nothing; its (ignored) action may be any
+            planes[failed] = 0.0
+            masks[failed] = 1
+        return {agent: {"observation": planes[self._index[agent]],
+                        "action_mask": masks[self._index[agent]]} for agent in agents}
 
-    def _infos(self) -> dict[str, dict[str, Any]]:
+    def _infos(self, agents: list[str]) -> dict[str, dict[str, Any]]:
         # Flat scalars with fixed keys: TorchRL builds its info spec from the reset infos and
         # writes every step's values into it (a nested dict or a key missing at reset breaks it).
         metrics = {key: float(value) for key, value in self.mission.history[-1].as_dict().items()}
-        return {agent: {"step": int(self.mission.step), "blocked": bool(self.mission.blocked[k]),
-                        **metrics}
-                for k, agent in enumerate(self.possible_agents)}
+        return {agent: {"step": int(self.mission.step),
+                        "blocked": bool(self.mission.blocked[self._index[agent]]), **metrics}
+                for agent in agents}
 
     def state(self) -> np.ndarray:
         """(C_state, G, G) float32 global planes for the centralised critic."""

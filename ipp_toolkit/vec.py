@@ -22,6 +22,8 @@ termination/truncation split and per-env infos.
   0) from that slot's reward; the action stored by the algorithm is the one executed (a hold
   is what that action does), so no sample is rewritten behind its back.
   ``invalid_action="raise"`` keeps the simulator's own rule (an error), as the native API does;
+* a failed UAV (``team.failures``) keeps its slot, inert until the mission ends: zero planes,
+  an all-valid mask, reward 0, its actions ignored (black death);
 * the budget end is a true terminal: ``dones`` is True and
   ``info["TimeLimit.truncated"]`` is False, so PPO does not bootstrap past it;
 * ``close()`` stops SuperSuit's worker processes; it also runs at interpreter exit, because
@@ -304,7 +306,8 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
                          f"{invalid_action!r}")
     if invalid_action == "hold":
         config = config.replace(team={"invalid_action": "hold"})
-    env = IPPEnv(config, namespace=namespace)
+    # Fixed slots: a failed UAV stays as an inert agent (black death) until the mission ends.
+    env = IPPEnv(config, namespace=namespace, keep_failed=True)
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),

@@ -89,6 +89,55 @@ def test_every_planner_flies_with_failures():
     assert all(0.0 < row["entropy"] <= 1.0 for row in finals)
 
 
-def test_the_multi_agent_views_refuse_failures_for_now():
-    with pytest.raises(ValueError, match="team.failures.*not yet"):
-        IPPEnv(small_config(team={"failures": [[1, 3]]}))
+def test_the_native_api_terminates_a_failed_uav_and_passes_pettingzoo_s_test():
+    from pettingzoo.test import parallel_api_test
+
+    config = small_config(resolution=1.0, team={"budget": 6, "failures": [[1, 3]]})
+    parallel_api_test(IPPEnv(config), num_cycles=20)
+    env = IPPEnv(config)
+    observations, _ = env.reset(seed=0)
+    assert len(observations) == 4
+    for step in range(1, 7):
+        actions = {agent: int(np.flatnonzero(obs["action_mask"])[0])
+                   for agent, obs in observations.items() if agent in env.agents}
+        observations, rewards, terminations, _, _ = env.step(actions)
+        if step < 3:
+            assert env.agents == ["uav_0", "uav_1", "uav_2", "uav_3"]
+        elif step == 3:  # terminated with its last observation and the team reward
+            assert terminations["uav_1"] and not terminations["uav_0"]
+            assert rewards["uav_1"] == rewards["uav_0"]
+            assert env.agents == ["uav_0", "uav_2", "uav_3"]
+        elif step < 6:
+            assert "uav_1" not in observations and env.agents == ["uav_0", "uav_2", "uav_3"]
+    assert env.agents == []
+
+
+def test_the_sb3_view_keeps_a_failed_uav_s_slot_inert():
+    from ipp_toolkit.vec import make_sb3_vec_env
+
+    config = small_config(resolution=1.0, team={"budget": 4, "failures": [[2, 2]]})
+    vec = make_sb3_vec_env(config, n_envs=1, seed=0)
+    try:
+        obs = vec.reset()
+        assert obs.shape[0] == 4
+        for step in range(1, 5):
+            actions = vec.action_masks().argmax(axis=1)
+            obs, rewards, dones, _ = vec.step(actions)
+            if 2 <= step < 4:  # (the last step's obs is already the next mission's)
+                assert not obs[2].any() and vec.action_masks()[2].all()
+            # The step it fails brings the team reward, as in the native API; then nothing.
+            if step == 2:
+                assert rewards[2] == rewards[0]
+            if step == 3:
+                assert rewards[2] == 0.0 and rewards[0] != 0.0
+        assert dones.all()  # every slot ends with the mission
+    finally:
+        vec.close()
+
+
+def test_coma_training_refuses_failures_for_now(tmp_path):
+    from coma.config import preset
+    from coma.learner import train
+
+    with pytest.raises(ValueError, match="team.failures.*COMA"):
+        train(preset("cpu", missions=1), small_config(team={"failures": [[1, 3]]}), tmp_path)
