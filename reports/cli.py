@@ -340,6 +340,9 @@ def study_main(argv: list[str] | None = None) -> int:
                              "for generalisation ig,coverage,random,coma,ppo")
     parser.add_argument("--agents", default="2,4,8", help="team sizes, comma-separated")
     parser.add_argument("--comm", default="0,25,inf", help="ranges in metres, comma-separated")
+    parser.add_argument("--failures", default="0",
+                        help="robustness: numbers of UAVs failing at a random step, "
+                             "comma-separated (e.g. 0,1; beyond the paper)")
     parser.add_argument("--trials", type=_positive_int("--trials"), default=50)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=_positive_int("--workers"), default=1)
@@ -394,11 +397,12 @@ def study_main(argv: list[str] | None = None) -> int:
         elif args.study == "robustness":
             agents = [int(a) for a in args.agents.split(",")]
             comms = [_comm_range(c) for c in args.comm.split(",")]
+            failures = [int(f) for f in args.failures.split(",")]
             study = robustness_study(args.planners or "coma,ig,coverage", agents, comms,
                                      trials=args.trials,
                                      seed=args.seed, out=out, workers=args.workers,
                                      resolution=args.resolution,
-                                     progress=not args.no_progress)
+                                     progress=not args.no_progress, failures=failures)
             print(study.table)
             print(f"written: {out}/robustness.md, .csv, .png, .pdf")
         else:

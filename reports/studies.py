@@ -13,43 +13,60 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from ipp_toolkit.config import EnvConfig, config_to_dict
-from ipp_toolkit.settings import comm_label
+from ipp_toolkit.settings import build_env_config, comm_label
 
 from .compare import compare
 from .plots import _colour, _new_figure, save_figure
 from .tables import Summary, atomic_write_text
 
-__all__ = ["RobustnessStudy", "robustness_study", "CreditStudy", "credit_assignment_study",
-           "ablation_study", "seed_table", "ABLATIONS"]
+__all__ = ["Setting", "RobustnessStudy", "robustness_study", "CreditStudy",
+           "credit_assignment_study", "ablation_study", "seed_table", "ABLATIONS"]
+
+
+class Setting(NamedTuple):
+    """One team setting of the robustness study."""
+
+    agents: int
+    comm: float
+    failures: int = 0  # UAVs that fail at a random step (``team.random_failures``)
+
+    @property
+    def folder(self) -> str:
+        """The setting's ``ipp-compare`` folder inside the study folder."""
+        name = f"a{self.agents}-d{comm_label(self.comm)}"
+        return name + (f"-f{self.failures}" if self.failures else "")
 
 
 @dataclass
 class RobustnessStudy:
-    """Final-step results of every planner in every (agents, comm) setting.
+    """Final-step results of every planner in every team setting.
 
     Attributes:
-        settings: (agents, comm) pairs in table order.
+        settings: the :class:`Setting` (agents, comm, failures) triples in table order.
         planners: planner labels.
         summaries: the per-setting :class:`~reports.tables.Summary`.
         table: the Markdown table (best final entropy and F1 per setting in bold).
     """
 
-    settings: list[tuple[int, float]]
+    settings: list[Setting]
     planners: list[str]
-    summaries: dict[tuple[int, float], Summary]
+    summaries: dict[Setting, Summary]
     table: str
 
 
-def _table(settings: list[tuple[int, float]], planners: list[str],
-           summaries: dict[tuple[int, float], Summary]) -> tuple[str, str]:
+def _table(settings: list[Setting], planners: list[str],
+           summaries: dict[Setting, Summary]) -> tuple[str, str]:
     """Markdown and CSV of the final entropy and F1 per setting and planner."""
-    header = ["agents", "D [m]"] + [f"{p} {m}" for p in planners for m in ("entropy", "F1")]
+    header = (["agents", "D [m]", "failures"]
+              + [f"{p} {m}" for p in planners for m in ("entropy", "F1")])
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    csv_lines = ["agents,comm,planner,entropy_mean,entropy_std,f1_mean,f1_std,missions"]
+    csv_lines = ["agents,comm,failures,planner,entropy_mean,entropy_std,f1_mean,f1_std,"
+                 "missions"]
     for setting in settings:
         summary = summaries[setting]
         step = summary.budget
@@ -57,21 +74,22 @@ def _table(settings: list[tuple[int, float]], planners: list[str],
                  for p in planners}
         best_h = min(s[0].mean for s in stats.values())
         best_f = max(s[1].mean for s in stats.values())
-        cells = [str(setting[0]), comm_label(setting[1])]
+        cells = [str(setting.agents), comm_label(setting.comm), str(setting.failures)]
         for planner in planners:
             h, f = stats[planner]
             text_h = f"{h.mean:.3f} ± {h.std:.3f}"
             text_f = f"{f.mean:.3f} ± {f.std:.3f}"
             cells.append(f"**{text_h}**" if h.mean == best_h else text_h)
             cells.append(f"**{text_f}**" if f.mean == best_f else text_f)
-            csv_lines.append(f"{setting[0]},{comm_label(setting[1])},{planner},{h.mean:.6g},"
-                             f"{h.std:.6g},{f.mean:.6g},{f.std:.6g},{h.n}")
+            csv_lines.append(f"{setting.agents},{comm_label(setting.comm)},{setting.failures},"
+                             f"{planner},{h.mean:.6g},{h.std:.6g},{f.mean:.6g},{f.std:.6g},"
+                             f"{h.n}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n", "\n".join(csv_lines) + "\n"
 
 
-def _figure(settings: list[tuple[int, float]], planners: list[str],
-            summaries: dict[tuple[int, float], Summary], stem: Path) -> list[Path]:
+def _figure(settings: list[Setting], planners: list[str],
+            summaries: dict[Setting, Summary], stem: Path) -> list[Path]:
     figure = _new_figure(max(6.0, 1.0 * len(settings)), 3.6)
     axes = figure.subplots(1, 2)
     x = np.arange(len(settings))
@@ -81,7 +99,8 @@ def _figure(settings: list[tuple[int, float]], planners: list[str],
             stats = [summaries[s].stat(planner, metric, summaries[s].budget) for s in settings]
             ax.bar(x + (k - (len(planners) - 1) / 2) * width, [s.mean for s in stats], width,
                    yerr=[s.std for s in stats], label=planner, color=_colour(k), capsize=2)
-        ax.set_xticks(x, [f"N={a}\nD={comm_label(c)}" for a, c in settings], fontsize=7)
+        ax.set_xticks(x, [f"N={a}\nD={comm_label(c)}" + (f"\n{f} fail" if f else "")
+                          for a, c, f in settings], fontsize=7)
         ax.set(ylabel=f"final {'entropy' if metric == 'entropy' else 'F1'}", ylim=(0, 1))
     axes[0].legend(fontsize=7)
     return save_figure(figure, stem)
@@ -93,7 +112,8 @@ def robustness_study(planners: str | Sequence[str] = "coma,ig,coverage",
                      seed: int = 0, out: str | os.PathLike[str] = "results/robustness",
                      workers: int = 1, resolution: float | None = None,
                      progress: bool = True,
-                     note: Callable[[str], None] | None = None) -> RobustnessStudy:
+                     note: Callable[[str], None] | None = None,
+                     failures: Sequence[int] = (0,)) -> RobustnessStudy:
     """Run the robustness study (paper Table I) and write its table and figure into ``out``.
 
     Args:
@@ -107,17 +127,27 @@ def robustness_study(planners: str | Sequence[str] = "coma,ig,coverage",
         resolution: map resolution override (default: the protocol's 0.1 m).
         progress: show progress bars.
         note: receives notes (skipped planners); default stderr.
+        failures: numbers of UAVs that fail at a random step of each mission
+            (``team.random_failures``; beyond the paper); every team setting is flown with
+            each. A count that leaves no UAV of a team is refused.
     """
     out = Path(out)
-    settings = [(int(a), float(c)) for a in agents for c in comms]
-    summaries: dict[tuple[int, float], Summary] = {}
+    settings = [Setting(int(a), float(c), int(f)) for a in agents for c in comms
+                for f in failures]
+    for setting in settings:  # every setting is checked before any mission is flown
+        build_env_config(None, agents=setting.agents, comm=setting.comm).replace(
+            team={"random_failures": setting.failures})
+    summaries: dict[Setting, Summary] = {}
     labels: list[str] = []
-    for n_agents, comm in settings:
-        folder = out / f"a{n_agents}-d{comm_label(comm)}"
-        comparison = compare(agents=n_agents, comm=comm, planners=planners, trials=trials,
-                             seed=seed, workers=workers, out=folder, resolution=resolution,
-                             progress=progress, note=note)
-        summaries[(n_agents, comm)] = comparison.summary
+    for setting in settings:
+        config = build_env_config(None, agents=setting.agents, comm=setting.comm,
+                                  resolution=resolution)
+        if setting.failures:
+            config = config.replace(team={"random_failures": setting.failures})
+        comparison = compare(planners=planners, trials=trials, seed=seed, workers=workers,
+                             out=out / setting.folder, config=config, progress=progress,
+                             note=note)
+        summaries[setting] = comparison.summary
         labels = list(comparison.summary.planners)
     markdown, csv_text = _table(settings, labels, summaries)
     caption = (f"Final entropy and F1 (mean ± std over {trials} test missions, seed {seed}) "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
@@ -13,20 +14,28 @@ from reports.studies import robustness_study
 @pytest.mark.slow
 def test_robustness_study_writes_table_and_figure(tmp_path):
     study = robustness_study("random,coverage", agents=(2,), comms=(0.0, math.inf),
-                             trials=2, resolution=1.0, out=tmp_path, progress=False)
-    assert study.settings == [(2, 0.0), (2, math.inf)]
+                             trials=2, resolution=1.0, out=tmp_path, progress=False,
+                             failures=(0, 1))
+    assert study.settings == [(2, 0.0, 0), (2, 0.0, 1), (2, math.inf, 0), (2, math.inf, 1)]
     rows = [line for line in (tmp_path / "robustness.md").read_text().splitlines()
             if line.startswith("| 2")]
-    assert len(rows) == 2 and all(row.count("**") == 4 for row in rows)
+    assert len(rows) == 4 and all(row.count("**") == 4 for row in rows)
     csv_lines = (tmp_path / "robustness.csv").read_text().splitlines()
-    assert len(csv_lines) == 1 + 2 * 2
+    assert len(csv_lines) == 1 + 4 * 2
     assert (tmp_path / "robustness.png").stat().st_size > 5_000
     assert (tmp_path / "a2-dinf" / "results.csv").exists()
+    stored = json.loads((tmp_path / "a2-dinf-f1" / "config.json").read_text())
+    assert stored["config"]["team"]["random_failures"] == 1
 
 
 def test_ipp_study_cli_bad_input(tmp_path, capsys):
     assert study_main(["robustness", "--comm", "far", "--out", str(tmp_path)]) == 2
     assert "far" in capsys.readouterr().err
+    # Two of two UAVs failing leaves none: refused before any mission is flown.
+    assert study_main(["robustness", "--agents", "2", "--comm", "0", "--failures", "0,2",
+                       "--out", str(tmp_path / "f"), "--no-progress"]) == 2
+    assert "random_failures" in capsys.readouterr().err
+    assert not (tmp_path / "f").exists()
     assert study_main(["robustness", "--planners", "nosuch", "--trials", "1",
                        "--out", str(tmp_path / "x"), "--no-progress"]) == 2
 
