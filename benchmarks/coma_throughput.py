@@ -21,7 +21,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import torch  # noqa: E402
 
 from coma.config import preset  # noqa: E402
-from coma.learner import make_optimisers, update  # noqa: E402
+from coma.learner import make_optimisers, to_channels_last, update  # noqa: E402
 from coma.persistence import build_networks  # noqa: E402
 from coma.rollout import collect_rollout  # noqa: E402
 from ipp_toolkit.config import EnvConfig  # noqa: E402
@@ -46,6 +46,7 @@ def main() -> None:
     if args.gain is not None:
         env = env.replace(features={"gain": True, "gain_smoothing": args.gain})
     networks = build_networks(config, env)
+    to_channels_last(networks)  # as the trainer does
     optimisers = make_optimisers(networks)
     target = copy.deepcopy(networks.critic)
     geometry = MissionGeometry(env)

