@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -65,6 +66,26 @@ DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "ppo_4age
 
 # --------------------------------------------------------------------------------------------
 # Configuration
+
+
+def config_record(config: Any) -> dict[str, Any]:
+    """A training-config dataclass as a JSON-safe dict (``comm_range`` inf as ``"inf"``)."""
+    values = dataclasses.asdict(config)
+    if math.isinf(values.get("comm_range", 0.0)):
+        values["comm_range"] = "inf"
+    return values
+
+
+def config_from_record(cls: type, values: Mapping[str, Any], what: str) -> Any:
+    """Inverse of :func:`config_record` for dataclass ``cls``; unknown keys are rejected."""
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"invalid {what} config: unknown key(s) {unknown}")
+    values = dict(values)
+    if values.get("comm_range") == "inf":
+        values["comm_range"] = math.inf
+    return cls(**values)
 
 
 @dataclass(frozen=True)
@@ -166,22 +187,12 @@ class PPOTrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict (an infinite comm_range becomes the string ``"inf"``)."""
-        values = dataclasses.asdict(self)
-        if math.isinf(values["comm_range"]):
-            values["comm_range"] = "inf"
-        return values
+        return config_record(self)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> PPOTrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys are rejected."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"invalid PPO config: unknown key(s) {unknown}")
-        values = dict(values)
-        if values.get("comm_range") == "inf":
-            values["comm_range"] = math.inf
-        return cls(**values)
+        return config_from_record(cls, values, "PPO")
 
 
 

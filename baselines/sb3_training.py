@@ -38,7 +38,7 @@ from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.vec import make_sb3_vec_env
 
-from .ppo import PPOTrainConfig, save_policy
+from .ppo import PPOTrainConfig, config_from_record, config_record, save_policy
 from .ppo_training import main as ppo_main
 from .ppo_training import train_ppo, training_env_config
 from .sb3_policies import (
@@ -257,23 +257,14 @@ class SB3TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict (an infinite comm_range becomes the string ``"inf"``)."""
-        values = dataclasses.asdict(self)
+        values = config_record(self)
         values["hyperparameters"] = dict(self.hyperparameters)
-        if math.isinf(values["comm_range"]):
-            values["comm_range"] = "inf"
         return values
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> SB3TrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys are rejected."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"invalid SB3 config: unknown key(s) {unknown}")
-        values = dict(values)
-        if values.get("comm_range") == "inf":
-            values["comm_range"] = math.inf
-        return cls(**values)
+        return config_from_record(cls, values, "SB3")
 
 
 # --------------------------------------------------------------------------------------------
