@@ -154,6 +154,33 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+def add_world_flags(parser: argparse.ArgumentParser, defaults: Any) -> None:
+    """The training world's flags of every SB3 trainer (``defaults``: its config dataclass)."""
+    parser.add_argument("--agents", type=int, default=None,
+                        help=f"team size N (default: the --config file's, else "
+                             f"{defaults.n_agents})")
+    parser.add_argument("--comm", type=float, default=None,
+                        help=f"communication range D in metres, inf allowed (default: the "
+                             f"--config file's, else {defaults.comm_range:g})")
+    parser.add_argument("--resolution", type=float, default=None,
+                        help=f"training map resolution in metres per cell (default: the "
+                             f"--config file's, else {defaults.resolution:g})")
+    parser.add_argument("--workers", "--num-cpus", dest="num_cpus", type=int,
+                        default=defaults.num_cpus, metavar="N",
+                        help="SuperSuit worker processes (0: none; --num-cpus is the old name)")
+    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
+                        help="agent-transitions between checkpoints")
+
+
+def add_run_flags(parser: argparse.ArgumentParser) -> None:
+    """The run-control flags of every SB3 trainer: time limit, resume, progress."""
+    parser.add_argument("--time-limit", type=float, default=None, metavar="MINUTES",
+                        help="stop after this many minutes of training and save")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue from OUT/checkpoint.pt")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
 def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.ArgumentParser:
     defaults = PPOTrainConfig()
     parser = argparse.ArgumentParser(
@@ -176,30 +203,13 @@ def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.Ar
     parser.add_argument("--width", type=int, default=defaults.width,
                         help="conv channels of the features extractor")
     parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--agents", type=int, default=None,
-                        help=f"team size N (default: the --config file's, else "
-                             f"{defaults.n_agents})")
-    parser.add_argument("--comm", type=float, default=None,
-                        help=f"communication range D in metres, inf allowed (default: the "
-                             f"--config file's, else {defaults.comm_range:g})")
-    parser.add_argument("--resolution", type=float, default=None,
-                        help=f"training map resolution in metres per cell (default: the "
-                             f"--config file's, else {defaults.resolution:g})")
-    parser.add_argument("--workers", "--num-cpus", dest="num_cpus", type=int,
-                        default=defaults.num_cpus, metavar="N",
-                        help="SuperSuit worker processes (0: none; --num-cpus is the old name)")
-    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
-                        help="agent-transitions between checkpoints")
+    add_world_flags(parser, defaults)
     parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
                         metavar="P", help="reward subtracted when plain PPO picks a masked "
                                           "action (the UAV holds for that step)")
     parser.add_argument("--masked", action=argparse.BooleanOptionalAction,
                         default=defaults.masked, help="MaskablePPO (default) or plain PPO")
-    parser.add_argument("--time-limit", type=float, default=None, metavar="MINUTES",
-                        help="stop after this many minutes of training and save")
-    parser.add_argument("--resume", action="store_true",
-                        help="continue from OUT/checkpoint.pt")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_flags(parser)
     parser.set_defaults(**PPO_PRESETS[preset])
     return parser
 

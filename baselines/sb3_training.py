@@ -39,8 +39,8 @@ from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.vec import make_sb3_vec_env
 
 from .ppo import PPOTrainConfig, config_from_record, config_record, save_policy
+from .ppo_training import add_run_flags, add_world_flags, train_ppo, training_env_config
 from .ppo_training import main as ppo_main
-from .ppo_training import train_ppo, training_env_config
 from .sb3_policies import (
     ALGORITHMS,
     SB3_POLICY_KIND,
@@ -428,20 +428,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--hidden", type=int, default=defaults.hidden,
                         help="hidden layer width of each head")
     parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--agents", type=int, default=None,
-                        help=f"team size N (default: the --config file's, else "
-                             f"{defaults.n_agents})")
-    parser.add_argument("--comm", type=float, default=None,
-                        help=f"communication range D in metres, inf allowed (default: the "
-                             f"--config file's, else {defaults.comm_range:g})")
-    parser.add_argument("--resolution", type=float, default=None,
-                        help=f"training map resolution in metres per cell (default: the "
-                             f"--config file's, else {defaults.resolution:g})")
-    parser.add_argument("--workers", "--num-cpus", dest="num_cpus", type=int,
-                        default=defaults.num_cpus, metavar="N",
-                        help="SuperSuit worker processes (0: none)")
-    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
-                        help="agent-transitions between checkpoints")
+    add_world_flags(parser, defaults)
     parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
                         metavar="P", help="reward subtracted when a masked action is picked "
                                           "(the UAV holds for that step)")
@@ -450,10 +437,7 @@ def _parser() -> argparse.ArgumentParser:
                              + "; ".join(f"{algo}: {', '.join(sorted(values))}"
                                          for algo, values in ALGORITHM_DEFAULTS.items()
                                          if algo not in PPO_ALGORITHMS))
-    parser.add_argument("--time-limit", type=float, default=None, metavar="MINUTES",
-                        help="stop after this many minutes of training and save")
-    parser.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_flags(parser)
     return parser
 
 
