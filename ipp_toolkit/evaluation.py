@@ -18,7 +18,8 @@ This module owns the mission loop (:func:`run_mission`), the task runner that fl
 (planner label, mission) with cached planners, and :func:`evaluate`. Its neighbours own the
 rest: planner specs and their syntax (:mod:`ipp_toolkit.planner_specs`), the planner seed
 (:func:`ipp_toolkit.seeding.planner_seed`), the worker processes
-(:mod:`ipp_toolkit.process_pool`) and the folder layout (:mod:`ipp_toolkit.result_store`).
+(:mod:`ipp_toolkit.process_pool`), the optional Ray backend (:mod:`ipp_toolkit.ray_backend`,
+imported only when asked) and the folder layout (:mod:`ipp_toolkit.result_store`).
 """
 
 from __future__ import annotations
@@ -73,10 +74,14 @@ __all__ = [
     "run_mission",
     "evaluate",
     "load_results",
+    "BACKENDS",
 ]
 
 METRICS = ("entropy", "f1", "rmse", "reward", "plan_ms")
 """The numeric per-step columns that :meth:`EvaluationResult.curves` accepts."""
+
+BACKENDS = ("local", "ray")
+"""Where :func:`evaluate` flies its missions: this machine's processes, or Ray tasks."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -341,13 +346,15 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
              progress: bool = True, namespace: str = "test",
              record_missions: Sequence[int] = (0,),
              on_recorded: Callable[[str, int, dict[str, Any], list[dict[str, Any]]], None]
-             | None = None) -> EvaluationResult:
+             | None = None, backend: str = "local",
+             address: str | None = None) -> EvaluationResult:
     """Fly missions ``0 .. missions - 1`` of run ``seed`` with every planner.
 
     Every input is checked before any work or file: planner names (an unknown one raises
     listing the registered planners), labels, counts, and ``out_dir`` (a folder holding
     another configuration raises :class:`EvaluationError` and stays untouched). With
-    ``workers == 1`` the planners are also built before anything is written.
+    ``workers == 1`` (local backend) the planners are also built before anything is
+    written; with the ray backend, Ray is started or reached before anything is written.
 
     Args:
         config: the mission configuration.
@@ -356,7 +363,8 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         missions: number of missions per planner (>= 1).
         seed: run seed (>= 0).
         workers: processes (>= 1); > 1 runs one task per (planner, mission) in a "spawn"
-            process pool, each worker single-threaded. Results do not depend on it.
+            process pool, each worker single-threaded. Results do not depend on it. With
+            ``backend="ray"`` and no ``address``: the CPUs of the local Ray it starts.
         out_dir: results folder (see the module docstring); missions already stored there
             are not flown again. None keeps everything in memory.
         progress: show a tqdm progress bar counting missions.
@@ -367,6 +375,13 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         on_recorded: called in this process as ``on_recorded(label, mission, trajectory,
             rows)`` as soon as a recorded mission has been flown (not for one read back from
             ``out_dir``), e.g. to draw it while the other missions fly.
+        backend: ``"local"`` (this process, or the process pool) or ``"ray"``: one Ray task
+            per (planner, mission), see :mod:`ipp_toolkit.ray_backend`; results are stored
+            in this process either way, and do not depend on the backend.
+        address: with ``backend="ray"``, the cluster to use (``HOST:PORT`` as printed by
+            ``ray start --head``, ``ray://HOST:PORT`` or ``auto``; its CPUs decide how many
+            missions fly at once); None starts a local Ray with ``workers`` CPUs for this
+            call (a process already connected to Ray uses that connection).
 
     Returns:
         the :class:`EvaluationResult`; its rows are ordered by planner, mission, step.
@@ -375,6 +390,9 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         ValueError: a bad input (the message names the value).
         EvaluationError: ``out_dir`` holds results of another configuration or another
             planner under one of the labels.
+        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray installed
+            (an ImportError; the message gives the install command).
+        ConnectionError: no Ray cluster answers at ``address`` (within seconds).
     """
     if not isinstance(config, EnvConfig):
         raise ValueError(f"config must be an EnvConfig, got {type(config).__name__}")
@@ -383,6 +401,16 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     seed = check_int("seed", seed, 0)
     if not isinstance(namespace, str) or not namespace:
         raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if address is not None and (not isinstance(address, str) or not address.strip()):
+        raise ValueError(f"address must be a non-empty string or None, got {address!r}")
+    if address is not None and backend != "ray":
+        raise ValueError("address is only used with backend='ray'")
+    if backend == "ray":
+        from .ray_backend import require_ray
+
+        require_ray()  # a missing Ray is reported even when every mission is stored already
     if isinstance(record_missions, int | np.integer):
         record_missions = (int(record_missions),)
     record = frozenset(check_int("record_missions", k, 0) for k in record_missions)
@@ -437,22 +465,18 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
 
     entries = {label: _Entry(spec_of[label]) for label in labels}
     local_runner: _Runner | None = None
-    if n_workers <= 1 and tasks:
+    if backend == "local" and n_workers <= 1 and tasks:
         local_runner = _Runner(config, seed, namespace, entries, record)
         for label in dict.fromkeys(label for label, _ in tasks):
             local_runner.planner(label)  # a planner that cannot be built fails before writing
     elif tasks:
         for label in dict.fromkeys(label for label, _ in tasks):
             entries[label].factory = transferable_factory(spec_of[label])
+    cluster = None
+    if backend == "ray" and tasks:
+        from .ray_backend import connect
 
-    if folder is not None:
-        folder.mkdir(parents=True, exist_ok=True)
-        if not has_identity:
-            write_json(folder / "config.json", identity)
-        for spec in specs:
-            path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
-            if not path.exists():
-                write_json(path, spec.to_dict())
+        cluster = connect(address, n_workers)  # starts or reaches Ray before anything is written
 
     def finish(label: str, mission: int, result: dict[str, Any]) -> None:
         if folder is not None:
@@ -465,16 +489,34 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             if on_recorded is not None:
                 on_recorded(label, mission, result["trajectory"], result["rows"])
 
-    with progress_bar(len(labels) * missions, "evaluate", "missions",
-                      initial=len(labels) * missions - len(tasks), disable=not progress) as bar:
-        if local_runner is not None:
-            with limit_blas_threads():
-                for label, mission in tasks:
-                    finish(*local_runner.run(label, mission))
-                    bar.update(1)
-        elif tasks:
-            runner = _Runner(config, seed, namespace, entries, record)
-            run_parallel(runner, tasks, n_workers, finish, bar)
+    try:
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            if not has_identity:
+                write_json(folder / "config.json", identity)
+            for spec in specs:
+                path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
+                if not path.exists():
+                    write_json(path, spec.to_dict())
+        with progress_bar(len(labels) * missions, "evaluate", "missions",
+                          initial=len(labels) * missions - len(tasks),
+                          disable=not progress) as bar:
+            if local_runner is not None:
+                with limit_blas_threads():
+                    for label, mission in tasks:
+                        finish(*local_runner.run(label, mission))
+                        bar.update(1)
+            elif cluster is not None:
+                from .ray_backend import run_ray
+
+                run_ray(cluster, _Runner(config, seed, namespace, entries, record), tasks,
+                        finish, bar)
+            elif tasks:
+                runner = _Runner(config, seed, namespace, entries, record)
+                run_parallel(runner, tasks, n_workers, finish, bar)
+    finally:
+        if cluster is not None:
+            cluster.close()
 
     rows = [row for label in labels for mission in range(missions)
             for row in done[(label, mission)]]

@@ -177,7 +177,16 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "cells are interesting): a raster FILE, fractal or real")
     parser.add_argument("--workers", type=_positive_int("workers"),
                         default=min(2, os.cpu_count() or 1),
-                        metavar="N", help="parallel evaluation processes; min(2, CPU count)")
+                        metavar="N", help="parallel evaluation processes; min(2, CPU count) "
+                                          "(--backend ray: the CPUs of the local Ray)")
+    parser.add_argument("--backend", choices=("local", "ray"), default="local",
+                        help="where the missions fly: processes on this machine, or Ray tasks "
+                             "(needs the ray extra: pip install -c constraints.txt -e "
+                             "\".[ray]\"; see docs/ray.md)")
+    parser.add_argument("--address", default=None, metavar="HOST:PORT",
+                        help="with --backend ray: the Ray cluster's head, as printed by `ray "
+                             "start --head` (its CPUs fly the missions; results are written "
+                             "here, to --out); default: start a local Ray with --workers CPUs")
     parser.add_argument("--out", default=DEFAULT_COMPARE_OUT, metavar="DIR",
                         help="output folder; rerunning into it resumes the same configuration "
                              "and refuses another one")
@@ -232,6 +241,15 @@ def compare_main(argv: list[str] | None = None) -> int:
             area_size=args.area_size, grid_spacing=args.grid_spacing)
     except (ValueError, OSError) as err:
         return error(err)
+    if args.address is not None and args.backend != "ray":
+        return error("--address needs --backend ray")
+    if args.backend == "ray":
+        from ipp_toolkit.ray_backend import RayUnavailableError, require_ray
+
+        try:
+            require_ray()
+        except RayUnavailableError as err:
+            return error(err)
     out = args.out
     if out == DEFAULT_COMPARE_OUT:
         out = out.format(agents=env_config.team.n_agents,
@@ -245,8 +263,9 @@ def compare_main(argv: list[str] | None = None) -> int:
         comparison = compare(
             planners=args.planners, trials=args.trials, seed=args.seed, workers=args.workers,
             out=out_dir, config=env_config, progress=not args.no_progress,
-            animate=args.animate, namespace=args.namespace)
-    except (ValueError, OSError) as err:
+            animate=args.animate, namespace=args.namespace, backend=args.backend,
+            address=args.address)
+    except (ValueError, OSError) as err:  # ConnectionError (no Ray at --address) included
         return error(err)
     except KeyboardInterrupt:
         return interrupted("ipp-compare", out_dir)

@@ -280,7 +280,8 @@ def compare(agents: int | None = None, comm: float | None = None,
             progress: bool = True, area_size: float | None = None,
             grid_spacing: float | None = None,
             note: Callable[[str], None] | None = None, animate: bool = False,
-            reference: str = "ig", namespace: str = "test") -> Comparison:
+            reference: str = "ig", namespace: str = "test", backend: str = "local",
+            address: str | None = None) -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
@@ -291,7 +292,8 @@ def compare(agents: int | None = None, comm: float | None = None,
         planners: see :func:`resolve_planners`; None: every available registered planner.
         trials: number of test missions (>= 1).
         seed: run seed of the missions.
-        workers: parallel evaluation processes (>= 1).
+        workers: parallel evaluation processes (>= 1); with ``backend="ray"`` and no
+            ``address``, the CPUs of the local Ray started for the run.
         out: folder for the raw results (``config.json``, ``results.csv``, ``shards/``,
             ``trajectories/*.npz``), the tables and the figures; None keeps everything in
             memory.
@@ -302,6 +304,10 @@ def compare(agents: int | None = None, comm: float | None = None,
             same missions, with its standard error and win rate); none when it is not flown.
         namespace: ``test`` (the held-out missions) or ``validation`` (the missions to select
             policies and settings on; never select on test missions).
+        backend: ``"local"`` (processes on this machine) or ``"ray"`` (one Ray task per
+            mission; the same results), see :func:`ipp_toolkit.evaluation.evaluate`.
+        address: with ``backend="ray"``, the Ray cluster (``HOST:PORT`` of its head); None
+            starts a local Ray for the run.
 
     Returns:
         the :class:`Comparison`; its ``table`` is the Markdown table.
@@ -310,6 +316,8 @@ def compare(agents: int | None = None, comm: float | None = None,
         ValueError: bad input, checked before anything is written;
             ``ipp_toolkit.evaluation.EvaluationError`` (a ValueError) when ``out`` holds
             results of another configuration.
+        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
+        ConnectionError: no Ray cluster answers at ``address``.
     """
     if isinstance(trials, bool) or int(trials) != trials or trials < 1:
         raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
@@ -317,6 +325,14 @@ def compare(agents: int | None = None, comm: float | None = None,
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if namespace not in ("test", "validation"):
         raise ValueError(f"namespace must be 'test' or 'validation', got {namespace!r}")
+    if backend not in ("local", "ray"):
+        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
+    if address is not None and backend != "ray":
+        raise ValueError("address is only used with backend='ray'")
+    if backend == "ray":
+        from ipp_toolkit.ray_backend import require_ray
+
+        require_ray()  # before the planners are built
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)
@@ -339,7 +355,9 @@ def compare(agents: int | None = None, comm: float | None = None,
 
     result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
                       workers=int(workers), out_dir=out, progress=progress, namespace=namespace,
-                      record_missions=(0,), on_recorded=draw_now if workers > 1 else None)
+                      record_missions=(0,),
+                      on_recorded=draw_now if workers > 1 or backend == "ray" else None,
+                      backend=backend, address=address)
     if out is not None:
         _record_checkpoints(Path(out), checkpoints, write=True)
     summary = summarise(result.rows, reference=reference, checkpoints={

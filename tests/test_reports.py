@@ -282,8 +282,10 @@ def test_build_config_overrides():
     assert three.team.start == "random" and three.terrain.kind == "blobs"
     twelve = build_config(agents=12)
     assert twelve.team.start == "random" and twelve.features.agent_id_scale == 12
-    small = build_config(agents=4, area_size=20.0, resolution=0.5)  # fixed starts do not fit
-    assert small.team.start == "random" and small.world.area_size == 20.0
+    small = build_config(agents=4, area_size=20.0, resolution=0.5)  # starts snap to waypoints
+    assert small.team.start == "fixed" and small.world.area_size == 20.0
+    tiny = build_config(agents=4, area_size=10.0, resolution=0.5)  # they would share cells
+    assert tiny.team.start == "random"
     base = EnvConfig().replace(team={"n_agents": 8, "comm_range": 10.0})
     kept = build_config(agents=None, comm=None, terrain=None, config=base)
     assert kept.team.n_agents == 8 and kept.team.comm_range == 10.0

@@ -1,0 +1,357 @@
+"""The Ray backend of the evaluation runner: missions flown as Ray tasks, on one machine or many.
+
+:func:`ipp_toolkit.evaluation.evaluate` with ``backend="ray"`` runs its (planner label,
+mission) tasks here instead of in :mod:`ipp_toolkit.process_pool`, with the same contract:
+every result is handed to ``finish`` in the calling process as it arrives (so the result
+folder is written there, one atomic shard per mission, exactly as with the local backend);
+on a failed mission no more tasks start, the running ones are awaited and stored, and the
+first error is raised; on KeyboardInterrupt the running tasks are cancelled and nothing more
+is stored.
+
+* :func:`connect` starts a local Ray (``address=None``: ``num_cpus`` = the workers, no
+  dashboard, worker logs not forwarded; shut down at the end) or connects to a running cluster
+  (``address="HOST:PORT"`` as printed by ``ray start --head``, ``"ray://HOST:PORT"`` or
+  ``"auto"``; only disconnected at the end). An address checked not to answer raises
+  :class:`ConnectionError` within seconds instead of letting ``ray.init`` retry for minutes.
+* :func:`run_ray` runs one task per (label, mission), ``num_cpus=1`` each, at most as many at
+  once as the cluster has CPUs. A task whose worker process or node dies is retried by Ray
+  (:data:`MAX_RETRIES`), so a killed worker loses nothing; a planner's own exception is not
+  retried. Each worker process keeps the task runner (and so its built planners) across the
+  tasks of one evaluation, runs one thread, and limits BLAS and torch to one thread, as the
+  process pool's workers do.
+
+Ray is optional (``pip install -c constraints.txt -e ".[ray]"``): this module imports it only
+inside :func:`require_ray`, so importing it costs nothing without Ray.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import socket
+import sys
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from .process_pool import TaskResult, TaskRunner, limit_blas_threads, limit_torch_threads
+
+__all__ = ["CONNECT_TIMEOUT_S", "INSTALL_COMMAND", "MAX_RETRIES", "RayCluster",
+           "RayUnavailableError", "connect", "probe", "require_ray", "run_ray", "start_local"]
+
+INSTALL_COMMAND = 'pip install -c constraints.txt -e ".[ray]"'
+"""How to install the optional Ray extra (from the repository root)."""
+
+MAX_RETRIES = 3
+"""How often Ray reruns a task whose worker process or node died (not a planner's error)."""
+
+CONNECT_TIMEOUT_S = 5.0
+"""How long :func:`connect` waits for an address to answer before giving up."""
+
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
+
+
+class RayUnavailableError(ImportError):
+    """``backend="ray"`` was asked and Ray cannot be imported; the message says how to install."""
+
+
+def require_ray() -> Any:
+    """Import and return the ``ray`` module, or raise :class:`RayUnavailableError`."""
+    try:
+        import ray
+    except ImportError as err:
+        raise RayUnavailableError(
+            f"the ray backend needs Ray, which cannot be imported here ({err}); install the "
+            f"optional extra with: {INSTALL_COMMAND}") from None
+    return ray
+
+
+# --------------------------------------------------------------------------------------------
+# Starting or joining a Ray cluster
+
+
+def _host_port(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of ``HOST:PORT``, ``[V6]:PORT`` or ``ray://HOST:PORT``; None for a
+    name Ray resolves itself (``auto``, ``local``)."""
+    text = address.strip()
+    if "://" in text:
+        scheme, text = text.split("://", 1)
+        if scheme != "ray":
+            raise ValueError(f"unsupported Ray address {address!r}: give HOST:PORT (as printed "
+                             "by `ray start --head`), ray://HOST:PORT or auto")
+    if text in ("auto", "local"):
+        return None
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"malformed Ray address {address!r}: give HOST:PORT (as printed by "
+                         "`ray start --head`, e.g. 127.0.0.1:6379), ray://HOST:PORT or auto")
+    return host, int(port)
+
+
+def probe(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Check that a gRPC server (a Ray head's GCS) answers at ``address``, within ``timeout``.
+
+    ``ray.init`` retries an address that does not answer for minutes; this fails fast.
+
+    Raises:
+        ConnectionError: nothing listens there, or what listens does not speak gRPC.
+        ValueError: a malformed address.
+    """
+    target = _host_port(address)
+    if target is None:
+        return
+    hint = ("start a cluster with `ray start --head` and pass the address it prints, or leave "
+            "the address out to start a local Ray")
+    try:
+        with socket.create_connection(target, timeout=timeout) as sock:
+            # A gRPC (HTTP/2) server answers the client preface with a SETTINGS frame.
+            sock.settimeout(timeout)
+            sock.sendall(_HTTP2_PREFACE + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]))
+            header = b""
+            deadline = time.monotonic() + timeout
+            while len(header) < 9 and time.monotonic() < deadline:
+                chunk = sock.recv(9 - len(header))
+                if not chunk:
+                    break
+                header += chunk
+    except OSError as err:
+        reason = (f"no answer within {timeout:g} s" if isinstance(err, TimeoutError)
+                  else err.strerror or str(err))
+        raise ConnectionError(f"no Ray cluster answers at {address!r} ({reason}); "
+                              f"{hint}") from None
+    if len(header) < 9 or header[3] != 4:  # frame type 4: SETTINGS
+        raise ConnectionError(f"the server at {address!r} is not a Ray head (it does not "
+                              f"speak gRPC); {hint}")
+
+
+class RayCluster:
+    """A Ray connection of one evaluation; :meth:`close` shuts down what :func:`connect` began.
+
+    Attributes:
+        ray: the ``ray`` module.
+        owned: this evaluation started (or connected) Ray and shuts it down (or disconnects)
+            at :meth:`close`; False when the process was already connected.
+        address: the address given, None for a local Ray.
+    """
+
+    def __init__(self, ray: Any, owned: bool, address: str | None):
+        self.ray = ray
+        self.owned = owned
+        self.address = address
+
+    def cpus(self) -> int:
+        """CPUs of the cluster now (nodes may join or leave during a run); at least 1."""
+        try:
+            return max(1, int(self.ray.cluster_resources().get("CPU", 1)))
+        except Exception:  # the head is briefly unreachable: keep going with one slot
+            return 1
+
+    def close(self) -> None:
+        if self.owned and self.ray.is_initialized():
+            self.ray.shutdown()
+        self.owned = False
+
+
+def connect(address: str | None, num_cpus: int) -> RayCluster:
+    """Start a local Ray with ``num_cpus`` CPUs (``address=None``) or join the cluster at
+    ``address``; a process already connected to Ray keeps its connection.
+
+    Raises:
+        RayUnavailableError: Ray is not installed.
+        ConnectionError: nothing (or no gRPC server) answers at ``address`` within
+            :data:`CONNECT_TIMEOUT_S` seconds.
+        ValueError: a malformed address, or ``address`` given while this process is
+            connected to another cluster.
+    """
+    ray = require_ray()
+    if address is not None:
+        probe(address)
+    if ray.is_initialized():
+        current = _current_address(ray)
+        if address is not None and not _same_cluster(address, current):
+            raise ValueError(f"this process is already connected to the Ray cluster at "
+                             f"{current!r}, not {address!r}: call ray.shutdown() first, or "
+                             "leave the address out to use the current one")
+        return RayCluster(ray, owned=False, address=address)
+    if address is None:
+        start_local(num_cpus)
+        return RayCluster(ray, owned=True, address=address)
+    refused = (ConnectionError, RuntimeError, getattr(ray.exceptions, "AuthenticationError",
+                                                      ConnectionError))
+    try:
+        ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+    except refused as err:
+        reason = (str(err).strip().splitlines() or [type(err).__name__])[0]
+        hint = ""
+        if os.environ.get("RAY_AUTH_MODE") is None:
+            hint = ("; a cluster started with token authentication (Ray's default when a token "
+                    "exists) needs RAY_AUTH_MODE=token and its token (~/.ray/auth_token or "
+                    "RAY_AUTH_TOKEN) in this shell too")
+        raise ConnectionError(f"cannot join the Ray cluster at {address!r}: {reason}{hint} "
+                              "(see docs/ray.md)") from None
+    return RayCluster(ray, owned=True, address=address)
+
+
+def start_local(num_cpus: int) -> None:
+    """Start the local Ray of :func:`connect` (``address=None``) in this process.
+
+    ``address="local"``: a new instance even when ``RAY_ADDRESS`` names a cluster; no GPUs,
+    no dashboard, worker logs not forwarded, Ray's start-up notes not shown. Its processes
+    start with this process's ``sys.path`` as ``PYTHONPATH`` and one thread per library (as
+    the process pool's spawned workers do), so a planner defined in a module the caller can
+    import (e.g. beside its script) is found as with the local backend.
+    """
+    ray = require_ray()
+    paths = [os.path.abspath(p or os.curdir) for p in sys.path]
+    paths = [p for p in dict.fromkeys(paths) if os.path.isdir(p)]
+    variables = {name: "1" for name in _THREAD_VARIABLES}
+    variables["PYTHONPATH"] = os.pathsep.join(paths)
+    saved = {name: os.environ.get(name) for name in variables}
+    try:
+        os.environ.update(variables)  # inherited by the raylet, so by every worker it starts
+        ray.init(address="local", num_cpus=int(num_cpus), num_gpus=0, include_dashboard=False,
+                 log_to_driver=False, logging_level=logging.ERROR)
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+def _current_address(ray: Any) -> str | None:
+    try:
+        return str(ray.get_runtime_context().gcs_address)
+    except Exception:
+        return None
+
+
+def _same_cluster(address: str, current: str | None) -> bool:
+    """Whether ``address`` may name the cluster at ``current`` (Ray replaces a loopback host
+    by the node's address, so the ports are compared)."""
+    target = _host_port(address)
+    if target is None or current is None:
+        return True
+    return current.rpartition(":")[2] == str(target[1])
+
+
+# --------------------------------------------------------------------------------------------
+# Tasks
+
+_RUNNERS: dict[str, TaskRunner] = {}
+"""In a Ray worker process: the runner of the evaluation being flown (one at a time)."""
+
+
+def _single_thread(runner: TaskRunner) -> TaskRunner:
+    for name in _THREAD_VARIABLES:
+        os.environ[name] = "1"
+    runner.single_thread = True
+    limit_blas_threads()
+    limit_torch_threads()
+    return runner
+
+
+def _fly(token: str, boxed_runner: list[Any], cwd: str, label: str,
+         mission: int) -> TaskResult:
+    """One Ray task: fly (label, mission) with the worker's cached runner of evaluation
+    ``token`` (fetched from the object store on the worker's first task of it).
+
+    The worker first moves to ``cwd``, the calling process's directory, where it exists on
+    the worker's node (always on the calling machine; elsewhere with a shared file system),
+    so relative paths (checkpoints, terrain files) mean what they mean to the caller.
+    """
+    runner = _RUNNERS.get(token)
+    if runner is None:
+        import ray
+
+        if os.path.isdir(cwd):
+            os.chdir(cwd)
+        runner = _single_thread(ray.get(boxed_runner[0]))
+        _RUNNERS.clear()  # a worker reused by a later evaluation drops the earlier runner
+        _RUNNERS[token] = runner
+    return runner.run(label, mission)
+
+
+_REMOTE: dict[int, Any] = {}
+
+
+def _remote_fly(ray: Any) -> Any:
+    remote = _REMOTE.get(id(ray))
+    if remote is None:
+        remote = _REMOTE[id(ray)] = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(_fly)
+    return remote
+
+
+def run_ray(cluster: RayCluster, runner: TaskRunner, tasks: Sequence[tuple[str, int]],
+            finish: Callable[[str, int, dict[str, Any]], None], bar: Any) -> None:
+    """Fly ``tasks`` as Ray tasks on ``cluster``; ``finish`` stores each result as it arrives.
+
+    At most one task per CPU of the cluster is in flight (re-read as tasks end, so nodes that
+    join mid-run are used). On a failed mission no more tasks are started, the running ones
+    are awaited and stored, and the first error is raised (the planner's own exception, its
+    remote traceback chained). On KeyboardInterrupt the running tasks are cancelled (their
+    workers stopped) and nothing more is stored.
+    """
+    ray = cluster.ray
+    fly = _remote_fly(ray)
+    token = uuid.uuid4().hex
+    runner_ref = ray.put(runner)
+    cwd = os.getcwd()
+    queue = deque(tasks)
+    running: dict[Any, tuple[str, int]] = {}
+    error: BaseException | None = None
+    try:
+        while queue or running:
+            if queue and error is None:
+                slots = cluster.cpus() - len(running)
+                while queue and (slots > 0 or not running):
+                    label, mission = queue.popleft()
+                    ref = fly.remote(token, [runner_ref], cwd, label, mission)
+                    running[ref] = (label, mission)
+                    slots -= 1
+            ready, _ = ray.wait(list(running), num_returns=1)
+            for ref in ready:
+                label, mission = running.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except Exception as err:  # a planner's error, or a worker lost too often
+                    if error is None:
+                        error = _unwrap(ray, err, label, mission)
+                        queue.clear()
+                    continue
+                finish(*result)
+                bar.update(1)
+    except BaseException:
+        for ref in running:
+            with contextlib.suppress(Exception):  # already finished, or its worker gone
+                ray.cancel(ref, force=True)
+        raise
+    if error is not None:
+        raise error
+
+
+def _unwrap(ray: Any, err: Exception, label: str, mission: int) -> BaseException:
+    """The planner's own exception of a failed task (its remote traceback chained), or the
+    Ray error with a note saying what was lost."""
+    exceptions = ray.exceptions
+    cause = getattr(err, "cause", None)
+    if isinstance(err, exceptions.RayTaskError) and isinstance(cause, Exception):
+        cause.__cause__ = err
+        return cause
+    lost = tuple(getattr(exceptions, name) for name in (
+        "WorkerCrashedError", "NodeDiedError", "OutOfMemoryError", "ObjectLostError",
+        "TaskUnschedulableError") if hasattr(exceptions, name))
+    if isinstance(err, lost):
+        err.add_note(f"mission {mission} of planner {label!r} was lost: its Ray worker or "
+                     f"node died {MAX_RETRIES + 1} times (e.g. out of memory, or the node "
+                     "left the cluster); run the same command again to fly what is missing")
+    else:
+        err.add_note(f"a Ray worker could not fly mission {mission} of planner {label!r}: "
+                     "every node needs the toolkit and the planner's module importable, at "
+                     "the versions of this machine (see docs/ray.md)")
+    return err
