@@ -337,6 +337,14 @@ def compare(agents: int | None = None, comm: float | None = None,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)
     built = _built_planners(planners, note)
+    for spec, planner in built:
+        # A policy made for another grid or team is refused here, before anything is
+        # written, not when its first mission flies.
+        try:
+            planner.reset(env_config, seed=0)
+        except ValueError as err:
+            raise ValueError(f"planner {spec.effective_label!r} cannot fly this "
+                             f"configuration: {err}") from err
     specs = [spec for spec, _ in built]
     checkpoints = planner_checkpoints(built)
     if out is not None:

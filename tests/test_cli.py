@@ -227,3 +227,13 @@ def test_the_papers_real_world_protocol_runs_with_the_shipped_policies(tmp_path,
     # Fixed starts snap to the nearest waypoints: (10, 10) m -> (12, 12) m, 40 m stays.
     assert trajectory["positions"][0, :, :2].tolist() == [[12, 12], [40, 12], [40, 40],
                                                           [12, 40]]
+
+
+def test_a_policy_for_another_grid_is_refused_before_anything_is_written(tmp_path, capsys):
+    out = tmp_path / "small"
+    argv = ["--planners", "ig,coma", "--area-size", "40", "--trials", "1", "--no-progress",
+            "--out", str(out)]
+    assert compare_main(argv) == 2
+    err = capsys.readouterr().err
+    assert "'coma'" in err and "11-waypoint grid, requested 9" in err
+    assert not out.exists()
