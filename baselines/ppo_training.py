@@ -15,7 +15,6 @@ the planner that flies it, live in :mod:`baselines.ppo`.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import shlex
 import sys
 from pathlib import Path
@@ -24,7 +23,7 @@ from typing import Any, Protocol
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
 
-from ipp_toolkit.config import EnvConfig, config_from_dict, start_for_team_size
+from ipp_toolkit.config import EnvConfig, start_for_team_size
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config
@@ -39,7 +38,7 @@ from .ppo import (
     policy_kwargs,
     policy_metadata,
 )
-from .sb3_runner import RunFormat, run_sb3_training
+from .sb3_runner import RunFormat, run_sb3_training, same_run_check
 
 __all__ = ["TrainingWorld", "training_env_config", "train_ppo", "main"]
 
@@ -104,15 +103,7 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         raise ValueError(f"env_config must be an EnvConfig, got {type(env_config).__name__}")
     env_cfg = training_env_config(config, env_config)
 
-    def check_resume(state: dict[str, Any], ckpt_path: Path) -> None:
-        stored = PPOTrainConfig.from_dict(state["ppo_config"])
-        if dataclasses.replace(stored, total_timesteps=config.total_timesteps) != config:
-            raise ValueError(f"cannot resume {str(ckpt_path)!r}: its PPO config "
-                             f"{stored} differs from the given {config} (only "
-                             "total_timesteps may change)")
-        if config_from_dict(state["env_config"]) != env_cfg:
-            raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
-                             "env config")
+    check_resume = same_run_check(config, env_cfg, "ppo_config", "PPO")
 
     def make_env(env_seed: int) -> Any:
         return make_sb3_vec_env(env_cfg, config.n_envs, env_seed, num_cpus=config.num_cpus,

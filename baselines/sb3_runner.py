@@ -20,6 +20,7 @@ imported by the planners.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -31,6 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from tqdm.auto import tqdm
 
+from ipp_toolkit.config import EnvConfig, config_from_dict
 from ipp_toolkit.io import load_torch, save_torch, write_json
 from ipp_toolkit.process_pool import limit_blas_threads
 
@@ -111,6 +113,25 @@ class RunFormat:
     training_kind: str
     metadata: Callable[..., dict[str, Any]]
     tb_log_name: str
+
+
+def same_run_check(config: Any, env_config: EnvConfig, key: str, what: str
+                   ) -> Callable[[dict[str, Any], Path], None]:
+    """The ``check_resume`` of a trainer whose config dataclass is stored under ``key``.
+
+    A checkpoint resumes only a run of the same config (``total_timesteps`` may change) on the
+    same env config; otherwise ValueError naming the file.
+    """
+    def check(state: dict[str, Any], ckpt_path: Path) -> None:
+        stored = type(config).from_dict(state[key])
+        if dataclasses.replace(stored, total_timesteps=config.total_timesteps) != config:
+            raise ValueError(f"cannot resume {str(ckpt_path)!r}: its {what} config {stored} "
+                             f"differs from the given {config} (only total_timesteps may "
+                             "change)")
+        if config_from_dict(state["env_config"]) != env_config:
+            raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
+                             "env config")
+    return check
 
 
 def run_sb3_training(

@@ -23,7 +23,6 @@ run collects ``learning_starts`` transitions again before it trains.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import shlex
 import sys
@@ -32,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
+from ipp_toolkit.config import EnvConfig, config_to_dict
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config
@@ -51,7 +50,7 @@ from .sb3_policies import (
     sb3_policy_kwargs,
     sb3_policy_metadata,
 )
-from .sb3_runner import RunFormat, run_sb3_training
+from .sb3_runner import RunFormat, run_sb3_training, same_run_check
 
 __all__ = ["SB3TrainConfig", "ALGORITHM_DEFAULTS", "PPO_ALGORITHMS", "algorithm_class",
            "coerce_hyperparameter", "sb3_model_payload", "make_sb3_model", "save_sb3_policy",
@@ -364,15 +363,7 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
     env_cfg = training_env_config(config, env_config)
     algo = config.algo
 
-    def check_resume(state: dict[str, Any], ckpt_path: Path) -> None:
-        stored = SB3TrainConfig.from_dict(state["sb3_config"])
-        if dataclasses.replace(stored, total_timesteps=config.total_timesteps) != config:
-            raise ValueError(f"cannot resume {str(ckpt_path)!r}: its SB3 config {stored} "
-                             f"differs from the given {config} (only total_timesteps may "
-                             "change)")
-        if config_from_dict(state["env_config"]) != env_cfg:
-            raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
-                             "env config")
+    check_resume = same_run_check(config, env_cfg, "sb3_config", "SB3")
 
     def make_env(env_seed: int) -> Any:
         # Only MaskablePPO reads the masks; every algorithm here holds masked actions.
