@@ -20,7 +20,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from importlib import metadata
 from typing import Any, Protocol
 
@@ -28,7 +28,8 @@ from .planner_specs import PlannerSpec
 from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
 __all__ = ["TaskRunner", "guard_worker", "limit_blas_threads", "limit_torch_threads",
-           "single_thread_environment", "transferable_factory", "run_parallel"]
+           "single_thread_environment", "single_thread_variables", "temporary_environment",
+           "transferable_factory", "run_parallel"]
 
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
@@ -104,8 +105,7 @@ def _init_worker(runner: TaskRunner, parent: int) -> None:
     """
     global _WORKER
     guard_worker(parent)
-    for name in _THREAD_VARIABLES:
-        os.environ[name] = "1"
+    os.environ.update(single_thread_variables())
     runner.single_thread = True
     limit_blas_threads()
     limit_torch_threads()
@@ -119,12 +119,12 @@ def _worker_task(label: str, mission: int) -> TaskResult:
 
 
 @contextlib.contextmanager
-def single_thread_environment() -> Iterator[None]:
-    """Set the thread-count variables while worker processes start (they inherit them)."""
-    saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
+def temporary_environment(variables: Mapping[str, str]) -> Iterator[None]:
+    """Set environment ``variables`` for the block (child processes started in it inherit
+    them), then restore the old values."""
+    saved = {name: os.environ.get(name) for name in variables}
     try:
-        for name in _THREAD_VARIABLES:
-            os.environ[name] = "1"
+        os.environ.update(variables)
         yield
     finally:
         for name, value in saved.items():
@@ -132,6 +132,16 @@ def single_thread_environment() -> Iterator[None]:
                 os.environ.pop(name, None)
             else:
                 os.environ[name] = value
+
+
+def single_thread_variables() -> dict[str, str]:
+    """The thread-count variables of a single-threaded worker (OpenMP, MKL, OpenBLAS)."""
+    return dict.fromkeys(_THREAD_VARIABLES, "1")
+
+
+def single_thread_environment() -> contextlib.AbstractContextManager[None]:
+    """Set the thread-count variables while worker processes start (they inherit them)."""
+    return temporary_environment(single_thread_variables())
 
 
 def transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
@@ -238,3 +248,10 @@ def _stop_workers(executor: concurrent.futures.ProcessPoolExecutor) -> None:
     for process in list(processes.values()):
         with contextlib.suppress(Exception):
             process.terminate()
+    # Let the pool's manager thread see its workers gone and close its pipes now: left to the
+    # interpreter's exit, its wake-up could race with that close and print a traceback after
+    # the one-line interrupt message.
+    manager = getattr(executor, "_executor_manager_thread", None)
+    if manager is not None:
+        with contextlib.suppress(Exception):
+            manager.join(timeout=10)

@@ -37,7 +37,14 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .process_pool import TaskResult, TaskRunner, limit_blas_threads, limit_torch_threads
+from .process_pool import (
+    TaskResult,
+    TaskRunner,
+    limit_blas_threads,
+    limit_torch_threads,
+    single_thread_variables,
+    temporary_environment,
+)
 
 __all__ = ["CONNECT_TIMEOUT_S", "INSTALL_COMMAND", "MAX_RETRIES", "RayCluster",
            "RayUnavailableError", "connect", "probe", "require_ray", "run_ray", "start_local"]
@@ -51,7 +58,6 @@ MAX_RETRIES = 3
 CONNECT_TIMEOUT_S = 5.0
 """How long :func:`connect` waits for an address to answer before giving up."""
 
-_THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 _HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
 
 
@@ -209,19 +215,10 @@ def start_local(num_cpus: int) -> None:
     ray = require_ray()
     paths = [os.path.abspath(p or os.curdir) for p in sys.path]
     paths = [p for p in dict.fromkeys(paths) if os.path.isdir(p)]
-    variables = {name: "1" for name in _THREAD_VARIABLES}
-    variables["PYTHONPATH"] = os.pathsep.join(paths)
-    saved = {name: os.environ.get(name) for name in variables}
-    try:
-        os.environ.update(variables)  # inherited by the raylet, so by every worker it starts
+    variables = {**single_thread_variables(), "PYTHONPATH": os.pathsep.join(paths)}
+    with temporary_environment(variables):  # inherited by the raylet, so by its workers
         ray.init(address="local", num_cpus=int(num_cpus), num_gpus=0, include_dashboard=False,
                  log_to_driver=False, logging_level=logging.ERROR)
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
 
 
 def _current_address(ray: Any) -> str | None:
@@ -248,8 +245,7 @@ _RUNNERS: dict[str, TaskRunner] = {}
 
 
 def _single_thread(runner: TaskRunner) -> TaskRunner:
-    for name in _THREAD_VARIABLES:
-        os.environ[name] = "1"
+    os.environ.update(single_thread_variables())
     runner.single_thread = True
     limit_blas_threads()
     limit_torch_threads()
