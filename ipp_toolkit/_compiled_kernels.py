@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-N_STATS = 7  # the length of apply_values_with_stats's result (kernels.N_STATS)
+from .kernels import N_STATS
 
 _jit = numba.njit(cache=True, nogil=True, boundscheck=False)
 

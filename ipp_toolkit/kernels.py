@@ -26,13 +26,18 @@ from typing import Any
 import numpy as np
 
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
-           "N_STATS"]
+           "REGION_STATS", "N_STATS"]
 
-N_STATS = 7
-"""Entries of the statistics vector of :func:`apply_values_with_stats`: the changes of the sum
-of H over interesting cells, of the sum of (1 - p)^2 over them, of the true and of the predicted
-positives, then the sum of W' H (posterior weights, prior entropies), of W H before and of
-W' H' after."""
+REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
+                "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
+                "new_weighted_entropy")
+"""The statistics vector of :func:`apply_values_with_stats` (and of
+:meth:`ipp_toolkit.mapping.BeliefMaps.refresh_with_stats`), in order: the changes inside the
+region of the sum of H over interesting cells, of the sum of (1 - p)^2 over them, of the true
+and of the predicted positives (p > 0.5), then the sums of W' H (posterior weights, prior
+entropies), of W H before and of W' H' after."""
+
+N_STATS = len(REGION_STATS)
 
 AVAILABLE = (os.environ.get("IPP_TOOLKIT_NO_NUMBA", "") in ("", "0")
              and importlib.util.find_spec("numba") is not None)
@@ -51,8 +56,6 @@ def _compiled() -> Any:
     if _module is None:
         from . import _compiled_kernels
 
-        if _compiled_kernels.N_STATS != N_STATS:  # pragma: no cover - a guard for editors
-            raise RuntimeError("ipp_toolkit._compiled_kernels is out of step with kernels")
         _module = _compiled_kernels
     return _module
 
@@ -95,6 +98,6 @@ def apply_values_with_stats(*arrays: np.ndarray) -> np.ndarray:
     after ``table_entropy``, then ``truth`` (rows, cols) bool ground truth of the rectangle.
 
     Returns:
-        (N_STATS,) float64, see :data:`N_STATS`.
+        (N_STATS,) float64, named by :data:`REGION_STATS`.
     """
     return _compiled().apply_values_with_stats(*arrays)

@@ -14,6 +14,7 @@ from functools import partial
 import numpy as np
 
 from . import kernels
+from .kernels import REGION_STATS
 from .value_table import ValueTable
 
 __all__ = [
@@ -46,13 +47,6 @@ WEIGHT_TIE_TOLERANCE = 1e-3
 Rect = tuple[int, int, int, int]
 """A half-open map-cell rectangle (row0, row1, col0, col1)."""
 
-REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
-                "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
-                "new_weighted_entropy")
-"""What :meth:`BeliefMaps.refresh_with_stats` returns, in order: the changes inside the region
-of the sum of H over interesting cells, of the sum of (1 - p)^2 over them, of the true and of
-the predicted positives (p > 0.5), then the sums of W' H (posterior weights, prior entropies),
-of W H before and of W' H' after."""
 
 
 def logit(p: np.ndarray | float) -> np.ndarray:
@@ -245,20 +239,16 @@ class BeliefMaps:
                                         weight_uninteresting=weight_uninteresting),
                                 BELIEF_COLUMNS, first=self.logodds[0, 0, :1])
         self.value_index = np.zeros((n_maps, size, size), dtype=np.int32)
-        p0, h0, w0, wh0 = (self.table.column(name)[0] for name in BELIEF_COLUMNS)
+        p0, h0, _, wh0 = (self.table.column(name)[0] for name in BELIEF_COLUMNS)
         self.prior_prob, self.prior_entropy = p0, h0  # the caches' value in every new cell
         self.prob = np.full((n_maps, size, size), p0, dtype=np.float32)
         self.entropy = np.full((n_maps, size, size), h0, dtype=np.float32)
         self.wentropy = np.full((n_maps, size, size), wh0, dtype=np.float32)
         self.prob_blocks = np.broadcast_to(blocks.block_area * float(p0),
                                            (n_maps,) + blocks.block_area.shape).copy()
-        self.wentropy_blocks = np.broadcast_to(blocks.block_area * float(w0 * h0),
+        self.wentropy_blocks = np.broadcast_to(blocks.block_area * float(wh0),
                                                (n_maps,) + blocks.block_area.shape).copy()
         self.changes: list[tuple[int, Rect]] = []
-
-    def weights(self, prob: np.ndarray) -> np.ndarray:
-        """Class weights W(p) of this stack's reward configuration; same shape as ``prob``."""
-        return class_weights(prob, self.weight_interesting, self.weight_uninteresting)
 
     def add_evidence(self, index: int, rect: Rect, delta_logodds: np.ndarray) -> None:
         """Fuse one measurement into map ``index`` (log-odds only; call :meth:`refresh` after).

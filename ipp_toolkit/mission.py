@@ -424,7 +424,7 @@ def _measure_exchange_fuse(state: MissionState) -> float:
                                        team.message_drop, state._drop_rng, state.alive)
     maps = state.maps
     for k in flying:
-        senders = [i for i in np.flatnonzero(state.heard[k]).tolist() if rects[i] is not None]
+        senders = np.flatnonzero(state.heard[k]).tolist()  # flying ones only (heard says so)
         for i in senders:
             maps.add_evidence(k, rects[i], deltas[i])
         for i in senders:

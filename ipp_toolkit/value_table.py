@@ -46,7 +46,6 @@ class ValueTable:
         self.size = 0
         self._capacity = 0
         self._bits = np.empty(0, dtype=np.uint32)
-        self._values = np.empty(0, dtype=np.float32)
         self._columns: dict[str, np.ndarray] = {name: np.empty(0, np.float32) for name in names}
         self._slot_bits = _MIN_SLOT_BITS
         self._slot = np.full(1 << self._slot_bits, -1, dtype=np.intp)
@@ -60,7 +59,7 @@ class ValueTable:
     @property
     def values(self) -> np.ndarray:
         """(size,) float32 the interned values, by index."""
-        return self._values[:self.size]
+        return self._bits[:self.size].view(np.float32)
 
     def column(self, name: str) -> np.ndarray:
         """(capacity,) float32 derived column ``name``; entries past :attr:`size` are unset.
@@ -92,9 +91,7 @@ class ValueTable:
 
     def _derive(self, start: int) -> None:
         """Fill the values and derived columns of indices ``start..size``."""
-        values = self._bits[start:self.size].view(np.float32)
-        self._values[start:self.size] = values
-        derived = self.derive(values)
+        derived = self.derive(self._bits[start:self.size].view(np.float32))
         if len(derived) != len(self.names):
             raise ValueError(f"derive returned {len(derived)} columns, expected {self.names}")
         for name, column in zip(self.names, derived, strict=True):
@@ -116,7 +113,6 @@ class ValueTable:
             return new
 
         self._bits = grown(self._bits)
-        self._values = grown(self._values)
         self._columns = {name: grown(column) for name, column in self._columns.items()}
         self._capacity = capacity
 

@@ -6,7 +6,7 @@ from conftest import random_valid_actions
 
 from ipp_toolkit import kernels
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import BELIEF_COLUMNS, REGION_STATS, belief_columns
+from ipp_toolkit.mapping import BELIEF_COLUMNS, belief_columns
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.value_table import ValueTable
 
@@ -71,7 +71,6 @@ def test_belief_columns_are_the_cell_functions():
 @needs_numba
 @pytest.mark.parametrize("comm_range", [25.0, float("inf")])
 def test_compiled_and_numpy_refresh_agree_over_whole_missions(monkeypatch, comm_range):
-    assert kernels.N_STATS == len(REGION_STATS)
     config = EnvConfig().replace(world={"resolution": 0.5}, team={"comm_range": comm_range})
     states = {}
     for compiled in (True, False):
