@@ -1,7 +1,7 @@
 """PPO with parameter sharing (one policy for every UAV): the trained policy and its planner.
 
 This module owns what flies a PPO policy: its architecture (:class:`PPOTrainConfig`, the
-features extractor :class:`SmallCNN`), its files and :class:`PPOPlanner`. Training
+features extractor :class:`SmallCNN`, the optional gain prior) and its files. Training
 (``ipp-train ppo``, its callbacks and command line) lives in :mod:`baselines.ppo_training`,
 which this module never imports.
 
@@ -16,15 +16,16 @@ Files in a run folder:
   ``resume=True`` carries on from it, and :func:`load_policy` reads it too.
 * ``tb/``: TensorBoard logs.
 
-:class:`PPOPlanner` (registry name ``ppo``) flies a saved model greedily: one batched forward
-for the whole team, invalid actions masked out.
+The ``ppo`` planner (:class:`baselines.sb3_planner.PPOPlanner`, the ``sb3`` planner with the
+shipped policy as its default) flies a saved model greedily: one batched forward for the whole
+team, invalid actions masked out.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,17 +35,23 @@ import torch
 from gymnasium import spaces
 from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
 from stable_baselines3.common.policies import ActorCriticPolicy
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, MlpExtractor
 from torch import nn
 
 from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
+from ipp_toolkit.features import gain_plane_channels, option_gain_cells
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
-from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
+from ipp_toolkit.team import N_ACTIONS
 
 __all__ = [
+    "SB3RunConfig",
     "PPOTrainConfig",
-    "PPOPlanner",
     "SmallCNN",
+    "GainPriorExtractor",
+    "GainPriorMlpExtractor",
+    "GainPriorMaskablePolicy",
+    "GainPriorPolicy",
+    "policy_class",
     "policy_kwargs",
     "model_payload",
     "policy_metadata",
@@ -88,13 +95,88 @@ def config_from_record(cls: type, values: Mapping[str, Any], what: str) -> Any:
     return cls(**values)
 
 
+def _check_integer(what: str, name: str, value: Any, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"invalid {what} config: {name} must be an integer >= {minimum}, "
+                         f"got {value!r}")
+
+
+def _check_number(what: str, name: str, value: Any, positive: bool) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float) \
+            or not math.isfinite(value) or (value <= 0 if positive else value < 0):
+        raise ValueError(f"invalid {what} config: {name} must be "
+                         f"{'a positive number' if positive else 'a number >= 0'}, "
+                         f"got {value!r}")
+
+
 @dataclass(frozen=True)
-class PPOTrainConfig:
-    """Hyper-parameters of a PPO run (SB3 timesteps are agent-transitions).
+class SB3RunConfig:
+    """What every SB3 training run shares: its length, seed, network sizes and world.
+
+    :class:`PPOTrainConfig` (``ipp-train ppo``) and ``SB3TrainConfig`` (``ipp-train sb3``)
+    extend it with their algorithm's hyper-parameters. SB3 timesteps are agent-transitions.
 
     Attributes:
         total_timesteps: agent-transitions to train for (one joint step of N agents counts N).
         n_envs: simulator copies stepped together; SB3 sees ``n_envs * n_agents`` envs.
+        seed: seed of the policy, the sampling and the training missions.
+        width: channels of the two 3x3 conv layers of :class:`SmallCNN`.
+        features_dim: output size of :class:`SmallCNN` (its final linear layer).
+        hidden: width of the one hidden layer of each head.
+        resolution: map resolution (metres per cell) of the training world; coarser than the
+            paper's 0.1 m so CPU training is fast (the 11 x 11 planes are resolution-free).
+        n_agents: team size N during training.
+        comm_range: communication range D (metres, inf allowed) during training.
+        num_cpus: SuperSuit worker processes (0: everything in this process, fastest on two
+            cores).
+        checkpoint_every: agent-transitions between training checkpoints.
+        invalid_penalty: reward subtracted from an agent slot whose (unmasked) action was
+            masked; the UAV holds for that step (never happens with MaskablePPO).
+    """
+
+    total_timesteps: int = 200_000
+    n_envs: int = 4
+    seed: int = 0
+    width: int = 32
+    features_dim: int = 128
+    hidden: int = 64
+    resolution: float = 0.5
+    n_agents: int = 4
+    comm_range: float = 25.0
+    num_cpus: int = 0
+    checkpoint_every: int = 20_000
+    invalid_penalty: float = 0.0
+
+    def run_fields(self) -> dict[str, Any]:
+        """The shared fields' values (to build another run config of the same run)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(SB3RunConfig)}
+
+    def _check_run_fields(self, what: str) -> None:
+        """Validate the shared fields; errors start with ``invalid {what} config``."""
+        for name in ("total_timesteps", "n_envs", "width", "features_dim", "hidden",
+                     "n_agents", "checkpoint_every"):
+            _check_integer(what, name, getattr(self, name), 1)
+        for name in ("seed", "num_cpus"):
+            _check_integer(what, name, getattr(self, name), 0)
+        _check_number(what, "resolution", self.resolution, positive=True)
+        _check_number(what, "invalid_penalty", self.invalid_penalty, positive=False)
+        if isinstance(self.comm_range, bool) or not isinstance(self.comm_range, int | float) \
+                or math.isnan(self.comm_range) or self.comm_range < 0:
+            raise ValueError(f"invalid {what} config: comm_range must be >= 0 (inf allowed), "
+                             f"got {self.comm_range!r}")
+
+    def _check_rollout(self, what: str, batch_size: int, n_steps: int) -> None:
+        rollout = n_steps * self.n_envs * self.n_agents
+        if batch_size > rollout:
+            raise ValueError(f"invalid {what} config: batch_size {batch_size} is larger than "
+                             f"a rollout (n_steps * n_envs * n_agents = {rollout})")
+
+
+@dataclass(frozen=True)
+class PPOTrainConfig(SB3RunConfig):
+    """Hyper-parameters of a PPO run: :class:`SB3RunConfig`'s fields and PPO's own.
+
+    Attributes:
         n_steps: steps per env slot per rollout; a rollout holds
             ``n_steps * n_envs * n_agents`` transitions.
         batch_size: mini-batch size of the PPO update (transitions).
@@ -106,26 +188,15 @@ class PPOTrainConfig:
         ent_coef: entropy bonus coefficient.
         vf_coef: value-loss coefficient.
         max_grad_norm: gradient clipping norm.
-        width: channels of the two 3x3 conv layers of :class:`SmallCNN`.
-        features_dim: output size of :class:`SmallCNN` (its final linear layer).
-        hidden: width of the one hidden layer of the policy and of the value head.
         masked: train with sb3-contrib ``MaskablePPO`` (invalid actions never sampled) instead
             of plain ``PPO`` (a sampled masked action holds the UAV for the step, see
             :func:`baselines.ppo_training.train_ppo`).
-        seed: seed of the policy, the sampling and the training missions.
-        resolution: map resolution (metres per cell) of the training world; coarser than the
-            paper's 0.1 m so CPU training is fast (the 11 x 11 planes are resolution-free).
-        n_agents: team size N during training.
-        comm_range: communication range D (metres) during training.
-        num_cpus: SuperSuit worker processes (0: everything in this process, fastest on two
-            cores).
-        checkpoint_every: agent-transitions between training checkpoints.
-        invalid_penalty: reward subtracted from an agent slot whose (unmasked) action was
-            masked; the UAV holds for that step (plain PPO only: MaskablePPO never picks one).
+        gain_prior: 0 for the plain policy; > 0 adds the ``gain`` planes' expected gain of each
+            option to the logits (:class:`GainPriorExtractor`), starting at this weight with a
+            zero learned part, so the untrained greedy policy flies the gain's argmax. Needs
+            the ``gain`` planes among the observations (``features.gain = true``).
     """
 
-    total_timesteps: int = 200_000
-    n_envs: int = 4
     n_steps: int = 64
     batch_size: int = 256
     n_epochs: int = 5
@@ -136,54 +207,24 @@ class PPOTrainConfig:
     ent_coef: float = 0.01
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
-    width: int = 32
-    features_dim: int = 128
-    hidden: int = 64
     masked: bool = True
-    seed: int = 0
-    resolution: float = 0.5
-    n_agents: int = 4
-    comm_range: float = 25.0
-    num_cpus: int = 0
-    checkpoint_every: int = 20_000
-    invalid_penalty: float = 0.0
+    gain_prior: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "width",
-                     "features_dim", "hidden", "n_agents", "checkpoint_every"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-                raise ValueError(f"invalid PPO config: {name} must be an integer >= 1, "
-                                 f"got {value!r}")
-        for name in ("seed", "num_cpus"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-                raise ValueError(f"invalid PPO config: {name} must be an integer >= 0, "
-                                 f"got {value!r}")
-        for name in ("lr", "clip_range", "resolution", "max_grad_norm"):
-            value = getattr(self, name)
-            if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
-                raise ValueError(f"invalid PPO config: {name} must be a positive number, "
-                                 f"got {value!r}")
+        self._check_run_fields("PPO")
+        for name in ("n_steps", "batch_size", "n_epochs"):
+            _check_integer("PPO", name, getattr(self, name), 1)
+        for name in ("lr", "clip_range", "max_grad_norm"):
+            _check_number("PPO", name, getattr(self, name), positive=True)
         for name in ("gamma", "gae_lambda"):
             value = getattr(self, name)
             if not isinstance(value, int | float) or not 0.0 <= value <= 1.0:
                 raise ValueError(f"invalid PPO config: {name} must lie in [0, 1], got {value!r}")
-        for name in ("ent_coef", "vf_coef", "invalid_penalty"):
-            value = getattr(self, name)
-            if not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"invalid PPO config: {name} must be a number >= 0, "
-                                 f"got {value!r}")
-        if not isinstance(self.comm_range, int | float) or self.comm_range < 0 \
-                or math.isnan(self.comm_range):
-            raise ValueError(f"invalid PPO config: comm_range must be >= 0 (inf allowed), "
-                             f"got {self.comm_range!r}")
+        for name in ("ent_coef", "vf_coef", "gain_prior"):
+            _check_number("PPO", name, getattr(self, name), positive=False)
         if not isinstance(self.masked, bool):
             raise ValueError(f"invalid PPO config: masked must be a bool, got {self.masked!r}")
-        rollout = self.n_steps * self.n_envs * self.n_agents
-        if self.batch_size > rollout:
-            raise ValueError(f"invalid PPO config: batch_size {self.batch_size} is larger than "
-                             f"a rollout (n_steps * n_envs * n_agents = {rollout})")
+        self._check_rollout("PPO", self.batch_size, self.n_steps)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict (an infinite comm_range becomes the string ``"inf"``)."""
@@ -229,25 +270,134 @@ class SmallCNN(BaseFeaturesExtractor):
         return self.linear(self.cnn(observations))
 
 
-def policy_kwargs(config: PPOTrainConfig) -> dict[str, Any]:
-    """SB3 ``policy_kwargs`` of the architecture ``config`` describes (:class:`SmallCNN`)."""
-    return {
-        "features_extractor_class": SmallCNN,
-        "features_extractor_kwargs": {"width": config.width,
-                                      "features_dim": config.features_dim},
-        "net_arch": {"pi": [config.hidden], "vf": [config.hidden]},
-    }
+class GainPriorExtractor(SmallCNN):
+    """:class:`SmallCNN` features followed by each option's relative expected gain.
+
+    Output (B, features_dim + 6): the CNN's features, then ``gain(a) / max_a' gain(a')`` read
+    from the ``gain`` planes at option a's waypoint
+    (:func:`~ipp_toolkit.features.option_gain_cells`; options outside the area read 0 and are
+    masked). :class:`GainPriorMlpExtractor` passes the
+    six gains around the policy's hidden layer, so the action layer sees them linearly.
+
+    Args:
+        observation_space: Box of shape (C, G, G).
+        gain_channels: channels of ``gain_level``, ``gain_up``, ``gain_down``.
+        width, features_dim: as :class:`SmallCNN`.
+    """
+
+    def __init__(self, observation_space: spaces.Box, gain_channels: Sequence[int],
+                 width: int = 32, features_dim: int = 128):
+        super().__init__(observation_space, width, features_dim)
+        self._features_dim = features_dim + N_ACTIONS
+        channel, row, col = option_gain_cells(gain_channels, observation_space.shape[-1])
+        # Buffers, not parameters: rebuilt from the configs, never stored.
+        self.register_buffer("option_channel", torch.from_numpy(channel), persistent=False)
+        self.register_buffer("option_row", torch.from_numpy(row), persistent=False)
+        self.register_buffer("option_col", torch.from_numpy(col), persistent=False)
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        gains = observations[:, self.option_channel, self.option_row, self.option_col]
+        relative = gains / (gains.amax(dim=1, keepdim=True) + 1e-8)
+        return torch.cat([super().forward(observations), relative], dim=1)
+
+
+class GainPriorMlpExtractor(nn.Module):
+    """SB3's policy/value MLPs on the CNN features, the six gains passed to the action layer.
+
+    ``forward_actor`` gives (B, hidden + 6): the policy MLP's latent, then the gains;
+    ``forward_critic`` gives the value MLP's (B, hidden) latent of the CNN features.
+    """
+
+    def __init__(self, feature_dim: int, net_arch: Any, activation_fn: type[nn.Module],
+                 device: torch.device | str = "auto"):
+        super().__init__()
+        self.mlp = MlpExtractor(feature_dim - N_ACTIONS, net_arch, activation_fn, device)
+        self.latent_dim_pi = self.mlp.latent_dim_pi + N_ACTIONS
+        self.latent_dim_vf = self.mlp.latent_dim_vf
+
+    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.forward_actor(features), self.forward_critic(features)
+
+    def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
+        cnn, gains = features[:, :-N_ACTIONS], features[:, -N_ACTIONS:]
+        return torch.cat([self.mlp.forward_actor(cnn), gains], dim=1)
+
+    def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
+        return self.mlp.forward_critic(features[:, :-N_ACTIONS])
+
+
+class _GainPriorMixin:
+    """Actor-critic policy whose logits are ``residual(latent) + gain_prior * relative gains``.
+
+    The action layer's weights on the six gains start at ``gain_prior`` times the identity and
+    its weights on the latent at zero, so the untrained policy's logits are the prior alone;
+    PPO then trains all of it (the prior's weights included).
+    """
+
+    def __init__(self, *args: Any, gain_prior: float, **kwargs: Any):
+        self.gain_prior = float(gain_prior)
+        super().__init__(*args, **kwargs)  # type: ignore[call-arg]
+
+    def _build_mlp_extractor(self) -> None:
+        self.mlp_extractor = GainPriorMlpExtractor(
+            self.features_dim, net_arch=self.net_arch,  # type: ignore[attr-defined]
+            activation_fn=self.activation_fn, device=self.device)  # type: ignore[attr-defined]
+
+    def _build(self, lr_schedule: Any) -> None:
+        super()._build(lr_schedule)  # type: ignore[misc]
+        action_net: nn.Linear = self.action_net  # type: ignore[attr-defined]
+        with torch.no_grad():
+            action_net.weight.zero_()
+            action_net.bias.zero_()
+            action_net.weight[:, -N_ACTIONS:] = self.gain_prior * torch.eye(N_ACTIONS)
+
+
+class GainPriorMaskablePolicy(_GainPriorMixin, MaskableActorCriticPolicy):
+    """MaskablePPO's policy with a gain prior (see :class:`_GainPriorMixin`)."""
+
+
+class GainPriorPolicy(_GainPriorMixin, ActorCriticPolicy):
+    """Plain PPO's policy with a gain prior (see :class:`_GainPriorMixin`)."""
+
+
+def policy_class(config: PPOTrainConfig) -> type[ActorCriticPolicy]:
+    """The SB3 policy class of ``config``: masked or not, with a gain prior or not."""
+    if config.gain_prior > 0:
+        return GainPriorMaskablePolicy if config.masked else GainPriorPolicy
+    return MaskableActorCriticPolicy if config.masked else ActorCriticPolicy
+
+
+def policy_kwargs(config: PPOTrainConfig, env_config: EnvConfig) -> dict[str, Any]:
+    """SB3 ``policy_kwargs`` of the architecture ``config`` describes on ``env_config``'s planes.
+
+    Raises:
+        ValueError: ``gain_prior`` > 0 without the ``gain`` planes.
+    """
+    extractor_kwargs: dict[str, Any] = {"width": config.width,
+                                        "features_dim": config.features_dim}
+    kwargs: dict[str, Any] = {"net_arch": {"pi": [config.hidden], "vf": [config.hidden]}}
+    if config.gain_prior > 0:
+        try:
+            extractor_kwargs["gain_channels"] = gain_plane_channels(env_config.features)
+        except ValueError as error:
+            raise ValueError(f"invalid PPO config: gain_prior = {config.gain_prior!r}: "
+                             f"{error}") from None
+        kwargs["gain_prior"] = config.gain_prior
+    kwargs["features_extractor_class"] = (GainPriorExtractor if config.gain_prior > 0
+                                          else SmallCNN)
+    kwargs["features_extractor_kwargs"] = extractor_kwargs
+    return kwargs
 
 
 def _observation_space(shape: tuple[int, ...]) -> spaces.Box:
     return spaces.Box(-1.0, 1.0, shape, dtype=np.float32)
 
 
-def _build_policy(config: PPOTrainConfig, obs_shape: tuple[int, ...], device: str = "cpu") -> Any:
+def _build_policy(config: PPOTrainConfig, env_config: EnvConfig, obs_shape: tuple[int, ...],
+                  device: str = "cpu") -> Any:
     """A fresh (untrained) policy network of the architecture ``config`` describes."""
-    cls = MaskableActorCriticPolicy if config.masked else ActorCriticPolicy
-    policy = cls(_observation_space(obs_shape), spaces.Discrete(6), lambda _: config.lr,
-                 **policy_kwargs(config))
+    policy = policy_class(config)(_observation_space(obs_shape), spaces.Discrete(N_ACTIONS),
+                                  lambda _: config.lr, **policy_kwargs(config, env_config))
     return policy.to(device)
 
 
@@ -325,7 +475,10 @@ def _rebuild(path: Path, data: dict[str, Any], device: str) -> tuple[Any, dict[s
     except (TypeError, ValueError) as error:
         raise CheckpointError(f"checkpoint {str(path)!r} holds an invalid configuration: "
                               f"{error}") from None
-    policy = _build_policy(config, obs_shape, device)
+    try:
+        policy = _build_policy(config, env_config, obs_shape, device)
+    except ValueError as error:
+        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
     try:
         policy.load_state_dict(data["policy"])
     except (RuntimeError, TypeError, AttributeError) as error:
@@ -357,58 +510,11 @@ def masked_greedy_actions(policy: Any, observations: np.ndarray, masks: np.ndarr
         return logits.argmax(dim=1).cpu().numpy().astype(np.int64)
 
 
-# --------------------------------------------------------------------------------------------
-# Planner
+def __getattr__(name: str) -> Any:
+    # PPOPlanner moved to baselines.sb3_planner (the sb3 planner with the shipped default);
+    # imported lazily here because sb3_planner imports this module.
+    if name == "PPOPlanner":
+        from .sb3_planner import PPOPlanner
 
-
-class PPOPlanner(Planner):
-    """Greedy shared PPO policy for every agent (one batched forward per step).
-
-    Args:
-        checkpoint: a ``policy.pt`` written by ``ipp-train ppo``; None loads the shipped
-            ``baselines/checkpoints/ppo_4agents_d25.pt``.
-        device: torch device of the forward pass.
-
-    Raises:
-        CheckpointError: no checkpoint, or a missing, corrupt or foreign one.
-    """
-
-    name = "ppo"
-    needs_observations = True
-
-    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
-        # Batches of N observations: extra intra-op threads only spin (80x slower when the
-        # cores are busy, measured), and evaluation runs one worker process per core.
-        torch.set_num_threads(1)
-        if checkpoint is None:
-            if not DEFAULT_CHECKPOINT.is_file():
-                raise CheckpointError(
-                    f"no PPO checkpoint given and the shipped default {str(DEFAULT_CHECKPOINT)!r} "
-                    "does not exist; train one with `ipp-train ppo --out runs/ppo` and pass "
-                    "checkpoint='runs/ppo/policy.pt' (or copy it to that default path)")
-            checkpoint = DEFAULT_CHECKPOINT
-        self.checkpoint = Path(checkpoint)
-        self.policy, self.meta = load_policy(self.checkpoint, device)
-        self.obs_shape: tuple[int, ...] = self.meta["obs_shape"]
-        self.observation_features = self.meta["env_config"].features
-        self.transfer_notes: list[str] = []
-
-    def reset(self, config: EnvConfig, seed: int) -> None:
-        """Check the transfer to ``config`` (see ``check_policy_transfer``).
-
-        The policy observes with its own feature planes (``observation_features``), so a
-        mission config with other feature switches is flown, not refused; another planning
-        grid, or more agents than the id plane numbers, is refused.
-        """
-        self.transfer_notes = check_policy_transfer(self.meta["env_config"], config,
-                                                    str(self.checkpoint))
-
-    def act(self, views: list[AgentView]) -> np.ndarray:
-        """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks."""
-        observations = np.stack([view.observation for view in views])
-        if observations.shape[1:] != self.obs_shape:
-            raise CheckpointError(
-                f"PPO model {str(self.checkpoint)!r} expects observations of shape "
-                f"{self.obs_shape}, got {observations.shape[1:]}")
-        masks = np.stack([view.mask for view in views])
-        return masked_greedy_actions(self.policy, observations, masks)
+        return PPOPlanner
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -35,6 +35,7 @@ from .ppo import (
     TRAINING_KIND,
     PPOTrainConfig,
     model_payload,
+    policy_class,
     policy_kwargs,
     policy_metadata,
 )
@@ -111,11 +112,11 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
 
     def make_model(env: Any, env_seed: int, tb_dir: str, done: int) -> Any:
         cls = MaskablePPO if config.masked else PPO
-        return cls("MlpPolicy", env, learning_rate=config.lr, n_steps=config.n_steps,
+        return cls(policy_class(config), env, learning_rate=config.lr, n_steps=config.n_steps,
                    batch_size=config.batch_size, n_epochs=config.n_epochs, gamma=config.gamma,
                    gae_lambda=config.gae_lambda, clip_range=config.clip_range,
                    ent_coef=config.ent_coef, vf_coef=config.vf_coef,
-                   max_grad_norm=config.max_grad_norm, policy_kwargs=policy_kwargs(config),
+                   max_grad_norm=config.max_grad_norm, policy_kwargs=policy_kwargs(config, env_cfg),
                    tensorboard_log=tb_dir, seed=env_seed, device="cpu", verbose=0)
 
     extra: dict[str, Any] = {"n_actions": N_ACTIONS}
@@ -198,6 +199,10 @@ def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.Ar
     parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
                         metavar="P", help="reward subtracted when plain PPO picks a masked "
                                           "action (the UAV holds for that step)")
+    parser.add_argument("--gain-prior", type=float, default=defaults.gain_prior, metavar="BETA",
+                        help="> 0: add the gain planes' expected gain of each option to the "
+                             "logits, starting at this weight (needs `features: {gain: true}` "
+                             "in --config); 0: the plain policy")
     parser.add_argument("--masked", action=argparse.BooleanOptionalAction,
                         default=defaults.masked, help="MaskablePPO (default) or plain PPO")
     add_run_flags(parser)
@@ -234,8 +239,8 @@ def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
             masked=args.masked, seed=args.seed, resolution=env_config.world.resolution,
             n_agents=env_config.team.n_agents, comm_range=env_config.team.comm_range,
             num_cpus=args.num_cpus, checkpoint_every=args.checkpoint_every,
-            invalid_penalty=args.invalid_penalty)
-        training_env_config(config, env_config)  # validate before any work
+            invalid_penalty=args.invalid_penalty, gain_prior=args.gain_prior)
+        policy_kwargs(config, training_env_config(config, env_config))  # validate before work
         path = train_ppo(config, env_config, args.out, progress=not args.no_progress,
                          resume=args.resume,
                          time_limit_s=None if args.time_limit is None else args.time_limit * 60,

@@ -25,7 +25,7 @@ from .sb3_policies import (
     load_sb3_policy,
 )
 
-__all__ = ["SB3Planner"]
+__all__ = ["SB3Planner", "PPOPlanner"]
 
 
 class SB3Planner(Planner):
@@ -79,7 +79,8 @@ class SB3Planner(Planner):
         if mission_shape != self.obs_shape:
             raise CheckpointError(
                 f"{self.algo} policy {str(self.checkpoint)!r} was trained on observations of "
-                f"shape {self.obs_shape}; missions of this config give {mission_shape}")
+                f"shape {self.obs_shape}; missions of this config give {mission_shape} "
+                "(another planning grid)")
         self.transfer_notes = check_policy_transfer(self.meta.env_config, config,
                                                     str(self.checkpoint))
         self._lstm_states = None
@@ -98,3 +99,31 @@ class SB3Planner(Planner):
         actions, states = greedy_actions(self.policy, self.algo, observations, masks, states)
         self._lstm_states = states if self.algo in RECURRENT_ALGORITHMS else None
         return actions
+
+
+class PPOPlanner(SB3Planner):
+    """The ``ppo`` planner: :class:`SB3Planner` whose default policy is the shipped PPO one.
+
+    Args:
+        checkpoint: a ``policy.pt`` of ``ipp-train ppo`` (or of ``ipp-train sb3``); None loads
+            the shipped ``baselines/checkpoints/ppo_4agents_d25.pt``.
+        device: torch device of the forward pass.
+
+    Raises:
+        CheckpointError: no shipped policy, or a missing, corrupt or foreign file.
+    """
+
+    name = "ppo"
+
+    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
+        from . import ppo  # the default is read at call time (tests point it elsewhere)
+
+        if checkpoint is None:
+            if not ppo.DEFAULT_CHECKPOINT.is_file():
+                raise CheckpointError(
+                    f"no PPO checkpoint given and the shipped default "
+                    f"{str(ppo.DEFAULT_CHECKPOINT)!r} does not exist; train one with "
+                    "`ipp-train ppo --out runs/ppo` and pass ppo=runs/ppo/policy.pt "
+                    "(checkpoint='runs/ppo/policy.pt')")
+            checkpoint = ppo.DEFAULT_CHECKPOINT
+        super().__init__(checkpoint, device)

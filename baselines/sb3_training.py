@@ -37,7 +37,7 @@ from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.vec import make_sb3_vec_env
 
-from .ppo import PPOTrainConfig, config_from_record, config_record, save_policy
+from .ppo import PPOTrainConfig, SB3RunConfig, config_from_record, config_record, save_policy
 from .ppo_training import add_run_flags, add_world_flags, train_ppo, training_env_config
 from .ppo_training import main as ppo_main
 from .sb3_policies import (
@@ -146,72 +146,24 @@ def coerce_hyperparameter(algo: str, name: str, text: str) -> int | float:
 
 
 @dataclass(frozen=True)
-class SB3TrainConfig:
-    """One ``ipp-train sb3`` run: the algorithm, its hyper-parameters and the training world.
-
-    SB3 timesteps are agent-transitions: one joint step of N agents counts N.
+class SB3TrainConfig(SB3RunConfig):
+    """One ``ipp-train sb3`` run: :class:`~baselines.ppo.SB3RunConfig`'s fields (length, seed,
+    network sizes, training world), the algorithm and its hyper-parameters.
 
     Attributes:
         algo: one of :data:`~baselines.sb3_policies.ALGORITHMS` (any case; stored in SB3's
             spelling).
-        total_timesteps: agent-transitions to train for.
-        n_envs: simulator copies stepped together; SB3 sees ``n_envs * n_agents`` envs.
-        seed: seed of the policy, the sampling and the training missions.
-        width: conv channels of the features extractor.
-        features_dim: output size of the features extractor.
-        hidden: width of the one hidden layer of each head.
-        resolution: map resolution (metres per cell) of the training world.
-        n_agents: team size N during training.
-        comm_range: communication range D (metres, inf allowed) during training.
-        num_cpus: SuperSuit worker processes (0: all copies in this process).
-        checkpoint_every: agent-transitions between checkpoints.
-        invalid_penalty: reward subtracted from a slot whose action was masked (the UAV
-            holds); never happens with MaskablePPO.
         hyperparameters: the algorithm's hyper-parameters (:data:`ALGORITHM_DEFAULTS` keys);
             missing ones take the defaults, so the stored dict is complete.
     """
 
     algo: str = "MaskablePPO"
-    total_timesteps: int = 200_000
-    n_envs: int = 4
-    seed: int = 0
-    width: int = 32
-    features_dim: int = 128
-    hidden: int = 64
-    resolution: float = 0.5
-    n_agents: int = 4
-    comm_range: float = 25.0
-    num_cpus: int = 0
-    checkpoint_every: int = 20_000
-    invalid_penalty: float = 0.0
     hyperparameters: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         algo = canonical_algo(self.algo)
         object.__setattr__(self, "algo", algo)
-        for name in ("total_timesteps", "n_envs", "width", "features_dim", "hidden",
-                     "n_agents", "checkpoint_every"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"invalid SB3 config: {name} must be an integer >= 1, "
-                                 f"got {value!r}")
-        for name in ("seed", "num_cpus"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"invalid SB3 config: {name} must be an integer >= 0, "
-                                 f"got {value!r}")
-        if not isinstance(self.resolution, int | float) or not math.isfinite(self.resolution) \
-                or self.resolution <= 0:
-            raise ValueError(f"invalid SB3 config: resolution must be a positive number, "
-                             f"got {self.resolution!r}")
-        if not isinstance(self.comm_range, int | float) or math.isnan(self.comm_range) \
-                or self.comm_range < 0:
-            raise ValueError(f"invalid SB3 config: comm_range must be >= 0 (inf allowed), "
-                             f"got {self.comm_range!r}")
-        if not isinstance(self.invalid_penalty, int | float) \
-                or not math.isfinite(self.invalid_penalty) or self.invalid_penalty < 0:
-            raise ValueError(f"invalid SB3 config: invalid_penalty must be a number >= 0, "
-                             f"got {self.invalid_penalty!r}")
+        self._check_run_fields("SB3")
         if not isinstance(self.hyperparameters, Mapping):
             raise ValueError(f"invalid SB3 config: hyperparameters must be a mapping, got "
                              f"{self.hyperparameters!r}")
@@ -220,11 +172,7 @@ class SB3TrainConfig:
             merged[name] = _check_hyperparameter(algo, name, value)
         object.__setattr__(self, "hyperparameters", merged)
         if "batch_size" in merged and "n_steps" in merged:
-            rollout = merged["n_steps"] * self.n_envs * self.n_agents
-            if merged["batch_size"] > rollout:
-                raise ValueError(f"invalid SB3 config: batch_size {merged['batch_size']} is "
-                                 f"larger than a rollout (n_steps * n_envs * n_agents = "
-                                 f"{rollout})")
+            self._check_rollout("SB3", merged["batch_size"], merged["n_steps"])
         self.architecture()  # validates the sizes
         if algo in PPO_ALGORITHMS:
             self.to_ppo_config()  # PPOTrainConfig's own checks, before any work
@@ -246,13 +194,8 @@ class SB3TrainConfig:
         if self.algo not in PPO_ALGORITHMS:
             raise ValueError(f"{self.algo} is not trained by ipp-train ppo")
         hyper = dict(self.hyperparameters)
-        return PPOTrainConfig(
-            total_timesteps=self.total_timesteps, n_envs=self.n_envs, lr=hyper.pop("learning_rate"),
-            masked=self.algo == "MaskablePPO", seed=self.seed, width=self.width,
-            features_dim=self.features_dim, hidden=self.hidden, resolution=self.resolution,
-            n_agents=self.n_agents, comm_range=self.comm_range, num_cpus=self.num_cpus,
-            checkpoint_every=self.checkpoint_every, invalid_penalty=self.invalid_penalty,
-            **hyper)
+        return PPOTrainConfig(**self.run_fields(), lr=hyper.pop("learning_rate"),
+                              masked=self.algo == "MaskablePPO", **hyper)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict (an infinite comm_range becomes the string ``"inf"``)."""

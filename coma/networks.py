@@ -15,7 +15,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ipp_toolkit.team import ACTION_DELTAS, N_ACTIONS
+from ipp_toolkit.features import option_gain_cells
+from ipp_toolkit.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bounded_softmax", "epsilon_at", "greedy_actions"]
 
@@ -98,25 +99,17 @@ class GainPriorActor(nn.Module):
         super().__init__()
         if not beta > 0 or not math.isfinite(beta):
             raise ValueError(f"GainPriorActor: beta = {beta!r} must be a positive number")
-        if len(gain_channels) != 3:
-            raise ValueError(f"GainPriorActor: gain_channels = {gain_channels!r} must name "
-                             "the three planes gain_level, gain_up, gain_down")
         self.residual = ConvNet(in_channels, grid, N_ACTIONS, width, hidden)
         last = self.residual.head[-1]
         assert isinstance(last, nn.Linear)
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
         self.log_beta = nn.Parameter(torch.tensor(math.log(beta)))
-        level, up, down = gain_channels
-        centre = grid // 2
-        channel = [up if dz > 0 else down if dz < 0 else level for _, _, dz in ACTION_DELTAS]
-        # Window cell (v, u) shows waypoint (y + v - c, x + u - c): option (dx, dy) is at
-        # (c + dy, c + dx). Buffers, not parameters: rebuilt from the configs, not stored.
-        self.register_buffer("option_channel", torch.tensor(channel), persistent=False)
-        self.register_buffer("option_row", torch.tensor(centre + ACTION_DELTAS[:, 1]),
-                             persistent=False)
-        self.register_buffer("option_col", torch.tensor(centre + ACTION_DELTAS[:, 0]),
-                             persistent=False)
+        channel, row, col = option_gain_cells(gain_channels, grid)
+        # Buffers, not parameters: rebuilt from the configs, not stored.
+        self.register_buffer("option_channel", torch.from_numpy(channel), persistent=False)
+        self.register_buffer("option_row", torch.from_numpy(row), persistent=False)
+        self.register_buffer("option_col", torch.from_numpy(col), persistent=False)
         self.in_channels = in_channels
         self.grid = grid
 

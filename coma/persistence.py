@@ -23,7 +23,7 @@ from typing import Any
 import torch
 
 from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
-from ipp_toolkit.features import GAIN_PLANES, actor_plane_names
+from ipp_toolkit.features import actor_plane_names, gain_plane_channels
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
 from ipp_toolkit.planners import check_policy_transfer as check_transfer
 from ipp_toolkit.team import N_ACTIONS
@@ -93,7 +93,7 @@ def build_networks(coma_config: COMAConfig, env_config: EnvConfig) -> COMANetwor
                              "needs the gain planes in the actor's input "
                              "(features.gain = true, --feature gain=true)")
         actor: torch.nn.Module = GainPriorActor(
-            len(names), grid, [names.index(name) for name in GAIN_PLANES], width, hidden,
+            len(names), grid, gain_plane_channels(features), width, hidden,
             coma_config.gain_prior)
     else:
         actor = ConvNet(len(names), grid, N_ACTIONS, width, hidden)

@@ -10,17 +10,21 @@ other plane in [0, 1].
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from .config import ACTOR_PLANES, FeatureConfig
 from .gain import FootprintGainCache
 from .interest import interest_smoother
 from .mission import MissionState
-from .team import N_ACTIONS
+from .team import ACTION_DELTAS, N_ACTIONS
 
 __all__ = [
     "GAIN_PLANES",
     "actor_plane_names",
+    "gain_plane_channels",
+    "option_gain_cells",
     "footprint_gain",
     "gain_planes",
     "state_plane_names",
@@ -45,6 +49,47 @@ def actor_plane_names(features: FeatureConfig) -> list[str]:
         if getattr(features, name):
             names += list(GAIN_PLANES) if name == "gain" else [name]
     return names
+
+
+def gain_plane_channels(features: FeatureConfig) -> list[int]:
+    """Channel indices of ``gain_level``, ``gain_up``, ``gain_down`` among the actor's planes.
+
+    Raises:
+        ValueError: the ``gain`` planes are switched off.
+    """
+    if not features.gain:
+        raise ValueError("the gain planes are not among the actor's planes "
+                         "(features.gain = false); switch them on with --feature gain=true")
+    names = actor_plane_names(features)
+    return [names.index(name) for name in GAIN_PLANES]
+
+
+def option_gain_cells(gain_channels: Sequence[int], grid: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where each option's expected gain sits in the agent-centred ``gain`` planes.
+
+    Option a's gain is ``planes[channel[a], row[a], col[a]]``: the horizontal moves read
+    ``gain_level`` next to the centre, up and down read the centre of ``gain_up`` /
+    ``gain_down``. Learned policies with a gain prior (COMA's ``GainPriorActor``, PPO's
+    ``gain_prior``) read their prior here.
+
+    Args:
+        gain_channels: the three channels of :func:`gain_plane_channels`.
+        grid: G, the side of the planes.
+
+    Returns:
+        (channel, row, col), each a (6,) int64 array indexed by action.
+    """
+    if len(gain_channels) != 3:
+        raise ValueError(f"gain_channels = {list(gain_channels)!r} must name the three planes "
+                         f"{', '.join(GAIN_PLANES)}")
+    level, up, down = (int(c) for c in gain_channels)
+    centre = grid // 2
+    channel = np.array([up if dz > 0 else down if dz < 0 else level
+                        for _, _, dz in ACTION_DELTAS], dtype=np.int64)
+    # Window cell (v, u) shows waypoint (y + v - c, x + u - c): option (dx, dy) is at
+    # (c + dy, c + dx).
+    return channel, centre + ACTION_DELTAS[:, 1], centre + ACTION_DELTAS[:, 0]
 
 
 def state_plane_names(features: FeatureConfig) -> list[str]:

@@ -14,15 +14,16 @@ from stable_baselines3.common.vec_env import VecMonitor
 
 import baselines.ppo as ppo
 from baselines.ppo import (
-    PPOPlanner,
     PPOTrainConfig,
     load_policy,
     masked_greedy_actions,
     save_policy,
 )
 from baselines.ppo_training import main, train_ppo, training_env_config
+from baselines.sb3_planner import PPOPlanner
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.features import gain_plane_channels, option_gain_cells
 from ipp_toolkit.io import CheckpointError, save_torch
 from ipp_toolkit.mission import reset_mission
 from ipp_toolkit.planners import agent_views
@@ -73,7 +74,7 @@ def test_save_load_round_trip_gives_identical_actions(tmp_path):
     vec = make_sb3_vec_env(env_config, n_envs=1, seed=0)
     try:
         model = MaskablePPO("MlpPolicy", VecMonitor(vec), n_steps=64, batch_size=128,
-                            policy_kwargs=ppo.policy_kwargs(config), seed=1)
+                            policy_kwargs=ppo.policy_kwargs(config, env_config), seed=1)
         model.learn(256)
         batches, mask_batches = [vec.reset()], [vec.action_masks()]
         rng = np.random.default_rng(0)
@@ -147,7 +148,7 @@ def test_planner_refuses_a_model_of_another_observation_shape(tmp_path):
     vec = make_sb3_vec_env(six_planes, n_envs=1, seed=0)
     try:
         model = MaskablePPO("MlpPolicy", VecMonitor(vec), n_steps=64, batch_size=128,
-                            policy_kwargs=ppo.policy_kwargs(config))
+                            policy_kwargs=ppo.policy_kwargs(config, six_planes))
     finally:
         vec.close()
     path = save_policy(tmp_path / "six.pt", model, config, six_planes)
@@ -229,3 +230,97 @@ def test_ppo_parallelism_flag_is_workers_with_the_old_name_kept():
 
     assert _parser().parse_args(["--workers", "2"]).num_cpus == 2
     assert _parser().parse_args(["--num-cpus", "3"]).num_cpus == 3
+
+
+# --------------------------------------------------------------------------------------------
+# Gain prior
+
+
+def _gain_world(config: PPOTrainConfig) -> EnvConfig:
+    return training_env_config(config, EnvConfig().replace(
+        features={"gain": True, "gain_smoothing": 5.0}))
+
+
+def _random_batches(vec, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Observations and masks of ``steps`` random valid joint steps (varied inputs)."""
+    batches, mask_batches = [vec.reset()], [vec.action_masks()]
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        now = mask_batches[-1]
+        batches.append(vec.step((rng.random(now.shape) * now).argmax(1))[0])
+        mask_batches.append(vec.action_masks())
+    return np.concatenate(batches), np.concatenate(mask_batches)
+
+
+def test_option_gain_cells_read_each_option_at_its_waypoint():
+    # Grid 5 (centre 2), gain planes at channels 7, 8, 9 (level, up, down); north is +y (a
+    # row further down the window), east is +x.
+    channel, row, col = option_gain_cells([7, 8, 9], 5)
+    assert channel.tolist() == [8, 7, 7, 7, 7, 9]  # up, north, east, south, west, down
+    assert row.tolist() == [2, 3, 2, 1, 2, 2]
+    assert col.tolist() == [2, 2, 3, 2, 1, 2]
+    with pytest.raises(ValueError, match="three planes"):
+        option_gain_cells([7, 8], 5)
+
+
+def test_untrained_gain_prior_policy_flies_the_argmax_of_the_gain_planes():
+    config = PPOTrainConfig(gain_prior=20.0, **TINY)
+    env_config = _gain_world(config)
+    vec = make_sb3_vec_env(env_config, n_envs=1, seed=3)
+    try:
+        obs, masks = _random_batches(vec, 6, seed=1)
+    finally:
+        vec.close()
+    policy = ppo._build_policy(config, env_config, obs.shape[1:])
+    channel, row, col = option_gain_cells(
+        gain_plane_channels(env_config.features), obs.shape[-1])
+    gains = obs[:, channel, row, col]  # (B, 6)
+    expected = np.where(masks.astype(bool), gains, -np.inf).argmax(1)
+    assert len(set(expected.tolist())) > 1  # the check sees several different choices
+    np.testing.assert_array_equal(masked_greedy_actions(policy, obs, masks), expected)
+    # The prior's weight sets how sharply the untrained policy samples.
+    with torch.no_grad():
+        dist = policy.get_distribution(torch.as_tensor(obs[:1]))
+    logits = dist.distribution.logits[0]
+    relative = torch.as_tensor(gains[0] / (gains[0].max() + 1e-8))
+    torch.testing.assert_close(logits - logits.max(),
+                               (20.0 * relative) - (20.0 * relative).max(), atol=1e-4, rtol=0)
+
+
+def test_gain_prior_policy_trains_saves_and_flies_identically(tmp_path):
+    config = PPOTrainConfig(total_timesteps=256, gain_prior=10.0, **TINY)
+    env_config = _gain_world(config)
+    path = train_ppo(config, env_config, tmp_path / "run", progress=False)
+    policy, meta = load_policy(path)
+    assert meta["ppo_config"].gain_prior == 10.0
+    assert isinstance(policy, ppo.GainPriorMaskablePolicy)
+    # Training moved the action layer away from the pure prior.
+    weight = policy.action_net.weight.detach()
+    assert weight[:, :-6].abs().max() > 0
+    vec = make_sb3_vec_env(env_config, n_envs=1, seed=4)
+    try:
+        obs, masks = _random_batches(vec, 4, seed=2)
+    finally:
+        vec.close()
+    with torch.no_grad():
+        logits = policy.action_net(policy.mlp_extractor.forward_actor(
+            policy.extract_features(torch.as_tensor(obs), policy.pi_features_extractor)))
+    expected = logits.masked_fill(~torch.as_tensor(masks.astype(bool)), -math.inf).argmax(1)
+    planner = PPOPlanner(path)
+    planner.reset(env_config, seed=0)
+    np.testing.assert_array_equal(masked_greedy_actions(planner.policy, obs, masks),
+                                  expected.numpy())
+    result = run_mission(env_config, planner, seed=0, mission=0)
+    assert len(result["rows"]) == env_config.team.budget + 1
+
+
+def test_gain_prior_without_gain_planes_is_refused_before_any_work(tmp_path, capsys):
+    config = PPOTrainConfig(gain_prior=5.0, **TINY)
+    with pytest.raises(ValueError, match="gain_prior = 5.0.*features.gain"):
+        ppo.policy_kwargs(config, training_env_config(config, EnvConfig()))
+    out = tmp_path / "run"
+    assert main(["--gain-prior", "5", "--out", str(out), "--no-progress"]) == 2
+    assert "gain_prior = 5.0" in capsys.readouterr().err
+    assert not out.exists()
+    with pytest.raises(ValueError, match="gain_prior"):
+        PPOTrainConfig(gain_prior=-1.0)
