@@ -34,6 +34,7 @@ from .ppo import (
     CHECKPOINT_KIND,
     TRAINING_KIND,
     PPOTrainConfig,
+    SB3RunConfig,
     model_payload,
     policy_class,
     policy_kwargs,
@@ -146,8 +147,21 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def add_world_flags(parser: argparse.ArgumentParser, defaults: Any) -> None:
-    """The training world's flags of every SB3 trainer (``defaults``: its config dataclass)."""
+def add_run_config_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig) -> None:
+    """The flags of :class:`~baselines.ppo.SB3RunConfig`'s fields (every SB3 trainer): the
+    env file, the run's length, seed and network sizes, and the training world."""
+    parser.add_argument("--config", help="env config YAML (defaults: the paper's world)")
+    parser.add_argument("--timesteps", type=int, default=defaults.total_timesteps,
+                        help="agent-transitions to train for")
+    parser.add_argument("--n-envs", type=int, default=defaults.n_envs,
+                        help="simulator copies stepped together")
+    parser.add_argument("--seed", type=int, default=defaults.seed)
+    parser.add_argument("--width", type=int, default=defaults.width,
+                        help="conv channels of the features extractor")
+    parser.add_argument("--features-dim", type=int, default=defaults.features_dim,
+                        help="output size of the features extractor")
+    parser.add_argument("--hidden", type=int, default=defaults.hidden,
+                        help="hidden layer width of each head")
     parser.add_argument("--agents", type=int, default=None,
                         help=f"team size N (default: the --config file's, else "
                              f"{defaults.n_agents})")
@@ -162,6 +176,27 @@ def add_world_flags(parser: argparse.ArgumentParser, defaults: Any) -> None:
                         help="SuperSuit worker processes (0: none; --num-cpus is the old name)")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
                         help="agent-transitions between checkpoints")
+    parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
+                        metavar="P", help="reward subtracted when a masked action is picked "
+                                          "(the UAV holds for that step; never with "
+                                          "MaskablePPO)")
+
+
+def run_config_from_args(args: argparse.Namespace, defaults: SB3RunConfig
+                    ) -> tuple[EnvConfig, dict[str, Any]]:
+    """The env config and the :class:`~baselines.ppo.SB3RunConfig` fields that
+    :func:`add_run_config_flags`' flags give (flag > ``--config`` file > ``defaults``)."""
+    env_config = build_env_config(
+        args.config, agents=args.agents, comm=args.comm, resolution=args.resolution,
+        defaults={"world": {"resolution": defaults.resolution},
+                  "team": {"n_agents": defaults.n_agents, "comm_range": defaults.comm_range}})
+    fields = {"total_timesteps": args.timesteps, "n_envs": args.n_envs, "seed": args.seed,
+              "width": args.width, "features_dim": args.features_dim, "hidden": args.hidden,
+              "resolution": env_config.world.resolution, "n_agents": env_config.team.n_agents,
+              "comm_range": env_config.team.comm_range, "num_cpus": args.num_cpus,
+              "checkpoint_every": args.checkpoint_every,
+              "invalid_penalty": args.invalid_penalty}
+    return env_config, fields
 
 
 def add_run_flags(parser: argparse.ArgumentParser) -> None:
@@ -181,24 +216,13 @@ def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.Ar
     parser.add_argument("--preset", choices=sorted(PPO_PRESETS), default="default",
                         help="start from these flags: 'shipped' retrains the shipped policy "
                              "(flags given explicitly win)")
-    parser.add_argument("--config", help="env config YAML (defaults: the paper's world)")
     parser.add_argument("--out", default="runs/ppo", help="output folder (default runs/ppo)")
-    parser.add_argument("--timesteps", type=int, default=defaults.total_timesteps,
-                        help="agent-transitions to train for")
-    parser.add_argument("--n-envs", type=int, default=defaults.n_envs,
-                        help="simulator copies stepped together")
     parser.add_argument("--n-steps", type=int, default=defaults.n_steps,
                         help="rollout steps per agent slot")
     parser.add_argument("--batch-size", type=int, default=defaults.batch_size)
     parser.add_argument("--lr", type=float, default=defaults.lr)
     parser.add_argument("--ent-coef", type=float, default=defaults.ent_coef)
-    parser.add_argument("--width", type=int, default=defaults.width,
-                        help="conv channels of the features extractor")
-    parser.add_argument("--seed", type=int, default=defaults.seed)
-    add_world_flags(parser, defaults)
-    parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
-                        metavar="P", help="reward subtracted when plain PPO picks a masked "
-                                          "action (the UAV holds for that step)")
+    add_run_config_flags(parser, defaults)
     parser.add_argument("--gain-prior", type=float, default=defaults.gain_prior, metavar="BETA",
                         help="> 0: add the gain planes' expected gain of each option to the "
                              "logits, starting at this weight (needs `features: {gain: true}` "
@@ -227,19 +251,10 @@ def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
     known, _ = _parser(prog=prog).parse_known_args(argv)  # exits 2 on malformed options
     args = _parser(known.preset, prog).parse_args(argv)
     try:
-        defaults = PPOTrainConfig()
-        env_config = build_env_config(
-            args.config, agents=args.agents, comm=args.comm, resolution=args.resolution,
-            defaults={"world": {"resolution": defaults.resolution},
-                      "team": {"n_agents": defaults.n_agents,
-                               "comm_range": defaults.comm_range}})
+        env_config, run_fields = run_config_from_args(args, PPOTrainConfig())
         config = PPOTrainConfig(
-            total_timesteps=args.timesteps, n_envs=args.n_envs, n_steps=args.n_steps,
-            batch_size=args.batch_size, lr=args.lr, ent_coef=args.ent_coef, width=args.width,
-            masked=args.masked, seed=args.seed, resolution=env_config.world.resolution,
-            n_agents=env_config.team.n_agents, comm_range=env_config.team.comm_range,
-            num_cpus=args.num_cpus, checkpoint_every=args.checkpoint_every,
-            invalid_penalty=args.invalid_penalty, gain_prior=args.gain_prior)
+            **run_fields, n_steps=args.n_steps, batch_size=args.batch_size, lr=args.lr,
+            ent_coef=args.ent_coef, masked=args.masked, gain_prior=args.gain_prior)
         policy_kwargs(config, training_env_config(config, env_config))  # validate before work
         path = train_ppo(config, env_config, args.out, progress=not args.no_progress,
                          resume=args.resume,

@@ -34,11 +34,16 @@ from typing import Any
 from ipp_toolkit.config import EnvConfig, config_to_dict
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
 from ipp_toolkit.progress import report_interrupt
-from ipp_toolkit.settings import build_env_config
 from ipp_toolkit.vec import make_sb3_vec_env
 
 from .ppo import PPOTrainConfig, SB3RunConfig, config_from_record, config_record, save_policy
-from .ppo_training import add_run_flags, add_world_flags, train_ppo, training_env_config
+from .ppo_training import (
+    add_run_config_flags,
+    add_run_flags,
+    run_config_from_args,
+    train_ppo,
+    training_env_config,
+)
 from .ppo_training import main as ppo_main
 from .sb3_policies import (
     ALGORITHMS,
@@ -346,26 +351,12 @@ def _parser() -> argparse.ArgumentParser:
                     "and take its options (ipp-train sb3 --algo PPO --help).")
     parser.add_argument("--algo", required=True, metavar="|".join(ALGORITHMS),
                         help="the algorithm (any case)")
-    parser.add_argument("--config", help="env config YAML (defaults: the paper's world)")
     parser.add_argument("--out", default=None,
                         help="output folder (default runs/sb3-ALGO, lower case)")
-    parser.add_argument("--timesteps", type=int, default=defaults.total_timesteps,
-                        help="agent-transitions to train for")
-    parser.add_argument("--n-envs", type=int, default=defaults.n_envs,
-                        help="simulator copies stepped together")
     parser.add_argument("--lr", type=float, default=None,
                         help="learning rate (default: the algorithm's, see --set)")
     parser.add_argument("--gamma", type=float, default=None, help="discount factor")
-    parser.add_argument("--width", type=int, default=defaults.width,
-                        help="conv channels of the features extractor")
-    parser.add_argument("--features-dim", type=int, default=defaults.features_dim)
-    parser.add_argument("--hidden", type=int, default=defaults.hidden,
-                        help="hidden layer width of each head")
-    parser.add_argument("--seed", type=int, default=defaults.seed)
-    add_world_flags(parser, defaults)
-    parser.add_argument("--invalid-penalty", type=float, default=defaults.invalid_penalty,
-                        metavar="P", help="reward subtracted when a masked action is picked "
-                                          "(the UAV holds for that step)")
+    add_run_config_flags(parser, defaults)
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="an algorithm hyper-parameter (repeatable): "
                              + "; ".join(f"{algo}: {', '.join(sorted(values))}"
@@ -419,19 +410,9 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)  # exits with status 2 on malformed options
     out = args.out or f"runs/sb3-{algo.lower()}"
     try:
-        defaults = SB3TrainConfig(algo=algo)
-        env_config = build_env_config(
-            args.config, agents=args.agents, comm=args.comm, resolution=args.resolution,
-            defaults={"world": {"resolution": defaults.resolution},
-                      "team": {"n_agents": defaults.n_agents,
-                               "comm_range": defaults.comm_range}})
-        config = SB3TrainConfig(
-            algo=algo, total_timesteps=args.timesteps, n_envs=args.n_envs, seed=args.seed,
-            width=args.width, features_dim=args.features_dim, hidden=args.hidden,
-            resolution=env_config.world.resolution, n_agents=env_config.team.n_agents,
-            comm_range=env_config.team.comm_range, num_cpus=args.num_cpus,
-            checkpoint_every=args.checkpoint_every, invalid_penalty=args.invalid_penalty,
-            hyperparameters=_hyperparameters(algo, args))
+        env_config, run_fields = run_config_from_args(args, SB3TrainConfig(algo=algo))
+        config = SB3TrainConfig(algo=algo, **run_fields,
+                                hyperparameters=_hyperparameters(algo, args))
         training_env_config(config, env_config)  # validate before any work
         path = train_sb3(config, env_config, out, progress=not args.no_progress,
                          resume=args.resume,
