@@ -4,7 +4,9 @@ This module owns the command line of COMA training: its flags (:func:`build_pars
 training defaults over the paper's mission (:data:`TRAINING_DEFAULTS`), how flags, a
 ``--config`` file and ``--set FIELD=VALUE`` become a :class:`~coma.config.COMAConfig` and an
 :class:`~ipp_toolkit.config.EnvConfig` (:func:`configs_from_args`; :func:`coerce_value` and
-:func:`int_list` also serve ``ipp-study``), and :func:`main` with its exit codes.
+:func:`int_list` also serve ``ipp-study``), and :func:`main` with its exit codes. ``--set``
+names a nested field with a dot (``--set warm_start.missions=100``); the older flat names
+(``--set warm_start_missions=100``) are still read (:func:`coma.config.nested_fields`).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.settings import build_env_config, merge_sections, parse_feature_flags
 
-from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, preset
+from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, nested_fields, preset
 from .learner import TrainingDiverged, train
 from .persistence import DEFAULT_SHIPPED, resolve_policy
 from .recipes import RECIPES, Stage, recipe
@@ -66,7 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "file's, else 0.5)")
     parser.add_argument("--warm-start", metavar="PLANNER",
                         help="first imitate this registered planner (e.g. ig; 'none' to "
-                             "switch the preset's off); not in the paper")
+                             "switch the preset's off; the same as --set "
+                             "warm_start.planner=NAME); not in the paper")
     parser.add_argument("--team-sizes", metavar="N,N,...",
                         help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
                              "randomisation; not in the paper)")
@@ -80,7 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="set a feature of the mission config, e.g. --feature "
                              "own_position=true or --feature gain_smoothing=5 (repeatable)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="any COMAConfig field, e.g. --set lr_actor=1e-4 (repeatable)")
+                        help="any COMAConfig field, e.g. --set lr_actor=1e-4; a warm-start "
+                             "field with a dot, e.g. --set warm_start.missions=100 (the older "
+                             "warm_start_missions / warm_start_epochs are still read) "
+                             "(repeatable)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
 
@@ -125,7 +131,7 @@ def _changes_from_args(args: argparse.Namespace) -> dict[str, Any]:
         if getattr(args, name) is not None:
             changes[name] = getattr(args, name)
     if args.warm_start is not None:
-        changes["warm_start"] = "" if args.warm_start == "none" else args.warm_start
+        changes["warm_start.planner"] = "" if args.warm_start == "none" else args.warm_start
     if args.team_sizes is not None:
         changes["team_sizes"] = int_list("--team-sizes", args.team_sizes)
     if args.comm_ranges is not None:
@@ -166,7 +172,7 @@ def stage_configs(args: argparse.Namespace) -> list[tuple[Stage, COMAConfig, Env
     changes = _changes_from_args(args)
     stages = []
     for k, stage in enumerate(recipe(args.preset)):
-        fields = {**stage.coma, **changes}
+        fields = nested_fields(stage.coma, changes)
         if k == 0 and "init_policy" not in changes and stage.init is not None:
             fields["init_policy"] = str(resolve_policy(stage.init))
         elif k > 0 and stage.init is not None and stage.init.startswith("previous"):
@@ -194,10 +200,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         for _, coma_config, env_config in stages:
             # An invalid team, range or validation terrain fails here, before any writing.
             validation_settings(coma_config, mission_settings(coma_config, env_config))
-            if coma_config.warm_start:
+            if coma_config.warm_start.enabled:
                 from ipp_toolkit.planners import planner_factory
 
-                planner_factory(coma_config.warm_start)  # an unknown name fails here
+                planner_factory(coma_config.warm_start.planner)  # an unknown name fails here
     except ValueError as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2

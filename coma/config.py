@@ -7,6 +7,13 @@ exploration starts at eps = 0.1, and PPO's clipped surrogate with normalised cou
 advantages for the actor; see the README for what each choice measured).
 The mission itself (team, world, features) is an
 :class:`~ipp_toolkit.config.EnvConfig`, kept separately and stored beside this in checkpoints.
+
+The warm start's settings are one nested section, :class:`WarmStartConfig` (``warm_start``);
+dicts, ``--set`` and :meth:`COMAConfig.replace` name its fields ``warm_start.missions`` or
+``{"warm_start": {"missions": ...}}``. Older files wrote them flat (``warm_start`` = the
+planner's name, ``warm_start_missions``, ``warm_start_epochs``): :func:`nested_fields` is the
+one place that reads those names, so old checkpoints, run folders and commands still load;
+saving writes the nested form.
 """
 
 from __future__ import annotations
@@ -15,14 +22,78 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NoReturn
 
 from ipp_toolkit.config import EnvConfig, start_for_team_size
 
-__all__ = ["VARIANTS", "PRESETS", "COMAConfig", "preset", "mission_settings"]
+__all__ = ["VARIANTS", "PRESETS", "FLAT_NAMES", "WarmStartConfig", "COMAConfig", "from_dict",
+           "nested_fields", "preset", "mission_settings"]
 
 #: The credit-assignment variants of the paper's study.
 VARIANTS = ("coma", "central_qv", "actor_independent", "decentralised")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
+def _fail(name: str, value: Any, why: str) -> NoReturn:
+    raise ValueError(f"invalid COMA config: {name} = {value!r}: {why}")
+
+
+#: The flat names older configs gave the warm start's fields (still read, never written), by
+#: their dotted names now. A plain string as ``warm_start`` is ``warm_start.planner``.
+FLAT_NAMES: dict[str, str] = {
+    "warm_start_missions": "warm_start.missions",
+    "warm_start_epochs": "warm_start.epochs",
+}
+
+
+@dataclass(frozen=True)
+class WarmStartConfig:
+    """How to imitate a demonstrator before COMA training (``coma.warm_start``; not in the
+    paper). Held as :attr:`COMAConfig.warm_start`; every field is validated at construction.
+
+    Attributes:
+        planner: registered planner name of the demonstrator, or ``""`` for no warm start
+            (the networks start at random, or from ``init_policy``).
+        missions: demonstration missions.
+        missions_per_batch: missions flown in lock-step per collection batch.
+        epochs: passes over the demonstrations when fitting each network.
+        minibatch_size: transitions per gradient step.
+        lr: Adam learning rate of the imitation and the critic fit.
+        holdout: share of the missions kept out of training to measure the imitation.
+    """
+
+    planner: str = "ig"
+    missions: int = 1_500
+    missions_per_batch: int = 50
+    epochs: int = 8
+    minibatch_size: int = 600
+    lr: float = 1e-3
+    holdout: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.planner, str) or any(c in self.planner for c in " ,="):
+            _fail("warm_start.planner", self.planner, "must be a planner name or ''")
+        for name in ("missions", "missions_per_batch", "epochs", "minibatch_size"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                _fail(f"warm_start.{name}", value, "must be an integer >= 1")
+        if not _is_number(self.lr) or self.lr <= 0:
+            _fail("warm_start.lr", self.lr, "must be a positive finite number")
+        if not _is_number(self.holdout) or not 0 <= self.holdout < 1:
+            _fail("warm_start.holdout", self.holdout, "must lie in [0, 1)")
+
+    @property
+    def enabled(self) -> bool:
+        """Whether a run imitates a planner first (``planner`` is not ``""``)."""
+        return bool(self.planner)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-safe dict of the fields (the ``warm_start`` section of a saved config)."""
+        return dataclasses.asdict(self)
 
 
 @dataclass(frozen=True)
@@ -63,10 +134,12 @@ class COMAConfig:
         eval_missions: missions per evaluation.
         checkpoint_every: updates between checkpoints (the last one is always written).
         seed: seed of the run: terrains, sensor noise, network initialisation and sampling.
-        warm_start: registered planner to imitate before COMA training (``coma.warm_start``;
-            not in the paper), or ``""`` to start from random networks.
-        warm_start_missions: demonstration missions of the warm start.
-        warm_start_epochs: passes over the demonstrations when fitting each network.
+        warm_start: the warm start, a :class:`WarmStartConfig` (not in the paper): imitate
+            the planner ``warm_start.planner`` (default ``ig``) on ``warm_start.missions``
+            demonstration missions, ``warm_start.epochs`` passes per network, before COMA
+            training; ``warm_start.planner = ""`` starts from random networks. The
+            constructor also takes a planner's name (``warm_start=""``) or a dict of its
+            fields.
         team_sizes: train on these team sizes, one drawn per update (domain randomisation,
             not in the paper; ``()``: the mission config's own ``n_agents``).
         comm_ranges: train on these communication ranges in metres (``inf`` allowed), one
@@ -121,9 +194,7 @@ class COMAConfig:
     eval_missions: int = 50
     checkpoint_every: int = 10
     seed: int = 0
-    warm_start: str = "ig"
-    warm_start_missions: int = 1_500
-    warm_start_epochs: int = 8
+    warm_start: WarmStartConfig = WarmStartConfig()
     team_sizes: tuple[int, ...] = ()
     comm_ranges: tuple[float, ...] = ()
     init_policy: str = ""
@@ -134,6 +205,10 @@ class COMAConfig:
     selection: str = "mean"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.warm_start, WarmStartConfig):
+            # A planner's name or a dict of fields (from JSON): read like from_dict does.
+            object.__setattr__(self, "warm_start",
+                               _warm_start_from(_warm_start_fields(self.warm_start)))
         # JSON and YAML hand back lists: keep tuples so configs compare and hash alike.
         if isinstance(self.validation_terrains, str):
             object.__setattr__(self, "validation_terrains", tuple(
@@ -167,7 +242,7 @@ class COMAConfig:
             _fail("variant", self.variant, f"choose from {list(VARIANTS)}")
         for name in ("width", "hidden", "missions", "missions_per_update", "minibatch_size",
                      "epochs", "target_update_transitions", "eval_every", "eval_missions",
-                     "checkpoint_every", "warm_start_missions", "warm_start_epochs"):
+                     "checkpoint_every"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 _fail(name, value, "must be an integer >= 1")
@@ -191,44 +266,93 @@ class COMAConfig:
             value = getattr(self, name)
             if not _is_number(value) or not 0 <= value < 1:
                 _fail(name, value, "must lie in [0, 1)")
-        if not isinstance(self.warm_start, str) or any(c in self.warm_start for c in " ,="):
-            _fail("warm_start", self.warm_start, "must be a planner name or ''")
         for name in ("eps_anneal_missions", "critic_warmup_updates"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 _fail(name, value, "must be a non-negative integer")
 
     def replace(self, **changes: Any) -> COMAConfig:
-        """Copy with some fields changed (validated; unknown names are refused)."""
-        return from_dict({**dataclasses.asdict(self), **changes})
+        """Copy with some fields changed (validated; unknown names are refused).
+
+        Nested fields by their dotted name, ``replace(**{"warm_start.missions": 100})``, or
+        as a dict of the fields to change, ``replace(warm_start={"missions": 100})``.
+        """
+        return from_dict(nested_fields(dataclasses.asdict(self), changes))
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-safe dict of the fields (tuples as lists, inf as the string 'inf')."""
+        """Plain JSON-safe dict of the fields (tuples as lists, inf as the string 'inf', the
+        warm start as a nested dict)."""
         values = dataclasses.asdict(self)
         values["team_sizes"] = list(self.team_sizes)
         values["comm_ranges"] = ["inf" if math.isinf(r) else r for r in self.comm_ranges]
         return values
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) \
-        and math.isfinite(value)
+def nested_fields(*layers: Mapping[str, Any]) -> dict[str, Any]:
+    """Merge mappings of COMAConfig fields, later layers winning, into the nested form.
+
+    The one owner of the old flat names (:data:`FLAT_NAMES`; a string as ``warm_start`` is
+    ``warm_start.planner``). A nested field may also be named with a dot
+    (``warm_start.missions``) or given as a dict (``{"warm_start": {"missions": 100}}``) or a
+    :class:`WarmStartConfig`; a layer changes only the nested fields it names. Keys are not
+    checked here (:func:`from_dict` refuses unknown ones by name).
+
+    Raises:
+        ValueError: ``warm_start`` is neither a string, a mapping nor a WarmStartConfig.
+    """
+    merged: dict[str, Any] = {}
+    for layer in layers:
+        if not isinstance(layer, Mapping):
+            raise ValueError(f"invalid COMA config: expected a mapping, got {layer!r}")
+        for key, value in layer.items():
+            name = FLAT_NAMES.get(key, str(key))
+            if name == "warm_start":
+                fields = _warm_start_fields(value)
+            elif name.startswith("warm_start."):
+                fields = {name.removeprefix("warm_start."): value}
+            else:
+                merged[key] = value
+                continue
+            merged.setdefault("warm_start", {}).update(fields)
+    return merged
 
 
-def _fail(name: str, value: Any, why: str) -> None:
-    raise ValueError(f"invalid COMA config: {name} = {value!r}: {why}")
+def _warm_start_fields(value: Any) -> Mapping[str, Any]:
+    """The warm-start fields a ``warm_start`` value names (all of a WarmStartConfig's)."""
+    if isinstance(value, str):
+        return {"planner": value}
+    if isinstance(value, WarmStartConfig):
+        return value.to_dict()
+    if isinstance(value, Mapping):
+        return value
+    _fail("warm_start", value, "must be a planner name ('' for none), a mapping of "
+          "WarmStartConfig fields or a WarmStartConfig")
+
+
+def _warm_start_from(fields: Mapping[str, Any]) -> WarmStartConfig:
+    known = {f.name for f in dataclasses.fields(WarmStartConfig)}
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise ValueError(f"invalid COMA config: unknown key(s) "
+                         f"{[f'warm_start.{k}' for k in unknown]}; known keys: "
+                         f"{[f'warm_start.{k}' for k in sorted(known)]}")
+    return WarmStartConfig(**fields)
 
 
 def from_dict(values: Mapping[str, Any]) -> COMAConfig:
-    """Build a :class:`COMAConfig` from a mapping; unknown keys are refused by name."""
+    """Build a :class:`COMAConfig` from a mapping, nested or flat (:func:`nested_fields`);
+    unknown keys are refused by name."""
     if not isinstance(values, Mapping):
         raise ValueError(f"invalid COMA config: expected a mapping, got {values!r}")
+    fields = nested_fields(values)
     known = {f.name for f in dataclasses.fields(COMAConfig)}
-    unknown = sorted(set(values) - known)
+    unknown = sorted(set(fields) - known)
     if unknown:
         raise ValueError(f"invalid COMA config: unknown key(s) {unknown}; "
                          f"known keys: {sorted(known)}")
-    return COMAConfig(**values)
+    if "warm_start" in fields:
+        fields["warm_start"] = _warm_start_from(fields["warm_start"])
+    return COMAConfig(**fields)
 
 
 #: Named starting points; ``cpu`` is the default of :class:`COMAConfig`.
@@ -238,17 +362,18 @@ PRESETS: dict[str, dict[str, Any]] = {
         "width": 256, "hidden": 256, "missions": 75_000, "missions_per_update": 50,
         "minibatch_size": 600, "epochs": 5, "lr_actor": 1e-5, "lr_critic": 1e-4,
         "target_update_transitions": 30_000, "eps_start": 0.5, "eps_end": 0.02,
-        "eps_anneal_missions": 10_000, "eval_every": 50, "warm_start": "",
+        "eps_anneal_missions": 10_000, "eval_every": 50, "warm_start": {"planner": ""},
         "normalise_advantage": False, "clip_ratio": 0.0, "entropy_coef": 0.0,
     },
 }
 
 
 def preset(name: str, **changes: Any) -> COMAConfig:
-    """The named preset (``cpu`` or ``paper``) with optional field changes."""
+    """The named preset (``cpu`` or ``paper``) with optional field changes (names as in
+    :func:`nested_fields`: ``preset("cpu", **{"warm_start.missions": 100})``)."""
     if name not in PRESETS:
         raise ValueError(f"unknown COMA preset {name!r}; choose from {sorted(PRESETS)}")
-    return from_dict({**dataclasses.asdict(COMAConfig()), **PRESETS[name], **changes})
+    return from_dict(nested_fields(PRESETS[name], changes))
 
 
 def mission_settings(coma_config: COMAConfig, env_config: EnvConfig) -> list[EnvConfig]:

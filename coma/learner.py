@@ -298,7 +298,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         tensorboard: write TensorBoard event files.
         max_updates: stop after this many updates in this call (for tests and time slices).
         warm_start: on a fresh run, first imitate a planner (``coma.warm_start``; default:
-            built from ``coma_config.warm_start``); the imitated networks are saved as
+            ``coma_config.warm_start``, if its planner is set); the imitated networks are saved as
             ``warm_start.pt`` and scored on validation missions (update 0). A run with
             ``coma_config.init_policy`` starts from that policy's networks instead (no warm
             start); they are scored and saved as ``best.pt`` at update 0 alike.
@@ -369,10 +369,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             return {"validation_entropy": validation[f"entropy_{budget}"],
                     "validation_f1": validation[f"f1_{budget}"]}
 
-        if warm_start is None and coma_config.warm_start:
-            warm_start = WarmStartConfig(planner=coma_config.warm_start,
-                                         missions=coma_config.warm_start_missions,
-                                         epochs=coma_config.warm_start_epochs)
+        if warm_start is None and coma_config.warm_start.enabled:
+            warm_start = coma_config.warm_start
         if coma_config.init_policy:
             _initialise_from(networks, coma_config.init_policy)
             run_info["init_policy"] = {"path": coma_config.init_policy, **score_start()}

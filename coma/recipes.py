@@ -28,7 +28,8 @@ class Stage:
 
     Attributes:
         name: short label (the stage's folder is ``stage-K-NAME``).
-        coma: COMAConfig fields over the ``cpu`` preset.
+        coma: COMAConfig fields over the ``cpu`` preset (the warm start's as a nested
+            dict, ``{"warm_start": {"planner": ""}}``; see :func:`coma.config.nested_fields`).
         env: mission config sections over ``ipp-train coma``'s defaults (r_M = 0.5 m, the
             own-position plane), e.g. ``{"features": {"gain": True}}``.
         init: where the networks start: None (fresh), ``shipped:NAME``, or ``previous`` /
@@ -41,7 +42,7 @@ class Stage:
     init: str | None = None
 
 
-_GAIN_PRIOR = {"warm_start": "", "gain_prior": 50.0, "critic_warmup_updates": 10,
+_GAIN_PRIOR = {"warm_start": {"planner": ""}, "gain_prior": 50.0, "critic_warmup_updates": 10,
                "eval_every": 5, "checkpoint_every": 5}
 _MIXTURE_SELECTION = {"validation_terrains": ("split", "blobs", "fractal", "real"),
                       "selection": "worst_vs_ig", "eval_missions": 30}

@@ -13,13 +13,14 @@ COMA then starts from a policy as good as the demonstrator and a critic that alr
 actions under it; its counterfactual advantage is a policy-improvement step from there. The
 demonstration missions are drawn from the ``train`` namespace at indices far beyond the ones
 COMA trains on (from :data:`DEMO_MISSION_OFFSET`), so no terrain is reused.
+
+The settings are a :class:`~coma.config.WarmStartConfig` (``COMAConfig.warm_start``; defined
+with the other hyper-parameters, so inference code can read a config without this module).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -31,50 +32,13 @@ from ipp_toolkit.planners import make_planner
 from ipp_toolkit.progress import progress_bar
 
 from .advantages import td_lambda_targets
+from .config import WarmStartConfig
 from .persistence import COMANetworks
 from .rollout import collect_rollout
 
 __all__ = ["DEMO_MISSION_OFFSET", "WarmStartConfig", "warm_start"]
 
 DEMO_MISSION_OFFSET = 1_000_000_000
-
-
-@dataclass(frozen=True)
-class WarmStartConfig:
-    """How to imitate a demonstrator before COMA training.
-
-    Attributes:
-        planner: registered planner name of the demonstrator.
-        missions: demonstration missions.
-        missions_per_batch: missions flown in lock-step per collection batch.
-        epochs: passes over the demonstrations for each network.
-        minibatch_size: transitions per gradient step.
-        lr: Adam learning rate of the imitation and the critic fit.
-        holdout: share of the missions kept out of training to measure the imitation.
-    """
-
-    planner: str = "ig"
-    missions: int = 1_500
-    missions_per_batch: int = 50
-    epochs: int = 8
-    minibatch_size: int = 600
-    lr: float = 1e-3
-    holdout: float = 0.1
-
-    def __post_init__(self) -> None:
-        for name in ("missions", "missions_per_batch", "epochs", "minibatch_size"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"invalid warm start: {name} = {value!r}: must be an "
-                                 "integer >= 1")
-        if not isinstance(self.lr, int | float) or not math.isfinite(self.lr) or self.lr <= 0:
-            raise ValueError(f"invalid warm start: lr = {self.lr!r}: must be positive")
-        if not 0 <= self.holdout < 1:
-            raise ValueError(f"invalid warm start: holdout = {self.holdout!r}: must lie in "
-                             "[0, 1)")
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
 
 
 def _fit(module: nn.Module, loss_of: Any, samples: int, config: WarmStartConfig,

@@ -162,8 +162,8 @@ def test_config_validation_names_field_and_value():
     with pytest.raises(ValueError, match=r"unknown key\(s\) \['lr'\]"):
         COMAConfig().replace(lr=1.0)
     assert preset("paper").width == 256 and preset("paper").lr_actor == 1e-5
-    assert preset("paper").eps_start == 0.5 and preset("paper").warm_start == ""
-    assert preset("cpu") == COMAConfig() and COMAConfig().warm_start == "ig"
+    assert preset("paper").eps_start == 0.5 and not preset("paper").warm_start.enabled
+    assert preset("cpu") == COMAConfig() and COMAConfig().warm_start.planner == "ig"
     with pytest.raises(ValueError, match="unknown COMA preset"):
         preset("gpu")
 
@@ -427,13 +427,17 @@ def test_warm_start_imitates_the_demonstrator(tmp_path):
 def test_warm_start_settings_come_from_the_coma_config(tmp_path):
     import json
 
-    config = tiny_coma(missions=2, warm_start="coverage", warm_start_missions=2,
-                       warm_start_epochs=3)
+    config = tiny_coma(missions=2, warm_start={"planner": "coverage", "missions": 2,
+                                               "epochs": 3})
     train(config, tiny_env(), tmp_path, progress=False, tensorboard=False)
-    info = json.loads((tmp_path / "config.json").read_text())["warm_start"]
+    stored = json.loads((tmp_path / "config.json").read_text())
+    info = stored["warm_start"]
     assert (info["planner"], info["missions"], info["epochs"]) == ("coverage", 2, 3)
-    with pytest.raises(ValueError, match="warm_start_epochs = 0"):
-        tiny_coma(warm_start_epochs=0)
+    # The run folder records the nested form, not the old flat names.
+    assert stored["coma"]["warm_start"]["missions"] == 2
+    assert not {"warm_start_missions", "warm_start_epochs"} & set(stored["coma"])
+    with pytest.raises(ValueError, match=r"warm_start\.epochs = 0"):
+        tiny_coma(warm_start={"epochs": 0})
 
 
 @pytest.mark.parametrize("name", ["paper-actor", "mixed", "prior", "prior-mixture",
