@@ -13,6 +13,10 @@ is stored.
   (``address="HOST:PORT"`` as printed by ``ray start --head``, ``"ray://HOST:PORT"`` or
   ``"auto"``; only disconnected at the end). An address checked not to answer raises
   :class:`ConnectionError` within seconds instead of letting ``ray.init`` retry for minutes.
+* :func:`session` holds one connection for several evaluations (a study's settings, its
+  training runs): the evaluations inside reuse it instead of starting their own Ray.
+* :func:`run_calls` runs any importable function as Ray tasks with declared CPUs, retried
+  when a worker dies (a study's training runs, which resume their folders).
 * :func:`run_ray` runs one task per (label, mission), ``num_cpus=1`` each, at most as many at
   once as the cluster has CPUs. A task whose worker process or node dies is retried by Ray
   (:data:`MAX_RETRIES`), so a killed worker loses nothing; a planner's own exception is not
@@ -34,7 +38,7 @@ import sys
 import time
 import uuid
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
 from .process_pool import (
@@ -47,7 +51,8 @@ from .process_pool import (
 )
 
 __all__ = ["CONNECT_TIMEOUT_S", "INSTALL_COMMAND", "MAX_RETRIES", "RayCluster",
-           "RayUnavailableError", "connect", "probe", "require_ray", "run_ray", "start_local"]
+           "RayUnavailableError", "connect", "probe", "require_ray", "run_calls", "run_ray",
+           "session", "start_local"]
 
 INSTALL_COMMAND = 'pip install -c constraints.txt -e ".[ray]"'
 """How to install the optional Ray extra (from the repository root)."""
@@ -203,6 +208,26 @@ def connect(address: str | None, num_cpus: int) -> RayCluster:
     return RayCluster(ray, owned=True, address=address)
 
 
+@contextlib.contextmanager
+def session(address: str | None, num_cpus: int) -> Iterator[RayCluster]:
+    """One Ray for a block of several evaluations (a study): :func:`connect` on entry,
+    :meth:`RayCluster.close` on exit (also on an error or Ctrl-C).
+
+    Every ``evaluate(..., backend="ray")`` and :func:`run_calls` inside the block uses this
+    connection (:func:`connect` keeps a process's existing connection), so a local Ray is
+    started once, not once per evaluation. A process already connected keeps its connection
+    after the block.
+
+    Raises:
+        as :func:`connect`.
+    """
+    cluster = connect(address, num_cpus)
+    try:
+        yield cluster
+    finally:
+        cluster.close()
+
+
 def start_local(num_cpus: int) -> None:
     """Start the local Ray of :func:`connect` (``address=None``) in this process.
 
@@ -298,30 +323,125 @@ def run_ray(cluster: RayCluster, runner: TaskRunner, tasks: Sequence[tuple[str, 
     token = uuid.uuid4().hex
     runner_ref = ray.put(runner)
     cwd = os.getcwd()
-    queue = deque(tasks)
-    running: dict[Any, tuple[str, int]] = {}
+
+    def submit(task: tuple[str, int]) -> Any:
+        return fly.remote(token, [runner_ref], cwd, *task)
+
+    def store(task: tuple[str, int], result: TaskResult) -> None:
+        finish(*result)
+        bar.update(1)
+
+    def notes(task: tuple[str, int]) -> tuple[str, str]:
+        label, mission = task
+        return (f"mission {mission} of planner {label!r} was lost: its Ray worker or node died "
+                f"{MAX_RETRIES + 1} times (e.g. out of memory, or the node left the cluster); "
+                "run the same command again to fly what is missing",
+                f"a Ray worker could not fly mission {mission} of planner {label!r}: every "
+                "node needs the toolkit and the planner's module importable, at the versions "
+                "of this machine (see docs/ray.md)")
+
+    _run_queue(cluster, tasks, submit, store, notes, num_cpus=1)
+
+
+def _call(cwd: str, function: Callable[..., Any], args: tuple[Any, ...]) -> Any:
+    """One Ray task of :func:`run_calls`: ``function(*args)`` in ``cwd`` (where it exists on
+    the worker's node), single-threaded."""
+    if os.path.isdir(cwd):
+        os.chdir(cwd)
+    os.environ.update(single_thread_variables())
+    with limit_blas_threads():
+        limit_torch_threads()
+        return function(*args)
+
+
+_REMOTE_CALL: dict[int, Any] = {}
+
+
+def _remote_call(ray: Any) -> Any:
+    remote = _REMOTE_CALL.get(id(ray))
+    if remote is None:
+        remote = _REMOTE_CALL[id(ray)] = ray.remote(max_retries=MAX_RETRIES)(_call)
+    return remote
+
+
+def run_calls(cluster: RayCluster, function: Callable[..., Any],
+              calls: Sequence[tuple[Any, ...]], describe: Callable[[int], str],
+              num_cpus: int = 1, done: Callable[[int, Any], None] | None = None) -> list[Any]:
+    """Run ``function(*args)`` for every ``args`` of ``calls`` as Ray tasks on ``cluster``.
+
+    The general form of :func:`run_ray` (e.g. the training runs of a study): each call is one
+    task declaring ``num_cpus`` CPUs, retried by Ray (:data:`MAX_RETRIES`) when its worker
+    process or node dies, so ``function`` must be safe to run again (a training run resumes
+    its folder). It runs in the calling process's directory where that exists on the
+    worker's node, single-threaded (BLAS, OpenMP, torch). At most as many calls as the
+    cluster has CPUs for are in flight; on a failed call no more start, the running ones are
+    awaited and the first error is raised (the function's own exception, its remote traceback
+    chained); on KeyboardInterrupt the running calls are cancelled.
+
+    ``function`` must be importable by the workers (a module-level function of an installed
+    module: Ray sends it by reference). ``describe(k)`` names call ``k`` in error notes
+    (e.g. ``"training run 'coma'"``); ``done(k, result)`` is called in this process as each
+    call ends.
+
+    Returns:
+        the results, in the order of ``calls``.
+    """
+    ray = cluster.ray
+    remote = _remote_call(ray).options(num_cpus=num_cpus)
+    cwd = os.getcwd()
+    results: dict[int, Any] = {}
+
+    def submit(k: int) -> Any:
+        return remote.remote(cwd, function, tuple(calls[k]))
+
+    def store(k: int, result: Any) -> None:
+        results[k] = result
+        if done is not None:
+            done(k, result)
+
+    def notes(k: int) -> tuple[str, str]:
+        what = describe(k)
+        return (f"{what} was lost: its Ray worker or node died {MAX_RETRIES + 1} times (e.g. "
+                "out of memory, or the node left the cluster); run the same command again to "
+                "continue it",
+                f"a Ray worker could not run {what}: every node needs the toolkit importable, "
+                "at the versions of this machine (see docs/ray.md)")
+
+    _run_queue(cluster, range(len(calls)), submit, store, notes, num_cpus=num_cpus)
+    return [results[k] for k in range(len(calls))]
+
+
+def _run_queue(cluster: RayCluster, items: Iterable[Any], submit: Callable[[Any], Any],
+               store: Callable[[Any, Any], None], notes: Callable[[Any], tuple[str, str]],
+               num_cpus: int) -> None:
+    """The loop of :func:`run_ray` and :func:`run_calls`: submit ``items`` while the cluster
+    has CPUs free (``num_cpus`` per item), ``store`` each result as it arrives; the first
+    error stops new submissions and is raised once the running items ended (``notes(item)``:
+    the notes of a lost item and of one a worker could not run); KeyboardInterrupt cancels the
+    running items."""
+    ray = cluster.ray
+    queue = deque(items)
+    running: dict[Any, Any] = {}
     error: BaseException | None = None
     try:
         while queue or running:
             if queue and error is None:
-                slots = cluster.cpus() - len(running)
+                slots = cluster.cpus() // max(1, num_cpus) - len(running)
                 while queue and (slots > 0 or not running):
-                    label, mission = queue.popleft()
-                    ref = fly.remote(token, [runner_ref], cwd, label, mission)
-                    running[ref] = (label, mission)
+                    item = queue.popleft()
+                    running[submit(item)] = item
                     slots -= 1
             ready, _ = ray.wait(list(running), num_returns=1)
             for ref in ready:
-                label, mission = running.pop(ref)
+                item = running.pop(ref)
                 try:
                     result = ray.get(ref)
-                except Exception as err:  # a planner's error, or a worker lost too often
+                except Exception as err:  # the task's own error, or a worker lost too often
                     if error is None:
-                        error = _unwrap(ray, err, label, mission)
+                        error = _unwrap(ray, err, *notes(item))
                         queue.clear()
                     continue
-                finish(*result)
-                bar.update(1)
+                store(item, result)
     except BaseException:
         for ref in running:
             with contextlib.suppress(Exception):  # already finished, or its worker gone
@@ -331,9 +451,10 @@ def run_ray(cluster: RayCluster, runner: TaskRunner, tasks: Sequence[tuple[str, 
         raise error
 
 
-def _unwrap(ray: Any, err: Exception, label: str, mission: int) -> BaseException:
-    """The planner's own exception of a failed task (its remote traceback chained), or the
-    Ray error with a note saying what was lost."""
+def _unwrap(ray: Any, err: Exception, lost_note: str, import_note: str) -> BaseException:
+    """The task's own exception of a failed task (its remote traceback chained), or the Ray
+    error with a note saying what was lost (``lost_note``) or could not run
+    (``import_note``)."""
     exceptions = ray.exceptions
     cause = getattr(err, "cause", None)
     if isinstance(err, exceptions.RayTaskError) and isinstance(cause, Exception):
@@ -342,12 +463,5 @@ def _unwrap(ray: Any, err: Exception, label: str, mission: int) -> BaseException
     lost = tuple(getattr(exceptions, name) for name in (
         "WorkerCrashedError", "NodeDiedError", "OutOfMemoryError", "ObjectLostError",
         "TaskUnschedulableError") if hasattr(exceptions, name))
-    if isinstance(err, lost):
-        err.add_note(f"mission {mission} of planner {label!r} was lost: its Ray worker or "
-                     f"node died {MAX_RETRIES + 1} times (e.g. out of memory, or the node "
-                     "left the cluster); run the same command again to fly what is missing")
-    else:
-        err.add_note(f"a Ray worker could not fly mission {mission} of planner {label!r}: "
-                     "every node needs the toolkit and the planner's module importable, at "
-                     "the versions of this machine (see docs/ray.md)")
+    err.add_note(lost_note if isinstance(err, lost) else import_note)
     return err

@@ -340,31 +340,54 @@ def _flag_value(argv: list[str], flag: str) -> str | None:
 
 
 def study_main(argv: list[str] | None = None) -> int:
-    """Entry point of ``ipp-study robustness ...``; 0 ok, 2 bad input.
+    """Entry point of ``ipp-study robustness|credit|ablation|generalisation|sweep ...``; 0 ok,
+    2 bad input (checked before anything is written or trained).
 
-    Writes one ``ipp-compare`` folder per setting plus the study's table and figure.
+    Writes one ``ipp-compare`` folder per setting plus the study's table and figure; ``sweep``
+    (:mod:`reports.sweep`) its run folders, ``validation/``, ``sweep.md`` and ``sweep.csv``.
     """
     parser = argparse.ArgumentParser(
         prog="ipp-study", description="Regenerate the paper's studies into a folder.")
-    parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation"],
+    parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation",
+                                          "sweep"],
                         help="generalisation: planners x terrain families (real test rasters "
                              "included) x team settings, paired differences to IG; "
                              "robustness: paper Table I (team sizes x communication ranges); "
                              "credit: COMA against its credit-assignment variants; ablation: "
                              "COMA with one input plane, the masking or the centring toggled; "
-                             "each run trained alike, then compared on test missions")
+                             "each run trained alike, then compared on test missions; sweep: "
+                             "a grid of COMA runs (--sweep FIELD=V1,V2 x --seeds) scored on "
+                             "validation missions against IG")
     parser.add_argument("--planners", default=None,
                         help="planners, comma-separated (coma=PATH for your own policy, "
                              "LABEL:coma=PATH to name it); default: coma,ig,coverage, and "
                              "for generalisation ig,coverage,random,coma,ppo")
-    parser.add_argument("--agents", default="2,4,8", help="team sizes, comma-separated")
-    parser.add_argument("--comm", default="0,25,inf", help="ranges in metres, comma-separated")
+    parser.add_argument("--agents", default=None,
+                        help="team sizes, comma-separated (default 2,4,8); sweep: the one "
+                             "team size of training and validation (default 4)")
+    parser.add_argument("--comm", default=None,
+                        help="ranges in metres, comma-separated (default 0,25,inf); sweep: "
+                             "the one range (default 25)")
     parser.add_argument("--failures", default="0",
                         help="robustness: numbers of UAVs failing at a random step, "
                              "comma-separated (e.g. 0,1; beyond the paper)")
     parser.add_argument("--trials", type=_positive_int("--trials"), default=50)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--workers", type=_positive_int("--workers"), default=1)
+    parser.add_argument("--seed", type=int, default=None,
+                        help="run seed of the missions flown (default 0; sweep: "
+                             "the validation missions of seed 10000, never a training seed)")
+    parser.add_argument("--workers", type=_positive_int("--workers"), default=1,
+                        help="evaluation processes and runs trained at once (--backend ray: "
+                             "the CPUs of the local Ray)")
+    parser.add_argument("--backend", choices=("local", "ray"), default="local",
+                        help="where missions fly and runs train: processes on this machine, "
+                             "or Ray tasks on one Ray for the whole study (needs the ray "
+                             "extra: pip install -c constraints.txt -e \".[ray]\"; see "
+                             "docs/ray.md)")
+    parser.add_argument("--address", default=None, metavar="HOST:PORT",
+                        help="with --backend ray: the Ray cluster's head, as printed by `ray "
+                             "start --head` (results are written here, to --out, a folder "
+                             "the nodes share for credit/ablation); default: start a local "
+                             "Ray with --workers CPUs")
     parser.add_argument("--resolution", type=_positive_float, default=None)
     parser.add_argument("--out", default=None, help="study folder (default results/STUDY)")
     parser.add_argument("--variants", default="coma,central_qv,actor_independent,decentralised",
@@ -372,16 +395,23 @@ def study_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ablations",
                         default="own_position,centred,masking,other_actions,footprints",
                         help="ablation: feature switches to toggle, or masking / centred")
-    parser.add_argument("--missions", type=_positive_int("--missions"), default=5000,
-                        help="credit, ablation: training missions per run")
+    parser.add_argument("--missions", type=_positive_int("--missions"), default=None,
+                        help="credit, ablation, sweep: training missions per run (default "
+                             "5000)")
     parser.add_argument("--train-resolution", type=_positive_float, default=0.5,
-                        help="credit: map resolution of the training missions")
+                        help="credit, ablation, sweep: map resolution of the training "
+                             "missions")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="credit, ablation: a COMAConfig field for every run (repeatable)")
-    parser.add_argument("--seeds", default=None, metavar="S,S,...",
-                        help="credit, ablation: training seeds; with several, each run is "
-                             "trained once per seed and the table gives mean and spread over "
-                             "seeds (default: one seed, 0)")
+                        help="credit, ablation, sweep: a COMAConfig field for every run, read "
+                             "as ipp-train coma --set reads it (repeatable)")
+    parser.add_argument("--sweep", action="append", default=[], metavar="FIELD=V1,V2,...",
+                        help="sweep: a COMAConfig field and its values (repeatable: the grid "
+                             "is the product; a list field's items joined by +, e.g. "
+                             "team_sizes=2+4,4)")
+    parser.add_argument("--seeds", action="append", default=None, metavar="S,S,...",
+                        help="credit, ablation, sweep: training seeds; with several, each run "
+                             "is trained once per seed and the table gives mean and spread "
+                             "over seeds (default: one seed, 0)")
     parser.add_argument("--families", default="split,blobs,fractal,real",
                         help="generalisation: terrain families at 4 UAVs / 25 m (real: one cell "
                              "per test raster)")
@@ -397,49 +427,73 @@ def study_main(argv: list[str] | None = None) -> int:
     from .studies import credit_assignment_study, robustness_study
 
     out = args.out or f"results/{args.study}"
+    if args.address is not None and args.backend != "ray":
+        print("ipp-study: error: --address needs --backend ray", file=sys.stderr)
+        return 2
+    if args.backend == "ray":
+        from ipp_toolkit.ray_backend import RayUnavailableError, require_ray
+
+        try:
+            require_ray()
+        except RayUnavailableError as err:
+            print(f"ipp-study: error: {err}", file=sys.stderr)
+            return 2
+    backend = {"backend": args.backend, "address": args.address}
+    if args.sweep and args.study != "sweep":
+        print(f"ipp-study: error: --sweep is for ipp-study sweep, not {args.study}",
+              file=sys.stderr)
+        return 2
+    if args.seeds is not None and len(args.seeds) > 1:
+        print(f"ipp-study: error: --seeds is given {len(args.seeds)} times "
+              f"({' and '.join(args.seeds)}); give all seeds in one --seeds S,S,...",
+              file=sys.stderr)
+        return 2
+    seed = 0 if args.seed is None else args.seed
+    agents = args.agents or "2,4,8"
+    comm = args.comm or "0,25,inf"
     try:
         if args.study == "generalisation":
             from .compare import DEFAULT_PLANNERS
             from .generalisation import generalisation_study, study_cells
 
             planners = args.planners or ",".join(DEFAULT_PLANNERS)
-            settings = [(int(a), _comm_range(c)) for a in args.agents.split(",")
-                        for c in args.comm.split(",")]
+            settings = [(int(a), _comm_range(c)) for a in agents.split(",")
+                        for c in comm.split(",")]
             cells = study_cells([f for f in args.families.split(",") if f],
                                 [f for f in args.team_families.split(",") if f], settings)
-            study = generalisation_study(planners, cells, trials=args.trials, seed=args.seed,
+            study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
                                          out=out, workers=args.workers,
                                          resolution=args.resolution, budget=args.budget,
-                                         progress=not args.no_progress)
+                                         progress=not args.no_progress, **backend)
             print(study.table)
             print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
         elif args.study == "robustness":
-            agents = [int(a) for a in args.agents.split(",")]
-            comms = [_comm_range(c) for c in args.comm.split(",")]
-            failures = [int(f) for f in args.failures.split(",")]
-            study = robustness_study(args.planners or "coma,ig,coverage", agents, comms,
+            study = robustness_study(args.planners or "coma,ig,coverage",
+                                     [int(a) for a in agents.split(",")],
+                                     [_comm_range(c) for c in comm.split(",")],
                                      trials=args.trials,
-                                     seed=args.seed, out=out, workers=args.workers,
+                                     seed=seed, out=out, workers=args.workers,
                                      resolution=args.resolution,
-                                     progress=not args.no_progress, failures=failures)
+                                     progress=not args.no_progress,
+                                     failures=[int(f) for f in args.failures.split(",")],
+                                     **backend)
             print(study.table)
             print(f"written: {out}/robustness.md, .csv, .png, .pdf")
+        elif args.study == "sweep":
+            return _sweep(args, out, backend)
         else:
-            from coma.cli import coerce_value, int_list
+            from coma.cli import int_list
 
             from .studies import ablation_study
+            from .sweep import parse_assignments
 
-            overrides = {}
-            for item in args.set:
-                name, sep, value = item.partition("=")
-                if not sep:
-                    raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
-                overrides[name.strip()] = coerce_value(value.strip())
-            seeds = None if args.seeds is None else int_list("--seeds", args.seeds)
-            common = dict(missions=args.missions, overrides=overrides, seeds=seeds,
+            overrides = parse_assignments(args.set)
+            seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
+            common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
                           train_resolution=args.train_resolution, trials=args.trials,
-                          seed=args.seed, out=out, workers=args.workers,
-                          eval_resolution=args.resolution, progress=not args.no_progress)
+                          seed=seed, out=out, workers=args.workers,
+                          eval_resolution=args.resolution, progress=not args.no_progress,
+                          **backend)
             if args.study == "credit":
                 result = credit_assignment_study([v for v in args.variants.split(",") if v],
                                                  **common)
@@ -449,8 +503,51 @@ def study_main(argv: list[str] | None = None) -> int:
             print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
                   "F1 per step)")
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
+        # OSError: ConnectionError (no Ray at --address) included
         print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return interrupted("ipp-study", Path(out))
+    return 0
+
+
+def _sweep(args: argparse.Namespace, out: str, backend: dict[str, str | None]) -> int:
+    """``ipp-study sweep``: the grid from --sweep/--set/--seeds, trained and scored
+    (ValueError on bad input, before anything is written)."""
+    from coma.cli import int_list
+
+    from .sweep import SCORING_SEED, parse_assignments, parse_sweep, sweep_study
+
+    if not args.sweep:
+        raise ValueError("ipp-study sweep needs at least one --sweep FIELD=V1,V2,...")
+    missions = args.missions
+    grid = parse_sweep(args.sweep)
+    overrides = parse_assignments(args.set)
+    if missions is not None and ("missions" in grid or "missions" in overrides):
+        raise ValueError("missions is given by --missions and by --sweep/--set; give it once")
+    if missions is None and "missions" not in grid:
+        missions = overrides.pop("missions", 5000)  # --set missions=N is --missions N
+    elif missions is None:
+        missions = 5000  # swept (sweep_grid refuses it in --set as well)
+    for flag, text in (("--agents", args.agents), ("--comm", args.comm)):
+        if text is not None and "," in text:
+            raise ValueError(f"sweep: {flag} takes one value (the training and validation "
+                             f"missions'), got {text!r}")
+    agents = None
+    if args.agents is not None:
+        try:
+            agents = int(args.agents)
+        except ValueError:
+            raise ValueError(f"--agents must be an integer >= 1, got {args.agents!r}") from None
+    study = sweep_study(
+        grid, seeds=[0] if args.seeds is None else int_list("--seeds", args.seeds[0]),
+        overrides=overrides, missions=missions, train_resolution=args.train_resolution,
+        agents=agents, comm=None if args.comm is None else parse_comm(args.comm),
+        trials=args.trials, seed=SCORING_SEED if args.seed is None else args.seed, out=out,
+        workers=args.workers, eval_resolution=args.resolution,
+        progress=not args.no_progress, **backend)
+    print(study.table)
+    print(f"best grid point: {study.best.label if study.best else 'none (no run has a policy)'}")
+    print(f"written: {out}/sweep.md, {out}/sweep.csv, {out}/runs/ (one folder per run), "
+          f"{out}/validation/ (the comparison on validation missions)")
     return 0

@@ -307,7 +307,9 @@ def compare(agents: int | None = None, comm: float | None = None,
         backend: ``"local"`` (processes on this machine) or ``"ray"`` (one Ray task per
             mission; the same results), see :func:`ipp_toolkit.evaluation.evaluate`.
         address: with ``backend="ray"``, the Ray cluster (``HOST:PORT`` of its head); None
-            starts a local Ray for the run.
+            starts a local Ray for the run. A process already connected to Ray (a study's
+            :func:`reports.studies.backend_session`, or ``ray.init`` by the caller) uses
+            that connection and keeps it.
 
     Returns:
         the :class:`Comparison`; its ``table`` is the Markdown table.

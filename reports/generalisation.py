@@ -13,6 +13,9 @@ A cell is an ``ipp-compare`` folder (resumable); the study writes ``generalisati
 paired difference of every other planner to the reference (IG): mean ± standard error over
 missions and the share of missions ahead. A difference is **bold** where the planner is
 ahead by two standard errors (mean <= -2 SE).
+
+With ``backend="ray"`` every cell's missions fly as Ray tasks, on one Ray for the whole study
+(:func:`reports.studies.backend_session`).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from ipp_toolkit.terrain_families import real_raster_names
 
 from .compare import DEFAULT_PLANNERS, compare
 from .plots import _colour, _new_figure, save_figure
+from .studies import backend_session, check_backend
 from .tables import Paired, Summary, atomic_write_text
 
 __all__ = ["Cell", "GeneralisationStudy", "generalisation_study", "study_cells"]
@@ -166,7 +170,8 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
                          workers: int = 1, resolution: float | None = None,
                          budget: int | None = None, reference: str = "ig",
                          progress: bool = True,
-                         note: Callable[[str], None] | None = None) -> GeneralisationStudy:
+                         note: Callable[[str], None] | None = None, backend: str = "local",
+                         address: str | None = None) -> GeneralisationStudy:
     """Fly every planner in every cell and write the study's tables and figure into ``out``.
 
     Args:
@@ -180,32 +185,45 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
         reference: the planner the paired columns compare with.
         progress: show progress bars.
         note: receives notes (skipped planners); default stderr.
+        backend: ``"local"`` or ``"ray"``: every mission a Ray task, on one Ray for the
+            whole study (the same results).
+        address: with ``backend="ray"``, the cluster's head (``HOST:PORT``); None starts a
+            local Ray with ``workers`` CPUs.
 
     Raises:
         ValueError: bad input (an unknown planner, no reference among the planners), checked
             on the first cell before anything is written.
+        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
+        ConnectionError: no Ray cluster answers at ``address``.
     """
     from ipp_toolkit.planner_specs import PlannerSpec
 
+    check_backend(backend, address)
     names = planners.split(",") if isinstance(planners, str) else list(planners)
     if reference not in [PlannerSpec.parse(n).effective_label for n in names if n.strip()]:
         raise ValueError(f"the reference planner {reference!r} is not among the planners "
                          f"{planners!r}")
     out = Path(out)
     cells = list(study_cells() if cells is None else cells)
+    if backend == "ray":
+        from .compare import resolve_planners
+
+        resolve_planners(planners, note)  # a bad planner fails before Ray starts
     summaries: dict[Cell, Summary] = {}
     labels: list[str] = []
-    for cell in cells:
-        terrain = {"kind": cell.terrain}
-        if cell.real_source:
-            terrain["real_sources"] = cell.real_source
-        config = EnvConfig().replace(terrain=terrain)
-        comparison = compare(agents=cell.agents, comm=cell.comm, planners=planners,
-                             trials=trials, seed=seed, workers=workers, out=out / cell.folder,
-                             config=config, resolution=resolution, budget=budget,
-                             progress=progress, note=note, reference=reference)
-        summaries[cell] = comparison.summary
-        labels = list(comparison.summary.planners)
+    with backend_session(backend, address, workers):
+        for cell in cells:
+            terrain = {"kind": cell.terrain}
+            if cell.real_source:
+                terrain["real_sources"] = cell.real_source
+            config = EnvConfig().replace(terrain=terrain)
+            comparison = compare(agents=cell.agents, comm=cell.comm, planners=planners,
+                                 trials=trials, seed=seed, workers=workers,
+                                 out=out / cell.folder, config=config, resolution=resolution,
+                                 budget=budget, progress=progress, note=note,
+                                 reference=reference, backend=backend, address=address)
+            summaries[cell] = comparison.summary
+            labels = list(comparison.summary.planners)
     markdown, csv_text, tex = _tables(cells, labels, reference, summaries)
     caption = (f"Final entropy (mean over {trials} test missions per cell, seed {seed}; lower "
                f"is better) and each planner's paired difference to {reference} on the same "

@@ -4,16 +4,26 @@
 communication range; learned planners are applied as trained (a COMA policy trained with 4
 UAVs at 25 m flies 2 and 8 UAVs at 0, 25 m and infinite range without retraining). Writes one
 ``ipp-compare`` folder per setting plus ``robustness.md/.csv`` and ``robustness.png/.pdf``.
+
+``credit`` and ``ablation`` train COMA runs alike (each resuming its folder), then compare them.
+``sweep`` (:mod:`reports.sweep`) trains a grid of COMA runs the same way and scores them on
+validation missions.
+
+Every study runs on the ``local`` backend (processes on this machine) or on ``ray``
+(:mod:`ipp_toolkit.ray_backend`): one Ray for the whole study (:func:`backend_session`), every
+mission flown as a Ray task as by ``ipp-compare --backend ray``, every training run one Ray
+task (one CPU) that resumes its folder when retried or run again.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -24,8 +34,50 @@ from .compare import compare
 from .plots import _colour, _new_figure, save_figure
 from .tables import Summary, atomic_write_text
 
+if TYPE_CHECKING:
+    from ipp_toolkit.ray_backend import RayCluster
+
 __all__ = ["Setting", "RobustnessStudy", "robustness_study", "CreditStudy",
-           "credit_assignment_study", "ablation_study", "seed_table", "ABLATIONS"]
+           "credit_assignment_study", "ablation_study", "seed_table", "ABLATIONS",
+           "backend_session", "check_backend"]
+
+
+def check_backend(backend: str, address: str | None) -> None:
+    """Check a study's ``backend`` and ``address`` before any work.
+
+    Raises:
+        ValueError: an unknown backend, or an address without ``backend="ray"``.
+        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray installed
+            (the message gives the install command).
+    """
+    if backend not in ("local", "ray"):
+        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
+    if address is not None and backend != "ray":
+        raise ValueError("address is only used with backend='ray'")
+    if backend == "ray":
+        from ipp_toolkit.ray_backend import require_ray
+
+        require_ray()
+
+
+@contextlib.contextmanager
+def backend_session(backend: str, address: str | None,
+                    workers: int) -> Iterator[RayCluster | None]:
+    """The study's one Ray (None for ``backend="local"``): a local Ray with ``workers`` CPUs
+    (``address=None``) or the cluster at ``address``, started or joined once for the whole
+    study and shut down (disconnected) at its end; the evaluations inside reuse it.
+
+    Raises:
+        as :func:`check_backend`; ConnectionError: no Ray cluster answers at ``address``.
+    """
+    check_backend(backend, address)
+    if backend == "local":
+        yield None
+        return
+    from ipp_toolkit.ray_backend import session
+
+    with session(address, workers) as cluster:
+        yield cluster
 
 
 class Setting(NamedTuple):
@@ -113,7 +165,8 @@ def robustness_study(planners: str | Sequence[str] = "coma,ig,coverage",
                      workers: int = 1, resolution: float | None = None,
                      progress: bool = True,
                      note: Callable[[str], None] | None = None,
-                     failures: Sequence[int] = (0,)) -> RobustnessStudy:
+                     failures: Sequence[int] = (0,), backend: str = "local",
+                     address: str | None = None) -> RobustnessStudy:
     """Run the robustness study (paper Table I) and write its table and figure into ``out``.
 
     Args:
@@ -130,25 +183,35 @@ def robustness_study(planners: str | Sequence[str] = "coma,ig,coverage",
         failures: numbers of UAVs that fail at a random step of each mission
             (``team.random_failures``; beyond the paper); every team setting is flown with
             each. A count that leaves no UAV of a team is refused.
+        backend: ``"local"`` or ``"ray"``: every mission a Ray task, on one Ray for the
+            whole study (the same results; see :func:`reports.compare.compare`).
+        address: with ``backend="ray"``, the cluster's head (``HOST:PORT``); None starts a
+            local Ray with ``workers`` CPUs.
     """
+    check_backend(backend, address)
     out = Path(out)
     settings = [Setting(int(a), float(c), int(f)) for a in agents for c in comms
                 for f in failures]
     for setting in settings:  # every setting is checked before any mission is flown
         build_env_config(None, agents=setting.agents, comm=setting.comm).replace(
             team={"random_failures": setting.failures})
+    if backend == "ray":
+        from .compare import resolve_planners
+
+        resolve_planners(planners, note)  # a bad planner fails before Ray starts
     summaries: dict[Setting, Summary] = {}
     labels: list[str] = []
-    for setting in settings:
-        config = build_env_config(None, agents=setting.agents, comm=setting.comm,
-                                  resolution=resolution)
-        if setting.failures:
-            config = config.replace(team={"random_failures": setting.failures})
-        comparison = compare(planners=planners, trials=trials, seed=seed, workers=workers,
-                             out=out / setting.folder, config=config, progress=progress,
-                             note=note)
-        summaries[setting] = comparison.summary
-        labels = list(comparison.summary.planners)
+    with backend_session(backend, address, workers):
+        for setting in settings:
+            config = build_env_config(None, agents=setting.agents, comm=setting.comm,
+                                      resolution=resolution)
+            if setting.failures:
+                config = config.replace(team={"random_failures": setting.failures})
+            comparison = compare(planners=planners, trials=trials, seed=seed, workers=workers,
+                                 out=out / setting.folder, config=config, progress=progress,
+                                 note=note, backend=backend, address=address)
+            summaries[setting] = comparison.summary
+            labels = list(comparison.summary.planners)
     markdown, csv_text = _table(settings, labels, summaries)
     caption = (f"Final entropy and F1 (mean ± std over {trials} test missions, seed {seed}) "
                "after the whole budget; learned policies are applied as trained.\n\n")
@@ -195,23 +258,65 @@ def _train_run(task: tuple[str, dict, dict, str, bool]) -> str:
     return str(run / "best.pt")
 
 
-def _train_runs(tasks: list[tuple[str, dict, dict, str, bool]], workers: int) -> dict[str, Path]:
-    """Train every task (in ``workers`` spawned processes when > 1); label -> best.pt."""
+TrainTask = tuple[str, dict, dict, str, bool]
+"""One training run: (label, COMAConfig fields, EnvConfig dict, run folder, progress)."""
+
+
+def _train_runs(tasks: list[TrainTask], workers: int, cluster: RayCluster | None = None,
+                progress: bool = False,
+                run: Callable[[TrainTask], Any] = _train_run) -> dict[str, Path]:
+    """Train every task; label -> its best.pt.
+
+    Without ``cluster``: in ``workers`` spawned processes when > 1, else here. With one:
+    each run is a Ray task declaring one CPU (COMA trains on the CPU), retried when its
+    worker dies; every try resumes the run's folder (``last.pt``), so a study stopped on a
+    cluster continues where its runs stopped. The folders are written by the workers, in
+    this process's directory: on a cluster it must be on a file system every node shares
+    (checked: a run whose ``last.pt`` this process cannot see raises FileNotFoundError).
+    ``progress`` shows a bar of finished runs (Ray only). ``run`` trains one task (tests
+    replace it).
+    """
     import concurrent.futures
     import multiprocessing
     import os
 
     from ipp_toolkit.process_pool import guard_worker
 
+    if cluster is not None:
+        return _train_on_ray(tasks, cluster, progress, run)
     if workers > 1 and len(tasks) > 1:
         context = multiprocessing.get_context("spawn")
         with concurrent.futures.ProcessPoolExecutor(
                 min(workers, len(tasks)), mp_context=context, initializer=guard_worker,
                 initargs=(os.getpid(),)) as pool:
-            paths = list(pool.map(_train_run, tasks))
+            paths = list(pool.map(run, tasks))
     else:
-        paths = [_train_run(task) for task in tasks]
+        paths = [run(task) for task in tasks]
     return {task[0]: Path(path) for task, path in zip(tasks, paths, strict=True)}
+
+
+def _train_on_ray(tasks: list[TrainTask], cluster: RayCluster, progress: bool,
+                  run: Callable[[TrainTask], Any]) -> dict[str, Path]:
+    """The Ray case of :func:`_train_runs`."""
+    from ipp_toolkit.progress import progress_bar
+    from ipp_toolkit.ray_backend import run_calls
+
+    quiet = [(label, values, env, folder, False)  # worker output is not forwarded
+             for label, values, env, folder, _ in tasks]
+    with progress_bar(len(tasks), "train", "runs", disable=not progress) as bar:
+        run_calls(cluster, run, [(task,) for task in quiet],
+                  describe=lambda k: f"training run {tasks[k][0]!r} ({tasks[k][3]})",
+                  num_cpus=1, done=lambda k, result: bar.update(1))
+    for _label, _values, _env, folder, _ in tasks:
+        # A sweep's run that diverged before its first checkpoint leaves only the marker
+        # ``diverged.json`` (reports.sweep.DIVERGED) in its folder.
+        if not any((Path(folder) / name).is_file() for name in ("last.pt", "diverged.json")):
+            raise FileNotFoundError(
+                f"the training run in {folder!r} ended on a Ray worker, but its last.pt is not "
+                f"here ({os.getcwd()!r}): on a cluster, run the study in a folder every node "
+                "shares (see docs/ray.md)")
+    # The paths as this process names them, so a study begun on the local backend resumes.
+    return {task[0]: Path(task[3]) / "best.pt" for task in tasks}
 
 
 def _training_seeds(seeds: Sequence[int] | None, overrides: dict | None) -> list[int]:
@@ -275,7 +380,8 @@ def seed_table(summary: Summary, runs: Sequence[str], seeds: Sequence[int]) -> s
 def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str, trials: int,
                   seed: int, workers: int, eval_resolution: float | None,
                   progress: bool, runs: Sequence[str] = (),
-                  seeds: Sequence[int] = ()) -> CreditStudy:
+                  seeds: Sequence[int] = (), backend: str = "local",
+                  address: str | None = None) -> CreditStudy:
     """Fly the trained policies on the test missions; write ``out/name`` and ``out/compare``.
 
     With several training ``seeds``, the text starts with :func:`seed_table` over ``runs``.
@@ -286,7 +392,7 @@ def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str,
              for label, path in policies.items()]
     comparison = compare(agents=4, comm=25.0, planners=specs, trials=trials, seed=seed,
                          workers=workers, out=out / "compare", resolution=eval_resolution,
-                         progress=progress)
+                         progress=progress, backend=backend, address=address)
     text = caption + "\n\n"
     if len(seeds) > 1:
         text += ("Over training seeds (mean ± std over seeds of each seed's mean over the test "
@@ -309,7 +415,8 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
                             out: str | os.PathLike[str] = "results/credit",
                             workers: int = 1, eval_resolution: float | None = None,
                             progress: bool = True,
-                            seeds: Sequence[int] | None = None) -> CreditStudy:
+                            seeds: Sequence[int] | None = None, backend: str = "local",
+                            address: str | None = None) -> CreditStudy:
     """Train COMA and its credit-assignment variants alike, then compare them on test missions.
 
     Every variant gets the ``cpu`` preset with ``overrides`` and ``missions`` training
@@ -331,6 +438,12 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
         seeds: training seeds; with several, every variant is trained once per seed (policies
             ``VARIANT@sK``) and the table starts with the mean and spread over seeds (default:
             one seed, ``overrides["seed"]`` or 0).
+        backend: ``"local"`` or ``"ray"``: on one Ray for the whole study, every training
+            run is a Ray task (one CPU; retried and resumed from its folder when its worker
+            dies) and every test mission too; the run folders must then be on a file system
+            the Ray nodes share.
+        address: with ``backend="ray"``, the cluster's head (``HOST:PORT``); None starts a
+            local Ray with ``workers`` CPUs.
     """
     from coma.config import VARIANTS
 
@@ -339,17 +452,20 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
     if unknown:
         raise ValueError(f"unknown variant(s) {unknown}; choose from {list(VARIANTS)}")
     training_seeds = _training_seeds(seeds, overrides)
+    check_backend(backend, address)
     out = Path(out)
     env = config_to_dict(_training_mission(train_resolution))
     values = {**(overrides or {}), "missions": int(missions)}
     tasks = _seeded_tasks([(v, {**values, "variant": v}, env, out / "runs" / v)
                            for v in variants], training_seeds, progress and workers == 1)
-    policies = _train_runs(tasks, workers)
     caption = (f"Credit-assignment study: each variant trained for {missions} missions "
                f"(cpu preset, overrides {overrides or {}}), {_seeds_text(training_seeds)}; "
                f"test: {trials} missions.")
-    return _compare_runs(policies, out, "credit.md", caption, trials, seed, workers,
-                         eval_resolution, progress, variants, training_seeds)
+    with backend_session(backend, address, workers) as cluster:
+        policies = _train_runs(tasks, workers, cluster, progress)
+        return _compare_runs(policies, out, "credit.md", caption, trials, seed, workers,
+                             eval_resolution, progress, variants, training_seeds, backend,
+                             address)
 
 
 def _seeds_text(seeds: Sequence[int]) -> str:
@@ -371,7 +487,8 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
                    trials: int = 50, seed: int = 0,
                    out: str | os.PathLike[str] = "results/ablation", workers: int = 1,
                    eval_resolution: float | None = None, progress: bool = True,
-                   seeds: Sequence[int] | None = None) -> CreditStudy:
+                   seeds: Sequence[int] | None = None, backend: str = "local",
+                   address: str | None = None) -> CreditStudy:
     """Train COMA on the default mission and on variants of it with one setting toggled.
 
     Each name in ``ablations`` is a ``FeatureConfig`` switch (toggled: a plane that is on is
@@ -381,7 +498,7 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
     unchanged mission. Every run gets the same ``cpu``-preset training (``missions``, plus
     ``overrides``); the greedy policies then fly the same ``trials`` test missions.
 
-    ``seeds`` works as in :func:`credit_assignment_study`.
+    ``seeds``, ``backend`` and ``address`` work as in :func:`credit_assignment_study`.
 
     Returns:
         a :class:`CreditStudy` whose ``policies`` are keyed ``full`` and ``-<name>`` (with
@@ -397,6 +514,7 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
         raise ValueError(f"unknown ablation(s) {unknown}; choose from "
                          f"{sorted(switches | set(ABLATIONS))}")
     training_seeds = _training_seeds(seeds, overrides)
+    check_backend(backend, address)
     out = Path(out)
     base = _training_mission(train_resolution)
     values = {**(overrides or {}), "missions": int(missions)}
@@ -407,10 +525,12 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
         else:
             env = base.replace(features={name: not getattr(base.features, name)})
         runs.append((f"-{name}", values, config_to_dict(env), out / "runs" / name))
-    policies = _train_runs(_seeded_tasks(runs, training_seeds, progress and workers == 1),
-                           workers)
+    tasks = _seeded_tasks(runs, training_seeds, progress and workers == 1)
     caption = (f"Feature ablation: COMA trained for {missions} missions per run (cpu preset, "
                f"overrides {overrides or {}}), {_seeds_text(training_seeds)}; '-x' = x "
                f"toggled; test: {trials} missions.")
-    return _compare_runs(policies, out, "ablation.md", caption, trials, seed, workers,
-                         eval_resolution, progress, [run[0] for run in runs], training_seeds)
+    with backend_session(backend, address, workers) as cluster:
+        policies = _train_runs(tasks, workers, cluster, progress)
+        return _compare_runs(policies, out, "ablation.md", caption, trials, seed, workers,
+                             eval_resolution, progress, [run[0] for run in runs],
+                             training_seeds, backend, address)

@@ -1,12 +1,15 @@
-"""Tests of the Ray backend (``evaluate(..., backend="ray")``, ``ipp-compare --backend ray``).
+"""Tests of the Ray backend (``evaluate(..., backend="ray")``, ``ipp-compare --backend ray``,
+``ipp-study ... --backend ray``).
 
-The tests that need a running Ray are marked slow and share one local Ray (2 CPUs) per module;
+The tests that need a running Ray are marked slow and share one local Ray (2 CPUs) per module
+(but the first, which checks that a study starts one Ray of its own);
 every test that needs Ray installed is skipped without it (``pip install -c constraints.txt
 -e ".[ray]"``). Missing Ray is simulated by making it unimportable, so that test always runs.
 """
 
 from __future__ import annotations
 
+import csv
 import hashlib
 import importlib.util
 import json
@@ -22,13 +25,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ipp_toolkit import ray_backend
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.evaluation import evaluate, load_results
 from ipp_toolkit.planner_specs import PlannerSpec
 from ipp_toolkit.planners import Planner, register_planner
-from ipp_toolkit.ray_backend import RayUnavailableError, probe, start_local
+from ipp_toolkit.ray_backend import RayCluster, RayUnavailableError, probe, start_local
 from ipp_toolkit.seeding import planner_seed
-from reports.cli import compare_main
+from reports.cli import compare_main, study_main
+from reports.studies import _train_run, _train_runs, credit_assignment_study, robustness_study
 
 
 def _ray_importable() -> bool:
@@ -53,6 +58,20 @@ def tiny_config() -> EnvConfig:
 def stripped(rows):
     """Rows without the timing column ``plan_ms``, comparable as JSON (NaN-safe)."""
     return json.dumps([{k: v for k, v in row.items() if k != "plan_ms"} for row in rows])
+
+
+def csv_rows(path: Path) -> list[dict[str, str]]:
+    """The rows of a ``results.csv`` without the timing column ``plan_ms``."""
+    with open(path, newline="") as handle:
+        return [{k: v for k, v in row.items() if k != "plan_ms"}
+                for row in csv.DictReader(handle)]
+
+
+#: The smallest COMA training of the study tests (tests/test_studies.py).
+TINY_COMA = {"width": 8, "hidden": 16, "missions_per_update": 2, "minibatch_size": 60,
+             "eval_missions": 1, "warm_start": ""}
+TINY_STUDY = ["--planners", "random,coverage", "--agents", "2", "--comm", "0,inf", "--trials",
+              "2", "--resolution", "1", "--no-progress"]
 
 
 def snapshot(folder: Path) -> dict[str, str]:
@@ -149,7 +168,8 @@ def test_evaluate_checks_backend_arguments(tmp_path, kwargs, message):
 
 def test_the_toolkit_does_not_import_ray():
     code = ("import sys, ipp_toolkit.evaluation, ipp_toolkit.ray_backend, reports.cli, "
-            "reports.compare; print('ray' in sys.modules)")
+            "reports.compare, reports.studies, reports.generalisation; "
+            "print('ray' in sys.modules)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True)
     assert result.stdout.strip() == "False"
@@ -203,6 +223,112 @@ def test_unreachable_address_is_a_clear_error_within_seconds(tmp_path, capsys):
     assert err[-1].startswith("ipp-compare: error: no Ray cluster answers at '127.0.0.1:1'")
     assert "ray start --head" in err[-1]
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# ipp-study: the errors, without a running Ray
+
+
+@pytest.mark.parametrize("study", ["robustness", "credit", "ablation", "generalisation"])
+def test_ipp_study_without_ray_is_one_line_with_the_install_command(tmp_path, monkeypatch,
+                                                                    capsys, study):
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` now raises ImportError
+    out = tmp_path / "out"
+    assert study_main([study, "--backend", "ray", "--out", str(out), *TINY_STUDY]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("ipp-study: error: ")
+    assert 'pip install -c constraints.txt -e ".[ray]"' in err
+    assert not out.exists()
+    with pytest.raises(RayUnavailableError, match="pip install"):
+        robustness_study("random", agents=(2,), comms=(0.0,), trials=1, out=out,
+                         progress=False, backend="ray")
+    with pytest.raises(RayUnavailableError, match="pip install"):
+        credit_assignment_study(["coma"], missions=2, overrides=TINY_COMA, out=out,
+                                progress=False, backend="ray")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--address", "127.0.0.1:6379"], "--address needs --backend ray"),
+    (["--backend", "local", "--address", "127.0.0.1:6379"], "--address needs --backend ray"),
+    (["--backend", "dask"], "invalid choice: 'dask'"),
+])
+def test_ipp_study_backend_flags_are_checked(tmp_path, capsys, argv, message):
+    out = tmp_path / "out"
+    assert study_main(["robustness", *argv, "--out", str(out), *TINY_STUDY]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"backend": "dask"}, "backend must be 'local' or 'ray', got 'dask'"),
+    ({"address": "127.0.0.1:6379"}, "address is only used with backend='ray'"),
+])
+def test_studies_check_backend_arguments(tmp_path, kwargs, message):
+    from reports.generalisation import Cell, generalisation_study
+    from reports.studies import ablation_study
+
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match=message):
+        robustness_study("random", agents=(2,), comms=(0.0,), trials=1, out=out,
+                         progress=False, **kwargs)
+    with pytest.raises(ValueError, match=message):
+        credit_assignment_study(["coma"], missions=2, out=out, progress=False, **kwargs)
+    with pytest.raises(ValueError, match=message):
+        ablation_study(["masking"], missions=2, out=out, progress=False, **kwargs)
+    with pytest.raises(ValueError, match=message):
+        generalisation_study("ig,random", [Cell("split", 2, 0.0)], trials=1, out=out,
+                             progress=False, **kwargs)
+    assert not out.exists()
+
+
+@needs_ray
+@pytest.mark.parametrize("study", ["robustness", "credit"])
+def test_ipp_study_at_an_unreachable_address_fails_within_seconds(tmp_path, capsys, study):
+    out = tmp_path / "out"
+    start = time.monotonic()
+    code = study_main([study, "--backend", "ray", "--address", "127.0.0.1:1", "--missions",
+                       "2", "--out", str(out), *TINY_STUDY])
+    assert time.monotonic() - start < 20
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("ipp-study: error: no Ray cluster answers at '127.0.0.1:1'")
+    assert not out.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# ipp-study on a Ray of its own (before the module's Ray below is started)
+
+
+@pytest.mark.slow
+def test_a_robustness_study_on_ray_gives_the_local_results_on_one_ray(tmp_path, monkeypatch):
+    if not HAS_RAY:
+        pytest.skip('Ray is not installed (pip install -c constraints.txt -e ".[ray]")')
+    import ray
+
+    was_running = ray.is_initialized()  # True only if this process already ran the tests below
+    connections: list[bool] = []  # per connect(): whether it started (owned) a Ray
+    real_connect = ray_backend.connect
+
+    def counting_connect(address, num_cpus):
+        cluster = real_connect(address, num_cpus)
+        connections.append(cluster.owned)
+        return cluster
+
+    monkeypatch.setattr(ray_backend, "connect", counting_connect)
+    local, on_ray = tmp_path / "local", tmp_path / "ray"
+    assert study_main(["robustness", "--out", str(local), *TINY_STUDY]) == 0
+    assert connections == []
+    assert study_main(["robustness", "--workers", "2", "--backend", "ray", "--out",
+                       str(on_ray), *TINY_STUDY]) == 0
+    # One Ray for the study: started (or joined) once; every setting's evaluation reused it.
+    assert connections == [not was_running, False, False]
+    assert ray.is_initialized() == was_running  # the study's own Ray is shut down at its end
+    for setting in ("a2-d0", "a2-dinf"):
+        rows = csv_rows(local / setting / "results.csv")
+        assert len(rows) == 2 * 2 * 16  # planners x missions x (budget + 1) steps
+        assert csv_rows(on_ray / setting / "results.csv") == rows
+    assert (on_ray / "robustness.csv").read_text() == (local / "robustness.csv").read_text()
 
 
 # --------------------------------------------------------------------------------------------
@@ -295,3 +421,96 @@ def test_a_failing_mission_raises_its_error_and_keeps_the_others(ray_cluster, tm
     names = {p.name for p in (out / "shards" / "test-ray-fails").glob("mission_*.json")}
     assert {"mission_00000.json", "mission_00001.json"} <= names
     assert "mission_00002.json" not in names and not (out / "results.csv").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Studies' training runs as Ray tasks (on the module's Ray)
+
+
+def train_or_die_once(task):
+    """A training task whose worker dies (SIGKILL) after its first update the first time.
+
+    Run by Ray workers (imported from this module): the retried task resumes the folder.
+    """
+    from coma.config import preset
+    from coma.learner import train
+    from ipp_toolkit.config import config_from_dict
+
+    label, values, env, folder, _ = task
+    marker = Path(folder).with_name(Path(folder).name + ".killed")
+    if label == "killed" and not marker.exists():
+        train(preset("cpu", **values), config_from_dict(env), folder, progress=False,
+              tensorboard=False, max_updates=1)
+        marker.write_text(str(os.getpid()))
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _train_run(task)
+
+
+@pytest.mark.slow
+def test_a_credit_study_trains_its_runs_as_ray_tasks(ray_cluster, tmp_path, monkeypatch):
+    def no_training_here(*args, **kwargs):
+        raise AssertionError("a run was trained in the calling process, not on Ray")
+
+    monkeypatch.setattr("coma.learner.train", no_training_here)  # Ray workers keep theirs
+    study = credit_assignment_study(["coma", "decentralised"], missions=2,
+                                    overrides=TINY_COMA, train_resolution=1.0, trials=1,
+                                    eval_resolution=1.0, out=tmp_path, progress=False,
+                                    workers=2, backend="ray")
+    assert ray_cluster.is_initialized()  # the module's Ray is used, and left running
+    assert study.policies == {v: tmp_path / "runs" / v / "best.pt"
+                              for v in ("coma", "decentralised")}
+    for variant in ("coma", "decentralised"):
+        assert (tmp_path / "runs" / variant / "last.pt").is_file()
+        assert study.policies[variant].is_file()
+    table = (tmp_path / "credit.md").read_text()
+    assert "| coma |" in table and "| decentralised |" in table
+    assert len(csv_rows(tmp_path / "compare" / "results.csv")) == 2 * 1 * 16
+    # Run again: every run is complete, so each Ray task only resumes and returns.
+    stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").rglob("*.pt")}
+    again = credit_assignment_study(["coma", "decentralised"], missions=2,
+                                    overrides=TINY_COMA, train_resolution=1.0, trials=1,
+                                    eval_resolution=1.0, out=tmp_path, progress=False,
+                                    workers=2, backend="ray")
+    assert again.table == study.table
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+
+
+@pytest.mark.slow
+def test_a_killed_training_worker_is_retried_and_resumes_its_run(ray_cluster, tmp_path):
+    import torch
+
+    from coma.persistence import load_policy
+    from ipp_toolkit.config import config_to_dict
+    from reports.studies import _training_mission
+
+    env = config_to_dict(_training_mission(1.0))
+    values = {**TINY_COMA, "missions": 4, "checkpoint_every": 1}  # two updates
+    tasks = [(label, values, env, str(tmp_path / label), False)
+             for label in ("killed", "straight")]
+    policies = _train_runs(tasks, 2, RayCluster(ray_cluster, owned=False, address=None),
+                           run=train_or_die_once)
+    marker = tmp_path / "killed.killed"
+    assert marker.exists() and int(marker.read_text()) != os.getpid()  # a worker died ...
+    assert policies == {label: tmp_path / label / "best.pt" for label in ("killed", "straight")}
+    with open(tmp_path / "killed" / "progress.csv", newline="") as handle:
+        assert [int(row["update"]) for row in csv.DictReader(handle)] == [1, 2]  # ... resumed
+    killed, _ = load_policy(tmp_path / "killed" / "last.pt")
+    straight, _ = load_policy(tmp_path / "straight" / "last.pt")
+    for key, value in straight.actor.state_dict().items():  # the same run as without the kill
+        assert torch.equal(value, killed.actor.state_dict()[key]), key
+
+
+@pytest.mark.slow
+def test_a_training_error_on_ray_is_the_runs_own_error(ray_cluster, tmp_path):
+    from ipp_toolkit.config import config_to_dict
+    from ipp_toolkit.io import CheckpointError
+    from reports.studies import _training_mission
+
+    env = config_to_dict(_training_mission(1.0))
+    task = ("coma", {**TINY_COMA, "missions": 2}, env, str(tmp_path / "run"), False)
+    _train_runs([task], 1, RayCluster(ray_cluster, owned=False, address=None))
+    other = ("coma", {**TINY_COMA, "missions": 2, "lr_actor": 1.0}, env, str(tmp_path / "run"),
+             False)
+    with pytest.raises(CheckpointError, match="other COMA settings") as caught:
+        _train_runs([other], 1, RayCluster(ray_cluster, owned=False, address=None))
+    assert "RayTaskError" in repr(caught.value.__cause__)  # the remote traceback is chained
