@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +42,7 @@ from torch import nn
 from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
 from ipp_toolkit.features import gain_plane_channels, option_gain_cells
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
+from ipp_toolkit.planners import resolve_shipped
 from ipp_toolkit.team import N_ACTIONS
 
 __all__ = [
@@ -61,14 +63,33 @@ __all__ = [
     "CHECKPOINT_KIND",
     "TRAINING_KIND",
     "DEFAULT_CHECKPOINT",
+    "DEFAULT_SHIPPED",
+    "SHIPPED_POLICIES",
+    "resolve_policy",
 ]
 
 CHECKPOINT_KIND = "ipp-toolkit/ppo"
 """Format tag of ``policy.pt`` files."""
 TRAINING_KIND = "ipp-toolkit/ppo-training"
 """Format tag of ``checkpoint.pt`` files (model + optimiser, for resuming)."""
-DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "ppo_4agents_d25.pt"
-"""The shipped policy (4 agents, D = 25 m), used when :class:`PPOPlanner` gets no checkpoint."""
+CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
+"""Where the shipped PPO policies live."""
+SHIPPED_POLICIES: dict[str, str] = {"split": "ppo_4agents_d25.pt"}
+"""Shipped PPO policies by name, as in ``ppo=shipped:NAME`` (files in :data:`CHECKPOINTS`)."""
+DEFAULT_SHIPPED = "split"
+"""The shipped policy the ``ppo`` planner flies by default (the best on validation missions)."""
+DEFAULT_CHECKPOINT = CHECKPOINTS / SHIPPED_POLICIES[DEFAULT_SHIPPED]
+"""Its file, used when the ``ppo`` planner gets no checkpoint."""
+
+
+def resolve_policy(policy: str | os.PathLike[str]) -> Path:
+    """A PPO policy as a user names it: ``shipped:NAME`` (:data:`SHIPPED_POLICIES`) or a path.
+
+    Raises:
+        ValueError: ``shipped:`` with an unknown name (the message lists the names).
+    """
+    return resolve_shipped(policy, {name: CHECKPOINTS / file
+                                    for name, file in SHIPPED_POLICIES.items()}, "ppo")
 
 
 # --------------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
 
+from .ppo import resolve_policy
 from .sb3_policies import (
     RECURRENT_ALGORITHMS,
     LSTMStates,
@@ -38,12 +39,14 @@ class SB3Planner(Planner):
 
     Args:
         checkpoint: a ``policy.pt`` (or ``checkpoint.pt``) of ``ipp-train sb3`` or
-            ``ipp-train ppo``.
+            ``ipp-train ppo``, or a shipped PPO policy by name (``shipped:NAME``,
+            :data:`baselines.ppo.SHIPPED_POLICIES`).
         device: torch device of the forward pass.
 
     Raises:
         CheckpointError: no checkpoint; a missing, corrupt or foreign one; or one trained for
             another action count (see :func:`~baselines.sb3_policies.load_sb3_policy`).
+        ValueError: an unknown ``shipped:`` name.
     """
 
     name = "sb3"
@@ -56,7 +59,7 @@ class SB3Planner(Planner):
             raise CheckpointError("the sb3 planner needs a policy file: train one with "
                                   "`ipp-train sb3 --algo ALGO --out RUN` and pass "
                                   "sb3=RUN/policy.pt (checkpoint='RUN/policy.pt')")
-        self.checkpoint = Path(checkpoint)
+        self.checkpoint = resolve_policy(checkpoint)
         self.policy, self.meta = load_sb3_policy(self.checkpoint, device)
         self.algo: str = self.meta.algo
         self.obs_shape: tuple[int, int, int] = self.meta.obs_shape
@@ -105,8 +108,9 @@ class PPOPlanner(SB3Planner):
     """The ``ppo`` planner: :class:`SB3Planner` whose default policy is the shipped PPO one.
 
     Args:
-        checkpoint: a ``policy.pt`` of ``ipp-train ppo`` (or of ``ipp-train sb3``); None loads
-            the shipped ``baselines/checkpoints/ppo_4agents_d25.pt``.
+        checkpoint: a ``policy.pt`` of ``ipp-train ppo`` (or of ``ipp-train sb3``), or
+            ``shipped:NAME`` (:data:`baselines.ppo.SHIPPED_POLICIES`); None loads the default
+            shipped policy (:data:`baselines.ppo.DEFAULT_SHIPPED`).
         device: torch device of the forward pass.
 
     Raises:

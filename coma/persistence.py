@@ -26,6 +26,7 @@ from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
 from ipp_toolkit.features import actor_plane_names, gain_plane_channels
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
 from ipp_toolkit.planners import check_policy_transfer as check_transfer
+from ipp_toolkit.planners import resolve_shipped
 from ipp_toolkit.team import N_ACTIONS
 
 from .config import COMAConfig, from_dict
@@ -155,14 +156,8 @@ def resolve_policy(policy: str | os.PathLike[str]) -> Path:
     Raises:
         ValueError: ``shipped:`` with an unknown name (the message lists the names).
     """
-    text = os.fspath(policy)
-    if not text.startswith("shipped:"):
-        return Path(text)
-    name = text.removeprefix("shipped:")
-    if name not in SHIPPED_POLICIES:
-        raise ValueError(f"unknown shipped policy {name!r}; shipped policies: "
-                         f"{', '.join(f'shipped:{n}' for n in SHIPPED_POLICIES)}")
-    return shipped_policy(SHIPPED_POLICIES[name])
+    return resolve_shipped(policy, {name: shipped_policy(file)
+                                    for name, file in SHIPPED_POLICIES.items()}, "coma")
 
 
 def load_state_into(module: torch.nn.Module, state: Any, what: str, path: str) -> None:

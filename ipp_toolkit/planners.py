@@ -22,9 +22,11 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,6 +46,7 @@ __all__ = [
     "available_planners",
     "planner_factory",
     "check_policy_transfer",
+    "resolve_shipped",
     "ENTRY_POINT_GROUP",
 ]
 
@@ -250,3 +253,25 @@ def check_policy_transfer(trained: EnvConfig, requested: EnvConfig, path: str = 
         diffs = ", ".join(f"{k} {new[k]!r} -> {old[k]!r}" for k in old if old[k] != new[k])
         notes.append(f"features: the policy observes with its own ({diffs})")
     return notes
+
+
+def resolve_shipped(policy: str | os.PathLike[str], shipped: Mapping[str, Path],
+                    planner: str) -> Path:
+    """A policy as a user names it: ``shipped:NAME`` (a key of ``shipped``), or a path.
+
+    Learned planners (``coma=shipped:NAME``, ``ppo=shipped:NAME``, ``--init shipped:NAME``)
+    resolve their names here, each with its own table of shipped files.
+
+    Raises:
+        ValueError: ``shipped:`` with an unknown name (the message lists ``planner``'s names).
+    """
+    text = os.fspath(policy)
+    if not text.startswith("shipped:"):
+        return Path(text)
+    name = text.removeprefix("shipped:")
+    if name not in shipped:
+        raise ValueError(f"unknown shipped policy {name!r}; shipped policies: "
+                         f"{', '.join(f'shipped:{n}' for n in shipped)} (of the {planner} "
+                         "planner)")
+    return shipped[name]
+

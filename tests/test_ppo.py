@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,12 +202,24 @@ def test_command_line(tmp_path, capsys):
     assert exit_info.value.code == 2
 
 
-@pytest.mark.skipif(not ppo.DEFAULT_CHECKPOINT.is_file(), reason="no shipped PPO checkpoint")
-def test_shipped_checkpoint_loads_and_flies():
-    planner = PPOPlanner()
-    assert planner.obs_shape == (7, 11, 11)
-    assert ppo.DEFAULT_CHECKPOINT.stat().st_size < 2_000_000
+@pytest.mark.parametrize("name", sorted(ppo.SHIPPED_POLICIES))
+def test_every_shipped_policy_loads_by_name_and_flies(name):
+    planner = PPOPlanner(f"shipped:{name}")
+    assert planner.checkpoint == ppo.CHECKPOINTS / ppo.SHIPPED_POLICIES[name]
+    assert planner.checkpoint.stat().st_size < 3_000_000  # committed weights stay small
+    assert planner.checkpoint.with_suffix(".json").is_file()  # with its record
     run_mission(small_config(), planner, seed=0, mission=0)
+
+
+def test_default_ppo_is_the_default_shipped_policy_and_names_resolve_for_sb3_too():
+    from baselines.sb3_planner import SB3Planner
+
+    assert PPOPlanner().checkpoint == ppo.resolve_policy(f"shipped:{ppo.DEFAULT_SHIPPED}")
+    assert SB3Planner("shipped:split").checkpoint == ppo.CHECKPOINTS / "ppo_4agents_d25.pt"
+    assert ppo.resolve_policy("runs/x/policy.pt") == Path("runs/x/policy.pt")
+    with pytest.raises(ValueError, match="unknown shipped policy 'nope'; shipped policies: "
+                                         "shipped:split"):
+        PPOPlanner("shipped:nope")
 
 
 def test_ppo_preset_shipped_gives_the_shipped_runs_flags():
