@@ -10,6 +10,17 @@ faster, with bit-identical cached values (the kernels only look values up, every
 computed by the table's NumPy code) and block and metric sums equal up to float64 summation
 order.
 
+A whole step of the mission (:func:`ipp_toolkit.mission.step_mission`) has its own three
+kernels, which do for every map at once what the per-rectangle calls above do one call at a
+time, with the same float operations in the same order (so the same numbers to the last bit):
+:func:`read_cells` turns the sensor noise into readings and their block planes,
+:func:`fuse_evidence` adds the readings' log-odds to every receiving map and interns the new
+values, and :func:`apply_targets` writes the caches, block sums and metric sums. A cell that
+several footprints of one map cover is looked up and written once (a second refresh would move
+nothing); the statistics of the global map still count it once per footprint, as the reward
+always did. :func:`sensor_noise` draws the step's sensor noise (NumPy's streams, bit for bit;
+:mod:`ipp_toolkit.sensor_noise`). The NumPy fallback keeps the per-rectangle code.
+
 Numba is a dependency of the toolkit; where it cannot be imported (an exotic platform, or
 ``IPP_TOOLKIT_NO_NUMBA=1`` in the environment, which the tests use to check both paths) the
 callers fall back to their NumPy code and :data:`AVAILABLE` is False. Compiled functions are
@@ -26,7 +37,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
-           "REGION_STATS", "N_STATS"]
+           "read_cells", "fuse_evidence", "apply_targets", "sensor_noise", "REGION_STATS",
+           "N_STATS"]
 
 REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
                 "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
@@ -44,6 +56,7 @@ AVAILABLE = (os.environ.get("IPP_TOOLKIT_NO_NUMBA", "") in ("", "0")
 """Whether the compiled kernels are used (Numba importable and not switched off)."""
 
 _module: Any = None
+_noise_module: Any = None
 
 
 def _compiled() -> Any:
@@ -101,3 +114,85 @@ def apply_values_with_stats(*arrays: np.ndarray) -> np.ndarray:
         (N_STATS,) float64, named by :data:`REGION_STATS`.
     """
     return _compiled().apply_values_with_stats(*arrays)
+
+
+def read_cells(*arrays: np.ndarray) -> None:
+    """Readings of several footprints from their noise, and each reading's block sums.
+
+    Args, in order: truth (H, W) bool ground truth; rects (F, 4) int64 footprint rectangles;
+    thresholds (F,) float32 the sensor accuracy of each (a cell is read wrongly where its
+    noise is >= it); noise (cells,) float32 the uniform noise of all footprints one after
+    another, each row-major; offsets (F + 1,) int64 where each footprint starts in it (and
+    the end); weights
+    (F, 2) float64 the value of a 0 and of a 1 reading in the planes; edges (G + 1,) int64
+    first map cell of each planning block; readings (cells,) bool output, laid out like
+    ``noise``; planes (F, G, G) float64, zero on entry: ``+=`` the block sums of each
+    footprint's weights, summed exactly as two ``np.add.reduceat`` passes sum them
+    (planning blocks of at most 129 cells a side).
+    """
+    _compiled().read_cells(*arrays)
+
+
+def fuse_evidence(*arrays: Any) -> tuple[int, bool]:
+    """Add readings to maps and intern the maps' new log-odds values; may stop when full.
+
+    For each target t (map ``target_maps[t]``, its footprints
+    ``senders[target_offsets[t]:target_offsets[t + 1]]``, indices into ``rects``), each cell
+    of the footprints is visited once, in the first footprint that covers it: the log-odds
+    increments of every footprint over it are added in order (d1 where the reading is 1,
+    else d0, each sum clipped to [-clip, clip], as
+    :meth:`ipp_toolkit.mapping.BeliefMaps.add_evidence`), then its value is interned into
+    the open-addressing table (as :func:`find_or_add`) and its index written to
+    ``value_index``. Values are interned in the order the per-footprint refreshes intern
+    them, so they get the same indices.
+
+    Args, in order: logodds (M, H, W) float32 and bits, its uint32 view; value_index (M, H,
+    W) the int32 array viewed as uint32; readings (cells,) bool and offsets (F + 1,) int64
+    as in :func:`read_cells`; rects (F, 4) int64; deltas (F, 2) float32 (d0, d1); clip
+    float32; target_maps (T,) int64; target_offsets (T + 1,) int64; senders (S,) int64;
+    slot, table_bits, size, shift, multiplier as in :func:`find_or_add`; limit, the most
+    values the table may hold; cursor (4,) int64, where to start (target, footprint, row,
+    whether that row has its evidence already), (0, 0, -1, 0) at first.
+
+    Returns:
+        (size, done): the table's new size, and whether the pass finished; if not, the table
+        reached ``limit`` and ``cursor`` says where the pass stopped: grow the table and call
+        again with the same cursor.
+    """
+    return _compiled().fuse_evidence(*arrays)
+
+
+def apply_targets(*arrays: np.ndarray) -> None:
+    """Write the caches of the targets of :func:`fuse_evidence` and move their block sums.
+
+    Args, in order: value_index (M, H, W) as in :func:`fuse_evidence` (the new indices),
+    prob, entropy, wentropy (M, H, W) the maps' caches;
+    table_prob, table_entropy, table_weights, table_wentropy the table's columns;
+    block_of_cell (H,) int64 and edges (G + 1,) int64 of the planning grid; prob_blocks and
+    wentropy_blocks (M, G, G) float64; rects, target_maps, target_offsets, senders as in
+    :func:`fuse_evidence`; truth (H, W) bool; stats (S_last, N_STATS) float64 output, one
+    row per footprint of the last target (the global map), named by :data:`REGION_STATS`
+    and summed over all of its cells as :func:`apply_values_with_stats` sums them. The
+    block and metric sums take the cells in the order the per-footprint kernels take them.
+    """
+    _compiled().apply_targets(*arrays)
+
+
+def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:
+    """Uniform float32 noise of several fresh PCG64 streams, one after another.
+
+    ``out[offsets[f]:offsets[f + 1]]`` = ``Generator(PCG64(SeedSequence(...))).random(n,
+    dtype=np.float32)`` of the sequence whose assembled entropy is ``words[f]``.
+
+    Args:
+        words: (F, n) uint32 assembled entropy of each stream (see
+            :mod:`ipp_toolkit.sensor_noise`).
+        offsets: (F + 1,) int64 where each stream's numbers start in ``out`` (and the end).
+        out: (cells,) float32 output.
+    """
+    global _noise_module
+    if _noise_module is None:
+        from . import _compiled_noise
+
+        _noise_module = _compiled_noise
+    _noise_module.sensor_noise(words, offsets, out)

@@ -4,7 +4,10 @@ The owner of every entropy computation in the toolkit. Maps are stored as log-od
 (float32, ``[y, x]``); probabilities and per-cell entropies are cached beside them and
 refreshed only inside the rectangles a measurement touched, so a step costs in proportion to
 the footprints, not to the map. The 11 x 11 planning-grid planes (block sums of probability
-and of weighted entropy) are maintained incrementally the same way.
+and of weighted entropy) are maintained incrementally the same way. A mission step fuses all
+its readings into every map in two compiled passes (:meth:`BeliefMaps.fuse_targets`), with
+the numbers of the per-rectangle :meth:`BeliefMaps.add_evidence` and
+:meth:`BeliefMaps.refresh`.
 """
 
 from __future__ import annotations
@@ -301,6 +304,65 @@ class BeliefMaps:
         return kernels.apply_values_with_stats(ids, *caches, prob, entropy, weights, wentropy,
                                                rows, cols, self.prob_blocks[index],
                                                self.wentropy_blocks[index], truth)
+
+    def fuse_targets(self, rects: np.ndarray, readings: np.ndarray, offsets: np.ndarray,
+                     deltas: np.ndarray, target_maps: np.ndarray, target_offsets: np.ndarray,
+                     senders: np.ndarray, truth: np.ndarray) -> np.ndarray:
+        """Fuse readings into several maps and refresh them, in compiled passes.
+
+        Target t is map ``target_maps[t]`` receiving the readings
+        ``senders[target_offsets[t]:target_offsets[t + 1]]``. The result is exactly that of,
+        for each target in order, :meth:`add_evidence` of each of its readings and then
+        :meth:`refresh` of each of their rectangles, :meth:`refresh_with_stats` for the last
+        target: the same caches, block sums, value indices, change log and statistics, to
+        the last bit.
+
+        Args:
+            rects: (F, 4) int64 footprint rectangle of each reading.
+            readings: (cells,) bool the readings one after another, each row-major
+                (:func:`ipp_toolkit.kernels.read_cells`).
+            offsets: (F + 1,) int64 where each reading starts in ``readings`` (and the end).
+            deltas: (F, 2) float32 log-odds increments (d0, d1) of a 0 / 1 in each reading.
+            target_maps: (T,) int64 map indices; target_offsets (T + 1,) int64; senders
+                (S,) int64 indices into ``rects``.
+            truth: (H, W) bool ground truth, for the statistics of the last target.
+
+        Returns:
+            (senders of the last target, len(REGION_STATS)) float64, one row per rectangle
+            as :meth:`refresh_with_stats` returns it.
+
+        Raises:
+            RuntimeError: the compiled kernels are not available (:data:`kernels.AVAILABLE`).
+        """
+        if not kernels.AVAILABLE:
+            raise RuntimeError("fuse_targets needs the compiled kernels; without them call "
+                               "add_evidence and refresh per rectangle")
+        rect_list = [tuple(rect) for rect in rects.tolist()]
+        bounds, sender_list = target_offsets.tolist(), senders.tolist()
+        self.changes += [(index, rect_list[u])
+                         for t, index in enumerate(target_maps.tolist())
+                         for u in sender_list[bounds[t]:bounds[t + 1]]]
+        clip = np.float32(LOGODDS_CLIP)
+        bits = self.logodds.view(np.uint32)
+        value_index = self.value_index.view(np.uint32)  # unsigned: cheaper indexing
+
+        cursor = np.array([0, 0, -1, 0], dtype=np.int64)  # target, footprint, row, resumed
+
+        def run(slot: np.ndarray, table_bits: np.ndarray, size: int, shift: np.uint32,
+                multiplier: np.uint32, limit: int) -> tuple[int, bool]:
+            return kernels.fuse_evidence(self.logodds, bits, value_index, readings, offsets,
+                                         rects, deltas, clip, target_maps, target_offsets,
+                                         senders, slot, table_bits, size, shift, multiplier,
+                                         limit, cursor)
+
+        self.table.intern_resumable(run)
+        columns = (self.table.column(name) for name in BELIEF_COLUMNS)
+        stats = np.zeros((target_offsets[-1] - target_offsets[-2], len(REGION_STATS)))
+        kernels.apply_targets(value_index, self.prob, self.entropy, self.wentropy, *columns,
+                              self.blocks.block_of_cell, self.blocks.edges, self.prob_blocks,
+                              self.wentropy_blocks, rects, target_maps, target_offsets, senders,
+                              truth, stats)
+        return stats
 
     def _apply_numpy(self, index: int, rect: Rect, new: np.ndarray, truth: np.ndarray | None
                      ) -> np.ndarray | None:

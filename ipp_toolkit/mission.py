@@ -7,21 +7,27 @@ in place and only inside the footprints a step touched.
 Order inside ``reset_mission``: place UAVs, all measure, exchange at the start positions
 (step s = 0). Inside ``step_mission``: check masks -> same-target rule -> move -> all measure
 -> exchange at the new positions (latest measurement only, no relaying) -> fuse local and
-global maps -> reward -> metrics.
+global maps -> reward -> metrics. Measuring and fusing run in whole-step compiled kernels
+where Numba is there (:func:`_measure_exchange_fuse_compiled`); the per-UAV, per-rectangle
+code (:func:`_measure_exchange_fuse`) is their reference and the NumPy fallback, and both
+give the same numbers to the last bit.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from itertools import accumulate
 from typing import Any
 
 import numpy as np
 
+from . import kernels
 from .config import EnvConfig, fixed_start_waypoints
 from .mapping import BeliefMaps, BlockGrid, Rect
 from .seeding import MissionStreams, mission_streams
 from .sensor import Camera
+from .sensor_noise import entropy_prefix, fill_sensor_noise
 from .team import (
     ACTION_NAMES,
     N_ACTIONS,
@@ -57,6 +63,10 @@ class MissionGeometry:
     """Everything about a world that does not change between missions: camera and blocks.
 
     Build it once per configuration and share it across missions (it is read-only).
+
+    Attributes:
+        whole_step: whether steps run in the whole-step kernels (planning blocks of at most
+            129 cells; :func:`_measure_exchange_fuse_compiled`).
     """
 
     def __init__(self, config: EnvConfig):
@@ -76,6 +86,16 @@ class MissionGeometry:
                 for ix in range(g):
                     cover[iz, iy, ix] = self.blocks.coverage(tuple(self.camera.rects[iz, iy, ix]))
         self.coverage = cover
+        # The whole-step kernels sum a reading's planes as np.add.reduceat does for blocks
+        # of up to 129 cells (every world at r_M >= 0.04 m with waypoints 5 m apart).
+        self.whole_step = bool(self.blocks.block_sizes.max() <= 129)
+        # Per altitude, for the compiled step: the float32 accuracy a cell's noise is
+        # compared with, and the weight W(z) H(z) of a 0 / a 1 reading (z = p(h) or
+        # 1 - p(h), so H(z) is one number per altitude) in the measurement planes.
+        self.accuracy32 = self.camera.accuracy.astype(np.float32)
+        reward, entropy = config.reward, self.camera.reading_entropy
+        self.reading_weights = np.stack([reward.weight_uninteresting * entropy,
+                                         reward.weight_interesting * entropy], axis=1)
 
     def positions_m(self, positions: np.ndarray) -> np.ndarray:
         """(N, 3) metres of (N, 3) waypoint indices."""
@@ -157,6 +177,7 @@ class MissionState:
     failure_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     history: list[Metrics] = field(default_factory=list)
     _drop_rng: np.random.Generator | None = None
+    _noise_prefix: list[int] | None = field(default=None, repr=False, compare=False)
     gain_cache: Any = field(default=None, repr=False, compare=False)
 
     @property
@@ -395,8 +416,15 @@ def step_mission(state: MissionState, actions: np.ndarray | list[int]) -> float:
     return state.reward
 
 
+_FUSED_STEP = True
+"""Run a step's sensing and fusion in the whole-step kernels when they are available (the
+tests switch it off to compare them with the per-rectangle calls, which they must equal)."""
+
+
 def _measure_exchange_fuse(state: MissionState) -> float:
     """All agents measure, exchange within range, fuse; returns the step's reward."""
+    if _FUSED_STEP and kernels.AVAILABLE and state.geometry.whole_step:
+        return _measure_exchange_fuse_compiled(state)
     geometry, camera, blocks = state.geometry, state.geometry.camera, state.geometry.blocks
     n = state.n_agents
     team = state.config.team
@@ -440,13 +468,80 @@ def _measure_exchange_fuse(state: MissionState) -> float:
         gained, reweighted = _fold_region_stats(state.stats, sums)
         numerator += gained
         denominator += reweighted
+    return _reward(state, numerator, denominator)
+
+
+def _reward(state: MissionState, numerator: float, denominator: float) -> float:
     reward_cfg = state.config.reward
     if denominator <= 1e-9:
         return float(reward_cfg.beta)
     return float(reward_cfg.alpha * numerator / denominator + reward_cfg.beta)
 
 
-def _fold_region_stats(stats: _GlobalStats, sums: np.ndarray) -> tuple[float, float]:
+def _measure_exchange_fuse_compiled(state: MissionState) -> float:
+    """:func:`_measure_exchange_fuse` in the whole-step kernels, with the same numbers.
+
+    The readings come from the same noise streams (:mod:`ipp_toolkit.sensor_noise`), their
+    planes are summed as ``np.add.reduceat`` sums them, and :meth:`BeliefMaps.fuse_targets`
+    fuses them into the local maps (each agent's heard readings, in agent order) and then
+    the global one.
+    """
+    geometry, camera, blocks = state.geometry, state.geometry.camera, state.geometry.blocks
+    flying = state.alive.nonzero()[0]
+    n_flying = len(flying)
+    positions = state.positions[flying]
+    altitude = positions[:, 2]
+    rects = camera.rects[altitude, positions[:, 1], positions[:, 0]]  # (F, 4)
+    ends = list(accumulate((r1 - r0) * (c1 - c0) for r0, r1, c0, c1 in rects.tolist()))
+    offsets = np.array([0] + ends, dtype=np.int64)  # each reading's first cell, and the end
+    noise = np.empty(int(offsets[-1]), dtype=np.float32)
+    if state._noise_prefix is None:
+        state._noise_prefix = entropy_prefix(state.streams)
+    fill_sensor_noise(state.streams, state.step, flying.tolist(), offsets, noise,
+                      state._noise_prefix)
+    readings = np.empty(len(noise), dtype=bool)
+    planes = np.zeros((n_flying,) + blocks.block_area.shape)
+    kernels.read_cells(state.ground_truth, rects, geometry.accuracy32[altitude], noise,
+                       offsets, geometry.reading_weights[altitude], blocks.edges, readings,
+                       planes)
+    state.measurement_planes[flying] = planes / blocks.block_area
+    if n_flying < state.n_agents:
+        state.measurement_planes[~state.alive] = 0.0  # a failed UAV's last reading is gone
+    footprints = state.footprints.copy()  # a new array: snapshots may hold the old one
+    footprints[flying] = rects
+    state.footprints = footprints
+    team = state.config.team
+    state.heard = communication_matrix(geometry.positions_m(state.positions), team.comm_range,
+                                       team.message_drop, state._drop_rng, state.alive)
+    # Targets: each flying agent's map with the readings it heard, senders in agent order
+    # (heard already excludes failed UAVs), then the global map with all of them. Plain
+    # Python: a handful of agents.
+    flying_list = flying.tolist()
+    slot_of = {k: f for f, k in enumerate(flying_list)}
+    heard = state.heard.tolist()
+    senders: list[int] = []
+    target_offsets = [0]
+    for k in flying_list:
+        senders += [slot_of[i] for i, hears in enumerate(heard[k]) if hears]
+        target_offsets.append(len(senders))
+    senders += range(n_flying)
+    target_offsets.append(len(senders))
+    stats = state.maps.fuse_targets(
+        rects, readings, offsets, camera.delta_logodds[altitude],
+        np.array(flying_list + [state.n_agents], dtype=np.int64),
+        np.array(target_offsets, dtype=np.int64), np.array(senders, dtype=np.int64),
+        state.ground_truth)
+    numerator = 0.0
+    denominator = state.stats.weighted_entropy
+    for sums in stats.tolist():
+        gained, reweighted = _fold_region_stats(state.stats, sums)
+        numerator += gained
+        denominator += reweighted
+    return _reward(state, numerator, denominator)
+
+
+def _fold_region_stats(stats: _GlobalStats, sums: np.ndarray | list[float]
+                       ) -> tuple[float, float]:
     """Fold one refreshed global region into the running sums.
 
     Args:
@@ -456,7 +551,7 @@ def _fold_region_stats(stats: _GlobalStats, sums: np.ndarray) -> tuple[float, fl
     correction of its denominator, sum (W' - W) H, with W' the posterior weights.
     """
     (entropy_interesting, squared_error, true_positive, predicted_positive,
-     reweighted_old, old_went, new_went) = sums.tolist()
+     reweighted_old, old_went, new_went) = sums.tolist() if isinstance(sums, np.ndarray) else sums
     stats.entropy_interesting += entropy_interesting
     stats.squared_error_interesting += squared_error
     stats.true_positive += int(true_positive)

@@ -28,6 +28,12 @@ ACTION_DELTAS = np.array(
 
 N_ACTIONS = len(ACTION_NAMES)
 
+_DELTAS = [tuple(delta) for delta in ACTION_DELTAS.tolist()]
+
+
+def _deltas_of(actions: np.ndarray) -> list[tuple[int, int, int]]:
+    return [_DELTAS[a] for a in actions.tolist()]
+
 
 def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int,
                  active: np.ndarray | None = None) -> np.ndarray:
@@ -47,18 +53,17 @@ def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int,
         (N, 6) int8 mask, 1 = valid.
     """
     positions = np.asarray(positions, dtype=np.int64)
-    targets = positions[:, None, :] + ACTION_DELTAS[None, :, :]  # (N, 6, 3)
-    inside = np.all((targets[..., :2] >= 0) & (targets[..., :2] < grid_points), axis=-1)
-    inside &= (targets[..., 2] >= 0) & (targets[..., 2] < n_altitudes)
-    # owner[iy, ix] = index of the agent holding that 2-D cell, -1 if free.
-    owner = np.full((grid_points, grid_points), -1, dtype=np.int64)
-    holders = np.arange(len(positions)) if active is None else np.flatnonzero(active)
-    owner[positions[holders, 1], positions[holders, 0]] = holders
-    tx = np.clip(targets[..., 0], 0, grid_points - 1)
-    ty = np.clip(targets[..., 1], 0, grid_points - 1)
-    holder = owner[ty, tx]
-    free = (holder < 0) | (holder == np.arange(len(positions))[:, None])
-    return (inside & free).astype(np.int8)
+    # Plain Python over the few agents: a dozen small NumPy calls cost several times more
+    # (the simulator asks for the masks at every step).
+    cells = positions.tolist()
+    flying = [True] * len(cells) if active is None else np.asarray(active, dtype=bool).tolist()
+    owner = {(x, y): k for k, (x, y, _) in enumerate(cells) if flying[k]}  # 2-D cell -> agent
+    masks = [
+        [0 <= x + dx < grid_points and 0 <= y + dy < grid_points and 0 <= z + dz < n_altitudes
+         and owner.get((x + dx, y + dy), k) == k  # free, or its own cell (up and down)
+         for dx, dy, dz in _DELTAS]
+        for k, (x, y, z) in enumerate(cells)]
+    return np.array(masks, dtype=np.int8).reshape(len(cells), N_ACTIONS)
 
 
 def resolve_moves(positions: np.ndarray, actions: np.ndarray,
@@ -84,19 +89,25 @@ def resolve_moves(positions: np.ndarray, actions: np.ndarray,
     positions = np.asarray(positions, dtype=np.int64)
     actions = np.asarray(actions, dtype=np.int64)
     n = len(positions)
-    moving = np.ones(n, dtype=bool) if moving is None else np.asarray(moving, dtype=bool)
-    targets = np.where(moving[:, None], positions + ACTION_DELTAS[actions], positions)
-    cell_ids = targets[:, 1] * (1 << 20) + targets[:, 0]
-    if active is not None:  # a failed UAV holds no cell: it never wins nor blocks one
-        inactive = ~np.asarray(active, dtype=bool)
-        cell_ids[inactive] = -1 - np.flatnonzero(inactive)
-    # np.unique returns the first occurrence in index order, i.e. the lowest agent index.
-    _, first = np.unique(cell_ids, return_index=True)
-    winner = np.zeros(n, dtype=bool)
-    winner[first] = True
-    blocked = moving & ~winner
-    new_positions = np.where(blocked[:, None], positions, targets)
-    return new_positions, blocked
+    moving = [True] * n if moving is None else np.asarray(moving, dtype=bool).tolist()
+    flying = [True] * n if active is None else np.asarray(active, dtype=bool).tolist()
+    cells = positions.tolist()
+    steps = _deltas_of(actions)
+    targets = [[x + dx, y + dy, z + dz] if moving[k] else [x, y, z]
+               for k, ((x, y, z), (dx, dy, dz)) in enumerate(zip(cells, steps, strict=True))]
+    claimed: set[tuple[int, int]] = set()
+    blocked = [False] * n
+    for k, (x, y, _) in enumerate(targets):  # in index order: the lowest index wins a cell
+        if not flying[k]:  # a failed UAV holds no cell: it never wins nor blocks one
+            continue
+        if (x, y) in claimed:
+            blocked[k] = moving[k]
+        claimed.add((x, y))
+    for k in range(n):
+        if blocked[k]:
+            targets[k] = cells[k]
+    return (np.array(targets, dtype=np.int64).reshape(n, 3),
+            np.array(blocked, dtype=bool))
 
 
 def positions_in_metres(positions: np.ndarray, spacing: float,
@@ -131,7 +142,9 @@ def communication_matrix(positions_m: np.ndarray, comm_range: float,
     """
     positions_m = np.asarray(positions_m, dtype=np.float64)
     n = len(positions_m)
-    distances = np.linalg.norm(positions_m[:, None, :] - positions_m[None, :, :], axis=-1)
+    difference = positions_m[:, None, :] - positions_m[None, :, :]
+    # np.linalg.norm(difference, axis=-1) is this reduction; called bare, without its checks.
+    distances = np.sqrt(np.add.reduce(difference * difference, axis=-1))
     heard = distances <= comm_range + 1e-9
     if message_drop > 0:
         if rng is None:

@@ -87,6 +87,28 @@ class ValueTable:
             self._derive(old_size)
         return out
 
+    def intern_resumable(self, run: Callable[..., tuple[int, bool]]) -> None:
+        """Let a compiled pass intern values into the table, growing it when the pass stops.
+
+        ``run(slot, bits, size, shift, multiplier, limit)`` interns (as
+        :func:`ipp_toolkit.kernels.find_or_add` does) and returns ``(size, True)`` when it is
+        done, or ``(size, False)`` when the table holds ``limit`` values; then the table
+        grows and ``run`` is called again, to go on where it stopped (it keeps its own
+        place). New values get their derived columns once, at the end. Unlike
+        :meth:`indices`, which reserves room for every cell it is given, the hash table
+        grows only with the values it holds, so it stays small enough for the CPU cache.
+        """
+        old_size = self.size
+        while True:
+            limit = min(self._capacity, len(self._slot) // 2)
+            self.size, done = run(self._slot, self._bits, self.size,
+                                  np.uint32(32 - self._slot_bits), _MULTIPLIER, limit)
+            if done:
+                break
+            self._reserve(max(self.size, 1 << (_MIN_SLOT_BITS - 1)))
+        if self.size > old_size:
+            self._derive(old_size)
+
     # ----------------------------------------------------------------------------------------
 
     def _derive(self, start: int) -> None:

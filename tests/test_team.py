@@ -59,3 +59,63 @@ def test_message_drop_is_seeded():
     a = communication_matrix(positions, np.inf, 0.5, np.random.default_rng(3))
     b = communication_matrix(positions, np.inf, 0.5, np.random.default_rng(3))
     assert (a == b).all() and 6 < a.sum() < 36
+
+
+def _reference_masks(positions, grid_points, n_altitudes, active=None):
+    """The NumPy formulation action_masks replaced (kept as its reference)."""
+    from ipp_toolkit.team import ACTION_DELTAS
+
+    positions = np.asarray(positions, dtype=np.int64)
+    targets = positions[:, None, :] + ACTION_DELTAS[None, :, :]
+    inside = np.all((targets[..., :2] >= 0) & (targets[..., :2] < grid_points), axis=-1)
+    inside &= (targets[..., 2] >= 0) & (targets[..., 2] < n_altitudes)
+    owner = np.full((grid_points, grid_points), -1, dtype=np.int64)
+    holders = np.arange(len(positions)) if active is None else np.flatnonzero(active)
+    owner[positions[holders, 1], positions[holders, 0]] = holders
+    holder = owner[np.clip(targets[..., 1], 0, grid_points - 1),
+                   np.clip(targets[..., 0], 0, grid_points - 1)]
+    free = (holder < 0) | (holder == np.arange(len(positions))[:, None])
+    return (inside & free).astype(np.int8)
+
+
+def _reference_moves(positions, actions, moving=None, active=None):
+    """The NumPy formulation resolve_moves replaced (kept as its reference)."""
+    from ipp_toolkit.team import ACTION_DELTAS
+
+    n = len(positions)
+    moving = np.ones(n, dtype=bool) if moving is None else np.asarray(moving, dtype=bool)
+    targets = np.where(moving[:, None], positions + ACTION_DELTAS[actions], positions)
+    cell_ids = targets[:, 1] * (1 << 20) + targets[:, 0]
+    if active is not None:
+        inactive = ~np.asarray(active, dtype=bool)
+        cell_ids[inactive] = -1 - np.flatnonzero(inactive)
+    _, first = np.unique(cell_ids, return_index=True)
+    winner = np.zeros(n, dtype=bool)
+    winner[first] = True
+    blocked = moving & ~winner
+    return np.where(blocked[:, None], positions, targets), blocked
+
+
+def test_masks_and_moves_match_their_numpy_reference():
+    rng = np.random.default_rng(3)
+    for _ in range(400):
+        n, g, z = int(rng.integers(1, 9)), int(rng.integers(2, 6)), int(rng.integers(1, 4))
+        cells = rng.choice(g * g, size=min(n, g * g), replace=False)
+        positions = np.stack([cells % g, cells // g, rng.integers(0, z, len(cells))], axis=1)
+        active = rng.random(len(cells)) < 0.8 if rng.random() < 0.5 else None
+        masks = action_masks(positions, g, z, active)
+        np.testing.assert_array_equal(masks, _reference_masks(positions, g, z, active))
+        assert masks.dtype == np.int8 and masks.shape == (len(cells), 6)
+        # Moves are valid (the rule assumes it; masks are all 0 only when boxed in).
+        moving = masks.any(axis=1) & (rng.random(len(cells)) < 0.8)
+        if active is not None:
+            moving &= active
+        actions = np.array([rng.choice(np.flatnonzero(row)) if move else rng.integers(0, 6)
+                            for row, move in zip(masks, moving, strict=True)])
+        if moving.all() and rng.random() < 0.5:
+            moving = None
+        moved, blocked = resolve_moves(positions, actions, moving, active)
+        expected_moved, expected_blocked = _reference_moves(positions, actions, moving, active)
+        np.testing.assert_array_equal(moved, expected_moved)
+        np.testing.assert_array_equal(blocked, expected_blocked)
+        assert moved.dtype == np.int64 and blocked.dtype == bool

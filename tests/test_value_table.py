@@ -1,13 +1,16 @@
-"""The interned value table and the compiled refresh kernels against their NumPy reference."""
+"""The interned value table and the compiled kernels (per rectangle and whole step, sensor noise)
+against their NumPy reference."""
 
 import numpy as np
 import pytest
 from conftest import random_valid_actions
 
-from ipp_toolkit import kernels
+from ipp_toolkit import kernels, mission, value_table
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import BELIEF_COLUMNS, belief_columns
+from ipp_toolkit.mapping import BELIEF_COLUMNS, BlockGrid, belief_columns
 from ipp_toolkit.mission import reset_mission, step_mission
+from ipp_toolkit.seeding import mission_streams
+from ipp_toolkit.sensor_noise import assembled_entropy, compiled_noise_ok
 from ipp_toolkit.value_table import ValueTable
 
 needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not importable")
@@ -68,10 +71,20 @@ def test_belief_columns_are_the_cell_functions():
                                                  np.float32(0.7)}
 
 
+# Teams the whole-mission comparisons fly: the paper's, everyone in range, and a larger
+# team with random starts, lost messages and failing UAVs.
+_TEAMS = {
+    "d25": {"comm_range": 25.0},
+    "inf": {"comm_range": float("inf")},
+    "drops": {"n_agents": 6, "start": "random", "comm_range": 15.0, "message_drop": 0.3,
+              "random_failures": 2},
+}
+
+
 @needs_numba
-@pytest.mark.parametrize("comm_range", [25.0, float("inf")])
-def test_compiled_and_numpy_refresh_agree_over_whole_missions(monkeypatch, comm_range):
-    config = EnvConfig().replace(world={"resolution": 0.5}, team={"comm_range": comm_range})
+@pytest.mark.parametrize("team", sorted(_TEAMS))
+def test_compiled_and_numpy_refresh_agree_over_whole_missions(monkeypatch, team):
+    config = EnvConfig().replace(world={"resolution": 0.5}, team=_TEAMS[team])
     states = {}
     for compiled in (True, False):
         monkeypatch.setattr(kernels, "AVAILABLE", compiled)
@@ -95,3 +108,114 @@ def test_compiled_and_numpy_refresh_agree_over_whole_missions(monkeypatch, comm_
     for a, b in zip(fast.history, reference.history, strict=True):
         np.testing.assert_allclose(list(a.as_dict().values()), list(b.as_dict().values()),
                                    rtol=1e-9, atol=1e-12)
+
+
+def _fly(config: EnvConfig, mission_index: int = 1):
+    state = reset_mission(config, seed=4, mission=mission_index)
+    rng = np.random.default_rng(2)
+    rewards = []
+    while not state.done:
+        rewards.append(step_mission(state, random_valid_actions(state.masks(), rng)))
+    return state, rewards
+
+
+@needs_numba
+@pytest.mark.parametrize("case", ["d25", "inf", "drops", "fine", "small-table"])
+def test_whole_step_kernels_equal_the_per_rectangle_kernels_bit_for_bit(monkeypatch, case):
+    """The whole-step kernels (mission._FUSED_STEP) change nothing, to the last bit."""
+    resolution = 0.1 if case == "fine" else 0.5
+    team = _TEAMS.get(case, _TEAMS["d25"])
+    if case == "inf":
+        team = {**team, "n_agents": 8}
+    if case == "small-table":  # the table fills in mid-pass and grows many times
+        monkeypatch.setattr(value_table, "_MIN_SLOT_BITS", 3)
+    config = EnvConfig().replace(world={"resolution": resolution}, team=team)
+    flown = {}
+    for fused in (True, False):
+        monkeypatch.setattr(mission, "_FUSED_STEP", fused)
+        flown[fused] = _fly(config)
+    (fast, fast_rewards), (reference, reference_rewards) = flown[True], flown[False]
+    assert fast_rewards == reference_rewards
+    assert [h.as_dict() for h in fast.history] == [h.as_dict() for h in reference.history]
+    assert fast.stats == reference.stats
+    for name in ("logodds", "value_index", "prob", "entropy", "wentropy", "prob_blocks",
+                 "wentropy_blocks"):
+        np.testing.assert_array_equal(getattr(fast.maps, name).view(np.uint8),
+                                      getattr(reference.maps, name).view(np.uint8),
+                                      err_msg=name)
+    np.testing.assert_array_equal(fast.maps.table.values.view(np.uint32),
+                                  reference.maps.table.values.view(np.uint32))
+    assert fast.maps.changes == reference.maps.changes
+    for name in ("measurement_planes", "footprints", "heard", "positions", "alive"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(reference, name),
+                                      err_msg=name)
+    if case == "small-table":
+        assert len(fast.maps.table) > 8
+
+
+@needs_numba
+def test_compiled_sensor_noise_is_numpys_stream():
+    assert compiled_noise_ok()
+    for namespace, seed, mission_index in (("train", 0, 0), ("test", 12345, 7),
+                                           ("my-study", 2**33 + 5, 3)):
+        streams = mission_streams(namespace, seed, mission_index)
+        for step, agents in ((0, [0, 1, 2, 3]), (15, [2, 7]), (2**32 + 1, [1])):
+            sizes = [1 + 37 * agent for agent in agents]  # odd counts: half-used outputs
+            offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+            got = np.empty(offsets[-1], dtype=np.float32)
+            kernels.sensor_noise(assembled_entropy(streams, step, agents), offsets, got)
+            expected = np.concatenate([streams.sensor(step, agent).random(size,
+                                                                          dtype=np.float32)
+                                       for agent, size in zip(agents, sizes, strict=True)])
+            np.testing.assert_array_equal(got.view(np.uint32), expected.view(np.uint32))
+
+
+@needs_numba
+def test_reading_planes_are_numpys_block_sums():
+    """read_cells sums the planes as np.add.reduceat does, up to blocks of 129 cells."""
+    rng = np.random.default_rng(5)
+    for map_cells, grid_points, spacing in ((258, 3, 129.0), (100, 11, 10.0), (64, 4, 20.0)):
+        blocks = BlockGrid(map_cells, grid_points, 1.0, spacing)
+        truth = rng.random((map_cells, map_cells)) < 0.4
+        rects = [(0, map_cells, 0, map_cells)]  # whole blocks: 128 rows after the first
+        for _ in range(4):
+            r0, c0 = rng.integers(0, map_cells - 1, 2)
+            r1 = rng.integers(r0 + 1, map_cells + 1)
+            c1 = rng.integers(c0 + 1, map_cells + 1)
+            rects.append((r0, r1, c0, c1))
+        rects = np.array(rects, dtype=np.int64)
+        sizes = (rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2])
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        noise = rng.random(offsets[-1], dtype=np.float32)
+        thresholds = np.float32([0.99, 0.7, 0.6, 0.8, 0.65])
+        weights = rng.random((5, 2))
+        readings = np.empty(offsets[-1], dtype=bool)
+        planes = np.zeros((5, grid_points, grid_points))
+        kernels.read_cells(truth, rects, thresholds, noise, offsets, weights, blocks.edges,
+                           readings, planes)
+        for f, (r0, r1, c0, c1) in enumerate(rects.tolist()):
+            cells = noise[offsets[f]:offsets[f + 1]].reshape(r1 - r0, c1 - c0)
+            reading = truth[r0:r1, c0:c1] ^ (cells >= thresholds[f])
+            np.testing.assert_array_equal(
+                readings[offsets[f]:offsets[f + 1]].reshape(reading.shape), reading)
+            expected = np.zeros((grid_points, grid_points))
+            blocks.add_block_sums(expected, np.where(reading, weights[f, 1], weights[f, 0]),
+                                  (r0, r1, c0, c1))
+            np.testing.assert_array_equal(planes[f], expected)
+
+
+@needs_numba
+def test_worlds_with_larger_blocks_take_the_per_rectangle_path(monkeypatch):
+    config = EnvConfig().replace(world={"area_size": 20.0, "grid_spacing": 10.0,
+                                        "resolution": 0.05},
+                                 team={"n_agents": 2, "start": "random"})
+    geometry = mission.MissionGeometry(config)
+    assert geometry.blocks.block_sizes.max() == 200 and not geometry.whole_step
+
+    def refuse(*_):
+        raise AssertionError("the whole-step kernels cannot sum blocks of 200 cells")
+
+    monkeypatch.setattr(kernels, "fuse_evidence", refuse)
+    state = reset_mission(config, seed=0, geometry=geometry)
+    step_mission(state, random_valid_actions(state.masks(), np.random.default_rng(0)))
+    assert state.step == 1 and mission.MissionGeometry(EnvConfig()).whole_step
