@@ -7,11 +7,20 @@ training defaults over the paper's mission (:data:`TRAINING_DEFAULTS`), how flag
 :func:`int_list` also serve ``ipp-study``), and :func:`main` with its exit codes. ``--set``
 names a nested field with a dot (``--set warm_start.missions=100``); the older flat names
 (``--set warm_start_missions=100``) are still read (:func:`coma.config.nested_fields`).
+
+Where the run computes is not part of its configs: ``--workers K`` flies each update's
+missions (and the validation missions) on K workers, ``--backend local|ray`` in local
+processes or on Ray actors (``--address`` of a cluster, else a local Ray with K CPUs), and
+``--device cpu|cuda`` is where the networks learn (``coma.parallel``). The same seed trains
+the same weights whatever ``--workers`` and ``--backend``; each is checked before anything is
+written (a missing Ray, an address that does not answer, ``cuda`` where there is none: exit
+code 2).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,6 +33,7 @@ from ipp_toolkit.settings import build_env_config, merge_sections, parse_feature
 
 from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, nested_fields, preset
 from .learner import TrainingDiverged, train
+from .parallel import BACKENDS, resolve_device
 from .persistence import DEFAULT_SHIPPED, resolve_policy
 from .recipes import RECIPES, Stage, recipe
 from .validation import validation_settings
@@ -87,8 +97,46 @@ def build_parser() -> argparse.ArgumentParser:
                              "field with a dot, e.g. --set warm_start.missions=100 (the older "
                              "warm_start_missions / warm_start_epochs are still read) "
                              "(repeatable)")
+    parser.add_argument("--workers", type=_positive_int, default=1, metavar="K",
+                        help="workers that fly each update's missions and the validation "
+                             "missions (default 1: this process); the same seed trains the "
+                             "same weights with any K (--backend ray: K Ray actors of one CPU)")
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="where the workers run: processes on this machine, or Ray actors "
+                             "(needs the ray extra: pip install -c constraints.txt -e "
+                             "\".[ray]\"; see docs/ray.md)")
+    parser.add_argument("--address", default=None, metavar="HOST:PORT",
+                        help="with --backend ray: the Ray cluster's head, as printed by `ray "
+                             "start --head`; default: start a local Ray with --workers CPUs")
+    parser.add_argument("--device", default="cpu", metavar="cpu|cuda",
+                        help="where the networks learn (default cpu); the missions always fly "
+                             "on CPUs, with a copy of the actor")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return value
+
+
+def _check_compute(args: argparse.Namespace) -> None:
+    """Refuse a bad --backend / --address / --device before anything is written
+    (ValueError, ImportError or ConnectionError with the message to print)."""
+    if args.address is not None and args.backend != "ray":
+        raise ValueError("--address needs --backend ray")
+    resolve_device(args.device)
+    if args.backend == "ray":
+        from ipp_toolkit.ray_backend import probe, require_ray
+
+        require_ray()  # RayUnavailableError (an ImportError) names the install command
+        if args.address is not None:
+            probe(args.address)  # fails within seconds where nothing answers
 
 
 def coerce_value(text: str) -> Any:
@@ -204,10 +252,29 @@ def main(argv: Sequence[str] | None = None) -> int:
                 from ipp_toolkit.planners import planner_factory
 
                 planner_factory(coma_config.warm_start.planner)  # an unknown name fails here
-    except ValueError as error:
+        _check_compute(args)
+    except (ValueError, ImportError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
     folders = _stage_folders(args.out, [stage for stage, _, _ in stages])
+    compute = {"workers": args.workers, "backend": args.backend, "address": args.address,
+               "device": args.device}
+    with contextlib.ExitStack() as stack:
+        if args.backend == "ray":  # one Ray for every stage
+            from ipp_toolkit.ray_backend import session
+
+            try:
+                stack.enter_context(session(args.address, args.workers))
+            except (ValueError, ConnectionError) as error:
+                print(f"ipp-train coma: error: {error}", file=sys.stderr)
+                return 2
+        code = _train_stages(args, stages, folders, compute)
+    return code
+
+
+def _train_stages(args: argparse.Namespace, stages: list[tuple[Stage, COMAConfig, EnvConfig]],
+                  folders: list[Path], compute: dict[str, Any]) -> int:
+    """Train every stage into its folder; the exit code of :func:`main`."""
     try:
         for k, (stage, coma_config, env_config) in enumerate(stages):
             if k > 0 and stage.init is not None and stage.init.startswith("previous"):
@@ -219,8 +286,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"stage {k + 1}/{len(stages)} ({stage.name}): {folders[k]}",
                       file=sys.stderr)
             result = train(coma_config, env_config, folders[k], resume=resume,
-                           progress=not args.no_progress)
-    except (FileExistsError, CheckpointError) as error:
+                           progress=not args.no_progress, **compute)
+    except (FileExistsError, CheckpointError, ValueError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
     except TrainingDiverged as error:

@@ -12,15 +12,19 @@ start (``coma.warm_start``) imitates a planner first. Hyper-parameters live in
 ``coma.run_files`` keeps its progress log.
 
 Reproducibility: mission k of a run always has the same terrain and sensor noise
-(``ipp_toolkit.seeding``); action sampling and mini-batch shuffling draw from one torch
-Generator whose state is checkpointed, so an interrupted run resumed with ``resume=True``
-continues exactly as if it had not stopped.
+(``ipp_toolkit.seeding``) and samples its actions from its own stream
+(``coma.rollout.sampling_generator``); mini-batch shuffling draws from one torch Generator
+whose state is checkpointed, so an interrupted run resumed with ``resume=True`` continues
+exactly as if it had not stopped. The missions of an update may be flown by several workers
+(``workers``, ``backend``: ``coma.parallel``) with the same result to the last bit; the update
+runs in this process, on ``device`` (a GPU's numbers differ from the CPU's in rounding).
 """
 
 from __future__ import annotations
 
 import copy
 import math
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -39,7 +43,15 @@ from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from .config import COMAConfig, mission_settings
-from .networks import ConvNet, GainPriorActor, bounded_softmax, epsilon_at
+from .networks import GainPriorActor, bounded_softmax, epsilon_at
+from .parallel import (
+    RunSpec,
+    Workers,
+    check_workers,
+    make_workers,
+    resolve_device,
+    to_channels_last,
+)
 from .persistence import (
     COMANetworks,
     build_networks,
@@ -47,7 +59,7 @@ from .persistence import (
     load_state_into,
     save_policy,
 )
-from .rollout import Rollout, collect_rollout
+from .rollout import Rollout
 from .run_files import (
     TrainResult,
     read_progress,
@@ -59,8 +71,8 @@ from .validation import reference_scores, validate, validation_settings
 from .warm_start import WarmStartConfig
 from .warm_start import warm_start as imitate
 
-__all__ = ["TrainingDiverged", "update", "make_optimisers", "setting_of_update", "to_channels_last",
-           "train"]
+__all__ = ["TrainingDiverged", "update", "make_optimisers", "setting_of_update",
+           "to_channels_last", "train"]
 
 
 class TrainingDiverged(RuntimeError):
@@ -86,19 +98,23 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
     """One COMA update on a rollout; returns the mean losses and diagnostics.
 
     ``train_actor=False`` fits only the critic(s) (a critic warm-up): the actor, its
-    optimiser and its diagnostics are left alone.
+    optimiser and its diagnostics are left alone. The update runs where the networks are: a
+    CPU rollout is moved to their device (on the CPU it is used as it is); ``generator``
+    (shuffling) is a CPU generator either way.
 
     Raises:
         TrainingDiverged: a loss is not finite (the networks may be damaged: do not save).
     """
     cfg = networks.coma_config
+    device = next(networks.critic.parameters()).device
+    rollout = rollout.to(device)
     e, n, t = rollout.actions.shape
     # TD(lambda) targets per agent and episode from the target critic.
     with torch.no_grad():
         q_target = target_critic(rollout.critic_obs.flatten(0, 2)).view(e, n, t, N_ACTIONS)
         q_target_taken = q_target.gather(-1, rollout.actions.unsqueeze(-1)).squeeze(-1)
         next_values = torch.roll(q_target_taken, shifts=-1, dims=-1)  # Q'(s_{t+1}, u_{t+1})
-        terminal = torch.zeros(e, n, t, dtype=torch.bool)
+        terminal = torch.zeros(e, n, t, dtype=torch.bool, device=device)
         terminal[..., -1] = True
         rewards = rollout.rewards.unsqueeze(1).expand(e, n, t)
         targets = td_lambda_targets(rewards, next_values, terminal, cfg.gamma, cfg.td_lambda)
@@ -115,7 +131,7 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
         "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
         "critic_grad_norm", "actor_grad_norm")}
     for _ in range(cfg.epochs):
-        order = torch.randperm(samples, generator=generator)
+        order = torch.randperm(samples, generator=generator).to(device)
         for start in range(0, samples, cfg.minibatch_size):
             batch = order[start:start + cfg.minibatch_size]
             q = networks.critic(critic_obs[batch])
@@ -180,15 +196,6 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
     return {k: float(np.mean(v)) for k, v in logs.items() if v}
 
 
-def to_channels_last(networks: COMANetworks) -> None:
-    """Train every convolution channels-last (:meth:`ConvNet.use_channels_last`)."""
-    for network in (networks.actor, networks.critic, networks.value):
-        if network is not None:
-            for module in network.modules():
-                if isinstance(module, ConvNet):
-                    module.use_channels_last()
-
-
 def _check_finite(what: str, value: torch.Tensor) -> None:
     if not torch.isfinite(value):
         raise TrainingDiverged(f"{what} is {value.item()}")
@@ -230,6 +237,13 @@ def _initialise_from(networks: COMANetworks, path: str) -> None:
             load_state_into(module, getattr(source, name).state_dict(), f"the {name}", path)
 
 
+def _move(networks: COMANetworks, device: torch.device) -> None:
+    """Put the networks on ``device`` (nothing moves on the CPU)."""
+    for module in (networks.actor, networks.critic, networks.value):
+        if module is not None:
+            module.to(device)
+
+
 def make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
     """Adam for the actor (``lr_actor``) and for the critic(s) (``lr_critic``)."""
     cfg = networks.coma_config
@@ -241,11 +255,12 @@ def make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
 
 
 def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config: EnvConfig,
-            generator: torch.Generator) -> tuple[COMANetworks, nn.Module,
-                                                 dict[str, torch.optim.Optimizer],
-                                                 dict[str, Any], list[dict[str, Any]]]:
-    """The run in ``last_path`` as it stopped: networks (in training mode), target critic,
-    optimisers, progress counters and logged rows; ``generator`` gets its sampling state.
+            generator: torch.Generator, device: torch.device
+            ) -> tuple[COMANetworks, nn.Module, dict[str, torch.optim.Optimizer], dict[str, Any],
+                       list[dict[str, Any]]]:
+    """The run in ``last_path`` as it stopped: networks (in training mode, on ``device``),
+    target critic, optimisers, progress counters and logged rows; ``generator`` gets its
+    shuffling state. A run may resume on another device than it began on.
 
     Raises:
         CheckpointError: the checkpoint is corrupt or belongs to another run.
@@ -262,6 +277,7 @@ def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config
     for module in (networks.actor, networks.critic, networks.value):
         if module is not None:
             module.train()
+    _move(networks, device)
     target_critic = copy.deepcopy(networks.critic)
     load_state_into(target_critic, data["target_critic"], "the target critic",
                     str(last_path))
@@ -280,7 +296,9 @@ def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config
 def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
           resume: bool = False, progress: bool = True, tensorboard: bool = True,
           max_updates: int | None = None,
-          warm_start: WarmStartConfig | None = None) -> TrainResult:
+          warm_start: WarmStartConfig | None = None, workers: int = 1,
+          backend: str = "local", address: str | None = None,
+          device: str | torch.device = "cpu") -> TrainResult:
     """Train COMA (or a variant) and write its run folder.
 
     The folder gets ``config.json`` (both configs), ``progress.csv`` (one row per update),
@@ -302,6 +320,15 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             ``warm_start.pt`` and scored on validation missions (update 0). A run with
             ``coma_config.init_policy`` starts from that policy's networks instead (no warm
             start); they are scored and saved as ``best.pt`` at update 0 alike.
+        workers: workers flying each update's missions and the validation missions
+            (``coma.parallel``; 1: this process). The trained weights do not depend on it.
+        backend: ``local`` (``workers`` spawned processes) or ``ray`` (``workers`` Ray
+            actors of one CPU, on a local Ray or the cluster at ``address``).
+        address: with the ray backend, the cluster's head (``HOST:PORT``); None starts a
+            local Ray with ``workers`` CPUs (a process already connected to Ray keeps its
+            connection).
+        device: where the networks learn: ``cpu`` or ``cuda``; rollouts always fly on the
+            CPU, with a CPU copy of the actor. The warm start imitates on the CPU.
 
     With ``coma_config.team_sizes`` / ``comm_ranges``, each update trains on one setting of
     :func:`mission_settings` (:func:`setting_of_update`), and validation averages over all of
@@ -312,11 +339,16 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             good state.
         CheckpointError: a checkpoint to resume is corrupt or belongs to another run.
         FileExistsError: ``out_dir`` holds a run and ``resume`` is false.
+        ValueError: bad ``workers``, ``backend``, ``address`` or ``device`` (e.g. ``cuda``
+            where there is none), before anything is written.
+        ConnectionError: no Ray cluster answers at ``address``.
     """
     torch.set_num_threads(1)
     limit_blas_threads()
+    learner_device = resolve_device(device)
+    check_workers(workers, backend, address)
     out = Path(out_dir)
-    last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
+    last_path = out / "last.pt"
     if env_config.team.has_failures:
         raise ValueError("team.failures / team.random_failures: COMA does not train with UAV "
                          "failures yet (a failed UAV's transitions would be recorded); "
@@ -326,25 +358,56 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     checks = validation_settings(coma_config, settings)
     check_geometries = geometries if checks == settings else [
         MissionGeometry(config) for config in checks]
-    reference = (reference_scores(checks, coma_config.seed, coma_config.eval_missions)
-                 if coma_config.selection == "worst_vs_ig" else None)
-    budget = env_config.team.budget
-
-    def criterion(scores: dict[str, float]) -> float:
-        """What best.pt minimises: the mean final entropy, or the worst gap to IG."""
-        return scores["gap_worst"] if reference is not None else scores[f"entropy_{budget}"]
-
     if resume and not last_path.exists():
         raise CheckpointError(f"nothing to resume: {str(last_path)!r} does not exist (drop "
                               "--resume to start a new run)")
     if last_path.exists() and not resume:
         raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
                               "(--resume) to continue it, or choose another folder")
+    # IG's reference flies in local processes even with the ray backend, whose actors hold
+    # the CPUs of a local Ray.
+    reference = (reference_scores(checks, coma_config.seed, coma_config.eval_missions,
+                                  workers=min(workers, os.cpu_count() or 1))
+                 if coma_config.selection == "worst_vs_ig" else None)
+    spec = RunSpec(coma_config, env_config, tuple(settings), tuple(checks), coma_config.seed)
+    known = {**{("train", k): g for k, g in enumerate(geometries)},
+             **{("check", k): g for k, g in enumerate(check_geometries)}}
+    with make_workers(spec, workers, backend, address, known) as pool:
+        return _train_with(pool, coma_config, env_config, out, resume, progress, tensorboard,
+                           max_updates, warm_start, learner_device, settings, checks,
+                           reference)
+
+
+def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, out: Path,
+                resume: bool, progress: bool, tensorboard: bool, max_updates: int | None,
+                warm_start: WarmStartConfig | None, device: torch.device,
+                settings: list[EnvConfig], checks: list[EnvConfig],
+                reference: list[float] | None) -> TrainResult:
+    """The run of :func:`train` once its inputs are checked: ``pool`` flies the missions of
+    the training ``settings`` and the validation ``checks``, the networks learn on
+    ``device``."""
+    last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
+    budget = env_config.team.budget
+
+    def criterion(scores: dict[str, float]) -> float:
+        """What best.pt minimises: the mean final entropy, or the worst gap to IG."""
+        return scores["gap_worst"] if reference is not None else scores[f"entropy_{budget}"]
+
+    def validate_now(networks: COMANetworks) -> dict[str, float]:
+        """The actor's validation scores, its missions flown by the pool's workers."""
+        networks.actor.eval()
+        try:
+            return validate(networks.actor, checks, None, coma_config.seed,
+                            coma_config.eval_missions, reference,
+                            fly=lambda k, n: pool.greedy(networks, k, n))
+        finally:
+            networks.actor.train()
+
     generator = torch.Generator().manual_seed(coma_config.seed)
     history: list[dict[str, Any]] = []
     if resume and last_path.exists():
         networks, target_critic, optimisers, state, history = _resume(
-            last_path, csv_path, coma_config, env_config, generator)
+            last_path, csv_path, coma_config, env_config, generator, device)
     else:
         torch.manual_seed(coma_config.seed)
         networks = build_networks(coma_config, env_config)
@@ -360,10 +423,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
 
         def score_start() -> dict[str, float]:
             """Validate the starting networks; they are ``best.pt`` at update 0."""
-            networks.actor.eval()
-            validation = validate(networks.actor, checks, check_geometries, coma_config.seed,
-                                  coma_config.eval_missions, reference)
-            networks.actor.train()
+            validation = validate_now(networks)
             state["best_entropy"] = criterion(validation)
             save_policy(best_path, networks, {"validation": validation, "update": 0})
             return {"validation_entropy": validation[f"entropy_{budget}"],
@@ -385,6 +445,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         elif coma_config.gain_prior > 0:
             # The gain-prior actor starts as a planner worth scoring (ig's choice).
             run_info["gain_prior_start"] = score_start()
+        _move(networks, device)  # the warm start imitated on the CPU
         target_critic = copy.deepcopy(networks.critic)
         optimisers = make_optimisers(networks)
         write_json(out / "config.json", run_info)
@@ -419,9 +480,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                 target_critic.load_state_dict(networks.critic.state_dict())
                 state["since_target"] = 0
             setting = setting_of_update(len(settings), coma_config.seed, state["update"])
-            rollout = collect_rollout(networks, settings[setting], geometries[setting],
-                                      coma_config.seed, state["missions"], per_update, eps,
-                                      generator)
+            rollout = pool.rollout(networks, setting, state["missions"], per_update, eps)
             try:
                 losses = update(networks, target_critic, optimisers, rollout, eps, generator,
                                 train_actor=state["update"] >= coma_config.critic_warmup_updates)
@@ -447,10 +506,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                 "comm_range": settings[setting].team.comm_range}
             last_update = state["update"] == total_updates
             if state["update"] % coma_config.eval_every == 0 or last_update:
-                networks.actor.eval()
-                scores = validate(networks.actor, checks, check_geometries, coma_config.seed,
-                                  coma_config.eval_missions, reference)
-                networks.actor.train()
+                scores = validate_now(networks)
                 row.update(eval_return=scores["return"],
                            eval_entropy_final=scores[f"entropy_{budget}"],
                            eval_f1_final=scores[f"f1_{budget}"],
@@ -479,4 +535,3 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             writer.close()
     return TrainResult(out, best_path, last_path, state["update"], state["missions"],
                        state["best_entropy"], history)
-

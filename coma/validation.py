@@ -1,15 +1,19 @@
 """Validation of a COMA actor during training, and which policy ``best.pt`` keeps.
 
-This module owns how a run scores its actor: :func:`evaluate_greedy` flies held-out
-``validation`` missions with the greedy policy, :func:`validate` averages that over the
-validation settings (:func:`validation_settings`: every training setting on every validation
-terrain) and, for ``selection = "worst_vs_ig"``, measures the gaps to a reference planner's
-final entropy on the same missions (:func:`reference_scores`).
+This module owns how a run scores its actor: :func:`fly_greedy` flies held-out
+``validation`` missions with the greedy policy and keeps each mission's record
+(:class:`GreedyFlights`), :func:`evaluate_greedy` summarises them, :func:`validate` averages
+that over the validation settings (:func:`validation_settings`: every training setting on every
+validation terrain) and, for ``selection = "worst_vs_ig"``, measures the gaps to a reference
+planner's final entropy on the same missions (:func:`reference_scores`). The missions of a
+setting may be flown in blocks by several workers (``coma.parallel``): the records of the
+blocks, joined in mission order, give the scores of one flight, to the last bit.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from torch import nn
@@ -21,8 +25,72 @@ from ipp_toolkit.team import N_ACTIONS
 
 from .config import COMAConfig
 from .networks import greedy_actions
+from .rollout import actor_batches
 
-__all__ = ["evaluate_greedy", "validate", "validation_settings", "reference_scores"]
+__all__ = ["GreedyFlights", "fly_greedy", "evaluate_greedy", "validate", "validation_settings",
+           "reference_scores"]
+
+
+@dataclass
+class GreedyFlights:
+    """What the greedy policy did on E missions of B steps.
+
+    Attributes:
+        rewards: (E, B) float64 team reward of every step.
+        entropy: (E, B + 1) entropy metric after every step (step 0: the start).
+        f1: (E, B + 1) F1 score after every step.
+    """
+
+    rewards: np.ndarray
+    entropy: np.ndarray
+    f1: np.ndarray
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[GreedyFlights]) -> GreedyFlights:
+        """The records of consecutive blocks of missions, joined in mission order."""
+        return cls(*(np.concatenate([getattr(p, name) for p in parts])
+                     for name in ("rewards", "entropy", "f1")))
+
+    def scores(self) -> dict[str, float]:
+        """``entropy_s`` and ``f1_s`` for s = 0..B (means over the missions) and ``return``:
+        the mean team return, summed step by step over the missions as a lock-step flight
+        of all of them adds it up."""
+        total = 0.0
+        for column in self.rewards.T:
+            total += sum(column.tolist())
+        result = {"return": total / len(self.rewards)}
+        for step in range(self.entropy.shape[1]):
+            result[f"entropy_{step}"] = float(np.mean(self.entropy[:, step].tolist()))
+            result[f"f1_{step}"] = float(np.mean(self.f1[:, step].tolist()))
+        return result
+
+
+def fly_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometry, seed: int,
+               first_mission: int, n_missions: int, namespace: str = "validation"
+               ) -> GreedyFlights:
+    """Fly missions ``first_mission .. first_mission + n_missions - 1`` of run ``seed`` in
+    lock-step with the greedy policy and record each one (the actor scores the agents of
+    each group of :func:`coma.rollout.actor_batches` together, so a mission's record does not
+    depend on the missions flown beside it)."""
+    states = [reset_mission(env_config, seed, first_mission + m, namespace, geometry)
+              for m in range(n_missions)]
+    features = env_config.features
+    groups = actor_batches(first_mission, n_missions)
+    rewards = []
+    for _ in range(env_config.team.budget):
+        obs = np.stack([actor_observations(s, features) for s in states])
+        masks = np.stack([s.masks() for s in states])
+        actions = np.concatenate([
+            greedy_actions(actor, obs[a:b].reshape(-1, *obs.shape[2:]),
+                           masks[a:b].reshape(-1, N_ACTIONS)).reshape(b - a, -1)
+            for a, b in groups])
+        rewards.append([step_mission(s, actions[e]) for e, s in enumerate(states)])
+    steps = range(env_config.team.budget + 1)
+    return GreedyFlights(
+        rewards=np.array(rewards, dtype=np.float64).T.reshape(n_missions, -1),
+        entropy=np.array([[s.history[t].entropy for t in steps] for s in states],
+                         dtype=np.float64),
+        f1=np.array([[s.history[t].f1 for t in steps] for s in states], dtype=np.float64))
 
 
 def evaluate_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometry,
@@ -33,33 +101,29 @@ def evaluate_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGe
     Returns:
         ``entropy_s`` and ``f1_s`` for s = 0..B, and ``return``: the mean team return.
     """
-    states = [reset_mission(env_config, seed, m, namespace, geometry) for m in range(n_missions)]
-    total_return = 0.0
-    features = env_config.features
-    for _ in range(env_config.team.budget):
-        obs = np.stack([actor_observations(s, features) for s in states])
-        masks = np.stack([s.masks() for s in states])
-        actions = greedy_actions(actor, obs.reshape(-1, *obs.shape[2:]),
-                                 masks.reshape(-1, N_ACTIONS)).reshape(n_missions, -1)
-        total_return += sum(step_mission(s, actions[e]) for e, s in enumerate(states))
-    result = {"return": total_return / n_missions}
-    for step in range(env_config.team.budget + 1):
-        result[f"entropy_{step}"] = float(np.mean([s.history[step].entropy for s in states]))
-        result[f"f1_{step}"] = float(np.mean([s.history[step].f1 for s in states]))
-    return result
+    return fly_greedy(actor, env_config, geometry, seed, 0, n_missions, namespace).scores()
 
 
 def validate(actor: nn.Module, settings: Sequence[EnvConfig],
-             geometries: Sequence[MissionGeometry], seed: int, n_missions: int,
-             reference: Sequence[float] | None = None) -> dict[str, float]:
+             geometries: Sequence[MissionGeometry] | None, seed: int, n_missions: int,
+             reference: Sequence[float] | None = None,
+             fly: Callable[[int, int], GreedyFlights] | None = None) -> dict[str, float]:
     """:func:`evaluate_greedy` on every setting, averaged key by key over the settings.
 
     With ``reference`` (a planner's mean final entropy per setting, same missions) it also
     gives ``gap_worst`` and ``gap_mean``: the largest and the mean of the policy's mean final
-    entropy minus the reference's over the settings.
+    entropy minus the reference's over the settings. ``fly(k, n_missions)``, if given, flies
+    the missions of setting ``k`` instead of this process (``coma.parallel``'s workers, with
+    ``actor``'s weights; ``geometries`` may then be None); the scores are the same.
     """
-    scores = [evaluate_greedy(actor, config, geometry, seed, n_missions)
-              for config, geometry in zip(settings, geometries, strict=True)]
+    if fly is None:
+        if geometries is None:
+            raise ValueError("validate needs the settings' geometries or a fly function")
+
+        def fly(k: int, count: int) -> GreedyFlights:
+            return fly_greedy(actor, settings[k], geometries[k], seed, 0, count)
+
+    scores = [fly(k, n_missions).scores() for k in range(len(settings))]
     result = {key: float(np.mean([s[key] for s in scores])) for key in scores[0]}
     if reference is not None:
         budget = settings[0].team.budget
@@ -79,15 +143,19 @@ def validation_settings(coma_config: COMAConfig, settings: Sequence[EnvConfig]
 
 
 def reference_scores(settings: Sequence[EnvConfig], seed: int, n_missions: int,
-                     planner: str = "ig") -> list[float]:
+                     planner: str = "ig", workers: int = 1, backend: str = "local",
+                     address: str | None = None) -> list[float]:
     """``planner``'s mean final entropy on the validation missions of each setting (the
-    missions :func:`evaluate_greedy` flies), for ``selection = "worst_vs_ig"``."""
+    missions :func:`evaluate_greedy` flies), for ``selection = "worst_vs_ig"``; flown by
+    :func:`ipp_toolkit.evaluation.evaluate` with ``workers``, ``backend`` and ``address``
+    (the same numbers on any)."""
     from ipp_toolkit.evaluation import evaluate
 
     scores = []
     for config in settings:
         result = evaluate(config, [planner], missions=n_missions, seed=seed,
-                          namespace="validation", progress=False)
+                          namespace="validation", progress=False, workers=workers,
+                          backend=backend, address=address)
         budget = config.team.budget
         scores.append(float(np.mean([r["entropy"] for r in result.rows
                                      if int(r["step"]) == budget])))
