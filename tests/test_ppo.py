@@ -222,20 +222,25 @@ def test_default_ppo_is_the_default_shipped_policy_and_names_resolve_for_sb3_too
         PPOPlanner("shipped:nope")
 
 
-def test_ppo_preset_shipped_gives_the_shipped_runs_flags():
-    import json
+@pytest.mark.parametrize("preset,name", [("shipped", "split"), ("split", "split"),
+                                         ("spatial-mixture", "spatial-mixture")])
+def test_ppo_preset_gives_the_shipped_runs_flags(preset, name):
+    from baselines.ppo_training import _parser, run_config_from_args
 
-    from baselines.ppo_training import _parser
-
-    stored = json.loads(ppo.DEFAULT_CHECKPOINT.with_suffix(".json").read_text())["ppo_config"]
-    args = _parser("shipped").parse_args(["--preset", "shipped"])
-    made = {"n_envs": args.n_envs, "n_steps": args.n_steps, "batch_size": args.batch_size,
-            "lr": args.lr, "ent_coef": args.ent_coef, "width": args.width, "seed": args.seed,
-            "resolution": args.resolution, "n_agents": args.agents, "comm_range": args.comm,
-            "masked": args.masked, "checkpoint_every": args.checkpoint_every}
-    assert made == {k: stored[k] for k in made}
-    assert args.timesteps == 1_738_016  # what the shipped run trained before its time limit
-    assert _parser("shipped").parse_args(["--timesteps", "10"]).timesteps == 10
+    path = ppo.CHECKPOINTS / ppo.SHIPPED_POLICIES[name]
+    record = json.loads(path.with_suffix(".json").read_text())
+    args = _parser(preset).parse_args(["--preset", preset])
+    env_config, run_fields = run_config_from_args(args, PPOTrainConfig())
+    made = {**run_fields, "n_steps": args.n_steps, "batch_size": args.batch_size, "lr": args.lr,
+            "ent_coef": args.ent_coef, "masked": args.masked, "gain_prior": args.gain_prior}
+    stored = record["ppo_config"]
+    assert {k: v for k, v in made.items() if k != "total_timesteps"} == \
+        {k: stored.get(k, 0.0) for k in made if k != "total_timesteps"}
+    assert made["total_timesteps"] == record["num_timesteps"]  # what the policy trained
+    # The recipe's mission settings are the policy's (terrain, feature planes, world).
+    trained = ppo.load_policy(path)[1]["env_config"]
+    assert env_config == trained
+    assert _parser(preset).parse_args(["--timesteps", "10"]).timesteps == 10
 
 
 def test_ppo_parallelism_flag_is_workers_with_the_old_name_kept():
