@@ -56,7 +56,7 @@ def main() -> None:
     for k in range(args.updates):
         start = time.perf_counter()
         rollout = collect_rollout(networks, env, geometry, 0, k * config.missions_per_update,
-                                  config.missions_per_update, 0.3, generator)
+                                  config.missions_per_update, 0.3)
         middle = time.perf_counter()
         update(networks, target, optimisers, rollout, 0.3, generator)
         rollout_s += middle - start

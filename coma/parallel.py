@@ -35,9 +35,7 @@ import concurrent.futures
 import contextlib
 import multiprocessing
 import os
-import signal
-import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,11 +44,13 @@ import torch
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.process_pool import (
+    children_ignore_sigint,
     guard_worker,
     limit_blas_threads,
     limit_torch_threads,
     single_thread_environment,
     single_thread_variables,
+    stop_workers,
 )
 
 from .config import COMAConfig
@@ -281,20 +281,6 @@ def _process_call(method: str, actor_state: dict[str, torch.Tensor], *args: Any)
     return getattr(_WORKER, method)(_WORKER.load(actor_state), *args)
 
 
-@contextlib.contextmanager
-def _children_ignore_sigint() -> Iterator[None]:
-    """Ignore SIGINT while worker processes start, so that a Ctrl-C during their imports
-    reaches only this process (as ``ipp_toolkit.process_pool`` does for its pool)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
 class ProcessWorkers(Workers):
     """K spawned processes kept for the run (``workers=K > 1``, the local backend)."""
 
@@ -314,7 +300,7 @@ class ProcessWorkers(Workers):
     def _submit(self, calls: Sequence[tuple[Any, ...]]) -> list[concurrent.futures.Future]:
         assert self._executor is not None
         # Workers start on a submission; they inherit one thread each and an ignored Ctrl-C.
-        with single_thread_environment(), _children_ignore_sigint():
+        with single_thread_environment(), children_ignore_sigint():
             return [self._executor.submit(*call) for call in calls]
 
     def _map(self, method: str, networks: COMANetworks,
@@ -346,16 +332,8 @@ class ProcessWorkers(Workers):
         if executor is None:
             return
         executor.shutdown(wait=False, cancel_futures=True)
-        # The executor exposes no public way to stop running workers (an interrupt or a
-        # failed update must not wait for their blocks); its process table is read
-        # defensively, as ipp_toolkit.process_pool does.
-        for process in list((getattr(executor, "_processes", None) or {}).values()):
-            with contextlib.suppress(Exception):
-                process.terminate()
-        manager = getattr(executor, "_executor_manager_thread", None)
-        if manager is not None:
-            with contextlib.suppress(Exception):
-                manager.join(timeout=10)
+        # An interrupt or a failed update must not wait for the running workers' blocks.
+        stop_workers(executor)
 
     def close(self) -> None:
         self._stop()

@@ -152,7 +152,7 @@ def _learning_masks(state: MissionState) -> np.ndarray:
 
 def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: MissionGeometry,
                     seed: int, first_mission: int, n_missions: int, eps: float,
-                    generator: torch.Generator | None = None, namespace: str = "train",
+                    namespace: str = "train",
                     demonstrators: Sequence[Planner] | None = None) -> Rollout:
     """Play ``n_missions`` missions in lock-step with the bounded-softmax policy.
 
@@ -164,8 +164,6 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
     group: ``coma.parallel`` splits at group boundaries).
 
     Args:
-        generator: not used (the missions' own streams sample); accepted so that calls
-            written for the single generator of earlier versions keep working.
         demonstrators: one planner per mission that acts instead of the actor (demonstrations
             for a warm start, see ``coma.warm_start``); ``eps`` is then unused.
     """

@@ -80,7 +80,7 @@ def warm_start(networks: COMANetworks, env_config: EnvConfig, config: WarmStartC
         count = min(config.missions_per_batch, config.missions - done)
         demonstrators = [make_planner(config.planner) for _ in range(count)]
         batches.append(collect_rollout(networks, env_config, geometry, seed,
-                                       DEMO_MISSION_OFFSET + done, count, 0.0, generator,
+                                       DEMO_MISSION_OFFSET + done, count, 0.0,
                                        demonstrators=demonstrators))
         done += count
         bar.update(count)

@@ -27,7 +27,8 @@ from typing import Any, Protocol
 from .planner_specs import PlannerSpec
 from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
-__all__ = ["TaskRunner", "guard_worker", "limit_blas_threads", "limit_torch_threads",
+__all__ = ["TaskRunner", "children_ignore_sigint", "stop_workers", "guard_worker",
+           "limit_blas_threads", "limit_torch_threads",
            "single_thread_environment", "single_thread_variables", "temporary_environment",
            "transferable_factory", "run_parallel"]
 
@@ -193,7 +194,7 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
     try:
         # Workers start during the submissions; they inherit one thread each and an ignored
         # Ctrl-C (a worker still importing when it comes would otherwise print a traceback).
-        with single_thread_environment(), _children_ignore_sigint():
+        with single_thread_environment(), children_ignore_sigint():
             futures = [executor.submit(_worker_task, label, mission)
                        for label, mission in tasks]
         for future in concurrent.futures.as_completed(futures):
@@ -205,7 +206,7 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
             bar.update(1)
     except BaseException:
         executor.shutdown(wait=False, cancel_futures=True)
-        _stop_workers(executor)
+        stop_workers(executor)
         raise
     executor.shutdown(wait=True, cancel_futures=True)
     if error is not None:
@@ -221,7 +222,7 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
 
 
 @contextlib.contextmanager
-def _children_ignore_sigint() -> Iterator[None]:
+def children_ignore_sigint() -> Iterator[None]:
     """Ignore SIGINT while child processes start, so they begin with it ignored.
 
     An ignored signal stays ignored across exec, and Python keeps it so at start-up. The main
@@ -237,7 +238,7 @@ def _children_ignore_sigint() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _stop_workers(executor: concurrent.futures.ProcessPoolExecutor) -> None:
+def stop_workers(executor: concurrent.futures.ProcessPoolExecutor) -> None:
     """Terminate the pool's workers now (an interrupt: their running missions are dropped).
 
     ``shutdown(cancel_futures=True)`` only cancels tasks not yet started; the running ones

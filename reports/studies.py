@@ -39,7 +39,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Setting", "RobustnessStudy", "robustness_study", "CreditStudy",
            "credit_assignment_study", "ablation_study", "seed_table", "ABLATIONS",
-           "backend_session", "check_backend"]
+           "backend_session", "check_backend", "TrainTask", "train_run", "train_runs",
+           "training_mission"]
 
 
 def check_backend(backend: str, address: str | None) -> None:
@@ -240,7 +241,7 @@ class CreditStudy:
     out: Path
 
 
-def _train_run(task: tuple[str, dict, dict, str, bool]) -> str:
+def train_run(task: tuple[str, dict, dict, str, bool]) -> str:
     """Worker: train one COMA run into its folder (resuming it if it exists); its best.pt."""
     import torch
 
@@ -262,9 +263,9 @@ TrainTask = tuple[str, dict, dict, str, bool]
 """One training run: (label, COMAConfig fields, EnvConfig dict, run folder, progress)."""
 
 
-def _train_runs(tasks: list[TrainTask], workers: int, cluster: RayCluster | None = None,
+def train_runs(tasks: list[TrainTask], workers: int, cluster: RayCluster | None = None,
                 progress: bool = False,
-                run: Callable[[TrainTask], Any] = _train_run) -> dict[str, Path]:
+                run: Callable[[TrainTask], Any] = train_run) -> dict[str, Path]:
     """Train every task; label -> its best.pt.
 
     Without ``cluster``: in ``workers`` spawned processes when > 1, else here. With one:
@@ -297,7 +298,7 @@ def _train_runs(tasks: list[TrainTask], workers: int, cluster: RayCluster | None
 
 def _train_on_ray(tasks: list[TrainTask], cluster: RayCluster, progress: bool,
                   run: Callable[[TrainTask], Any]) -> dict[str, Path]:
-    """The Ray case of :func:`_train_runs`."""
+    """The Ray case of :func:`train_runs`."""
     from ipp_toolkit.progress import progress_bar
     from ipp_toolkit.ray_backend import run_calls
 
@@ -403,7 +404,7 @@ def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str,
     return CreditStudy(policies, text, out)
 
 
-def _training_mission(train_resolution: float) -> EnvConfig:
+def training_mission(train_resolution: float) -> EnvConfig:
     """The default training mission of ``ipp-train coma`` at ``train_resolution``."""
     return EnvConfig().replace(world={"resolution": train_resolution},
                                features={"own_position": True})
@@ -454,7 +455,7 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
     training_seeds = _training_seeds(seeds, overrides)
     check_backend(backend, address)
     out = Path(out)
-    env = config_to_dict(_training_mission(train_resolution))
+    env = config_to_dict(training_mission(train_resolution))
     values = {**(overrides or {}), "missions": int(missions)}
     tasks = _seeded_tasks([(v, {**values, "variant": v}, env, out / "runs" / v)
                            for v in variants], training_seeds, progress and workers == 1)
@@ -462,7 +463,7 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
                f"(cpu preset, overrides {overrides or {}}), {_seeds_text(training_seeds)}; "
                f"test: {trials} missions.")
     with backend_session(backend, address, workers) as cluster:
-        policies = _train_runs(tasks, workers, cluster, progress)
+        policies = train_runs(tasks, workers, cluster, progress)
         return _compare_runs(policies, out, "credit.md", caption, trials, seed, workers,
                              eval_resolution, progress, variants, training_seeds, backend,
                              address)
@@ -516,7 +517,7 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
     training_seeds = _training_seeds(seeds, overrides)
     check_backend(backend, address)
     out = Path(out)
-    base = _training_mission(train_resolution)
+    base = training_mission(train_resolution)
     values = {**(overrides or {}), "missions": int(missions)}
     runs = [("full", values, config_to_dict(base), out / "runs" / "full")]
     for name in ablations:
@@ -530,7 +531,7 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
                f"overrides {overrides or {}}), {_seeds_text(training_seeds)}; '-x' = x "
                f"toggled; test: {trials} missions.")
     with backend_session(backend, address, workers) as cluster:
-        policies = _train_runs(tasks, workers, cluster, progress)
+        policies = train_runs(tasks, workers, cluster, progress)
         return _compare_runs(policies, out, "ablation.md", caption, trials, seed, workers,
                              eval_resolution, progress, [run[0] for run in runs],
                              training_seeds, backend, address)

@@ -46,11 +46,11 @@ from ipp_toolkit.settings import build_env_config, describe_config, safe_name
 from .compare import compare
 from .studies import (
     TrainTask,
-    _train_run,
-    _train_runs,
-    _training_mission,
     backend_session,
     check_backend,
+    train_run,
+    train_runs,
+    training_mission,
 )
 from .tables import atomic_write_text
 
@@ -300,12 +300,12 @@ def _check_folder(folder: Path, config: Any, env: EnvConfig) -> None:
 
 
 def _train_or_note_divergence(task: TrainTask) -> str:
-    """Worker: :func:`reports.studies._train_run`; a run whose loss diverged is finished, with
+    """Worker: :func:`reports.studies.train_run`; a run whose loss diverged is finished, with
     :data:`DIVERGED` written into its folder (the sweep goes on with the other runs)."""
     from coma.learner import TrainingDiverged
 
     try:
-        return _train_run(task)
+        return train_run(task)
     except TrainingDiverged as err:
         write_json(Path(task[3]) / DIVERGED, {"error": str(err)})
         return str(Path(task[3]) / "best.pt")
@@ -486,7 +486,7 @@ def sweep_study(sweep: Mapping[str, Sequence[tuple[str, Any]]] | Sequence[str],
     if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
         raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
     check_backend(backend, address)
-    env = build_env_config(_training_mission(train_resolution), agents=agents, comm=comm)
+    env = build_env_config(training_mission(train_resolution), agents=agents, comm=comm)
     validation = build_env_config(None, agents=env.team.n_agents, comm=env.team.comm_range,
                                   resolution=eval_resolution)
     out = Path(out)
@@ -510,7 +510,7 @@ def sweep_study(sweep: Mapping[str, Sequence[tuple[str, Any]]] | Sequence[str],
     points = [point for point, _ in grid]
     with backend_session(backend, address, workers) as cluster:
         if tasks:
-            _train_runs(tasks, workers, cluster, progress, run)
+            train_runs(tasks, workers, cluster, progress, run)
         runs = [dataclasses.replace(r, diverged=(r.folder / DIVERGED).is_file()) for r in runs]
         flown = [r for r in runs if (r.folder / "best.pt").is_file()]
         specs = [PlannerSpec("ig", label="ig")] + [

@@ -143,8 +143,7 @@ def test_rollout_never_samples_masked_actions():
     networks = build_networks(config, env)
     with torch.no_grad():  # a policy that wants "up" and "north" (masked at the start) badly
         networks.actor.head[-1].bias.copy_(torch.tensor([30.0, 30.0, 0, 0, 0, 0]))
-    rollout = collect_rollout(networks, env, MissionGeometry(env), 0, 0, 3, 0.5,
-                              torch.Generator().manual_seed(0))
+    rollout = collect_rollout(networks, env, MissionGeometry(env), 0, 0, 3, 0.5)
     taken = rollout.masks.gather(-1, rollout.actions.unsqueeze(-1))
     assert taken.all()
     assert rollout.actor_obs.shape[:3] == (3, 4, env.team.budget)
@@ -213,8 +212,7 @@ def test_rollout_records_behaviour_probabilities():
     env = tiny_env()
     torch.manual_seed(0)
     networks = build_networks(tiny_coma(), env)
-    rollout = collect_rollout(networks, env, MissionGeometry(env), 0, 0, 2, 0.5,
-                              torch.Generator().manual_seed(1))
+    rollout = collect_rollout(networks, env, MissionGeometry(env), 0, 0, 2, 0.5)
     probs = rollout.behaviour_probs
     assert probs.shape == rollout.actions.shape
     # Bounded softmax with eps = 0.5 over at most 6 valid actions: each is >= 0.5 / 6.
@@ -641,8 +639,7 @@ def test_coma_sees_what_the_pettingzoo_env_shows_on_the_same_missions():
                                            "gain_smoothing": 4.0})
     networks = build_networks(COMAConfig(width=8, hidden=16, warm_start=""), config)
     rollout = collect_rollout(networks, config, MissionGeometry(config), seed=5,
-                              first_mission=3, n_missions=2, eps=0.5,
-                              generator=torch.Generator().manual_seed(0))
+                              first_mission=3, n_missions=2, eps=0.5)
     env = IPPEnv(config, namespace="train")
     for e in range(2):
         observations, _ = env.reset(seed=5, options={"mission": 3 + e})

@@ -33,7 +33,7 @@ from ipp_toolkit.planners import Planner, register_planner
 from ipp_toolkit.ray_backend import RayCluster, RayUnavailableError, probe, start_local
 from ipp_toolkit.seeding import planner_seed
 from reports.cli import compare_main, study_main
-from reports.studies import _train_run, _train_runs, credit_assignment_study, robustness_study
+from reports.studies import credit_assignment_study, robustness_study, train_run, train_runs
 
 
 def _ray_importable() -> bool:
@@ -443,7 +443,7 @@ def train_or_die_once(task):
               tensorboard=False, max_updates=1)
         marker.write_text(str(os.getpid()))
         os.kill(os.getpid(), signal.SIGKILL)
-    return _train_run(task)
+    return train_run(task)
 
 
 @pytest.mark.slow
@@ -481,13 +481,13 @@ def test_a_killed_training_worker_is_retried_and_resumes_its_run(ray_cluster, tm
 
     from coma.persistence import load_policy
     from ipp_toolkit.config import config_to_dict
-    from reports.studies import _training_mission
+    from reports.studies import training_mission
 
-    env = config_to_dict(_training_mission(1.0))
+    env = config_to_dict(training_mission(1.0))
     values = {**TINY_COMA, "missions": 4, "checkpoint_every": 1}  # two updates
     tasks = [(label, values, env, str(tmp_path / label), False)
              for label in ("killed", "straight")]
-    policies = _train_runs(tasks, 2, RayCluster(ray_cluster, owned=False, address=None),
+    policies = train_runs(tasks, 2, RayCluster(ray_cluster, owned=False, address=None),
                            run=train_or_die_once)
     marker = tmp_path / "killed.killed"
     assert marker.exists() and int(marker.read_text()) != os.getpid()  # a worker died ...
@@ -504,13 +504,13 @@ def test_a_killed_training_worker_is_retried_and_resumes_its_run(ray_cluster, tm
 def test_a_training_error_on_ray_is_the_runs_own_error(ray_cluster, tmp_path):
     from ipp_toolkit.config import config_to_dict
     from ipp_toolkit.io import CheckpointError
-    from reports.studies import _training_mission
+    from reports.studies import training_mission
 
-    env = config_to_dict(_training_mission(1.0))
+    env = config_to_dict(training_mission(1.0))
     task = ("coma", {**TINY_COMA, "missions": 2}, env, str(tmp_path / "run"), False)
-    _train_runs([task], 1, RayCluster(ray_cluster, owned=False, address=None))
+    train_runs([task], 1, RayCluster(ray_cluster, owned=False, address=None))
     other = ("coma", {**TINY_COMA, "missions": 2, "lr_actor": 1.0}, env, str(tmp_path / "run"),
              False)
     with pytest.raises(CheckpointError, match="other COMA settings") as caught:
-        _train_runs([other], 1, RayCluster(ray_cluster, owned=False, address=None))
+        train_runs([other], 1, RayCluster(ray_cluster, owned=False, address=None))
     assert "RayTaskError" in repr(caught.value.__cause__)  # the remote traceback is chained

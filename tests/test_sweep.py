@@ -16,7 +16,7 @@ import pytest
 
 from ipp_toolkit.config import config_to_dict
 from reports.cli import study_main
-from reports.studies import _training_mission
+from reports.studies import training_mission
 from reports.sweep import (
     DIVERGED,
     GridPoint,
@@ -143,7 +143,7 @@ def _fake_run(folder: Path, config, updates: int) -> None:
     """A run folder as training leaves it, without weights: config.json, progress.csv and an
     empty last.pt."""
     folder.mkdir(parents=True)
-    env = config_to_dict(_training_mission(1.0))
+    env = config_to_dict(training_mission(1.0))
     (folder / "config.json").write_text(json.dumps({"coma": config.to_dict(), "env": env}))
     rows = "update,missions\n" + "".join(f"{k},{2 * k}\n" for k in range(1, updates + 1))
     (folder / "progress.csv").write_text(rows)
@@ -162,7 +162,7 @@ def test_finished_and_diverged_runs_are_not_trained_and_other_runs_are_refused(
         trained.append(task[0])
         raise TrainingDiverged("loss is nan")
 
-    monkeypatch.setattr(reports.sweep, "_train_run", diverges)
+    monkeypatch.setattr(reports.sweep, "train_run", diverges)
     kwargs = dict(seeds=[2], overrides=TINY, missions=4, train_resolution=1.0, trials=1,
                   eval_resolution=1.0, out=tmp_path, progress=False)
     finished = preset("cpu", **TINY, missions=4, lr_actor=1e-4, seed=2)
