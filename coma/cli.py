@@ -29,11 +29,12 @@ from typing import Any
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.progress import report_interrupt
+from ipp_toolkit.ray_backend import add_backend_flags, check_backend_flags, probe
 from ipp_toolkit.settings import build_env_config, merge_sections, parse_feature_flags
 
 from .config import PRESETS, VARIANTS, COMAConfig, mission_settings, nested_fields, preset
 from .learner import TrainingDiverged, train
-from .parallel import BACKENDS, resolve_device
+from .parallel import resolve_device
 from .persistence import DEFAULT_SHIPPED, resolve_policy
 from .recipes import RECIPES, Stage, recipe
 from .validation import validation_settings
@@ -101,13 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="workers that fly each update's missions and the validation "
                              "missions (default 1: this process); the same seed trains the "
                              "same weights with any K (--backend ray: K Ray actors of one CPU)")
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help="where the workers run: processes on this machine, or Ray actors "
-                             "(needs the ray extra: pip install -c constraints.txt -e "
-                             "\".[ray]\"; see docs/ray.md)")
-    parser.add_argument("--address", default=None, metavar="HOST:PORT",
-                        help="with --backend ray: the Ray cluster's head, as printed by `ray "
-                             "start --head`; default: start a local Ray with --workers CPUs")
+    add_backend_flags(parser, "where the workers run: processes on this machine, or Ray actors",
+                      "")
     parser.add_argument("--device", default="cpu", metavar="cpu|cuda",
                         help="where the networks learn (default cpu); the missions always fly "
                              "on CPUs, with a copy of the actor")
@@ -128,15 +124,10 @@ def _positive_int(text: str) -> int:
 def _check_compute(args: argparse.Namespace) -> None:
     """Refuse a bad --backend / --address / --device before anything is written
     (ValueError, ImportError or ConnectionError with the message to print)."""
-    if args.address is not None and args.backend != "ray":
-        raise ValueError("--address needs --backend ray")
+    check_backend_flags(args.backend, args.address)  # RayUnavailableError names the install
     resolve_device(args.device)
-    if args.backend == "ray":
-        from ipp_toolkit.ray_backend import probe, require_ray
-
-        require_ray()  # RayUnavailableError (an ImportError) names the install command
-        if args.address is not None:
-            probe(args.address)  # fails within seconds where nothing answers
+    if args.backend == "ray" and args.address is not None:
+        probe(args.address)  # fails within seconds where nothing answers
 
 
 def coerce_value(text: str) -> Any:

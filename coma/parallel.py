@@ -42,6 +42,7 @@ from typing import Any
 import torch
 
 from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.evaluation import BACKENDS  # where workers run: local processes or Ray
 from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.process_pool import (
     children_ignore_sigint,
@@ -62,9 +63,6 @@ from .validation import GreedyFlights, fly_greedy
 __all__ = ["BACKENDS", "MAX_RETRIES", "RunSpec", "RolloutWorker", "Workers", "InProcess",
            "ProcessWorkers", "RayWorkers", "make_workers", "split_missions", "to_channels_last",
            "resolve_device", "check_workers", "cpu_actor_state"]
-
-BACKENDS = ("local", "ray")
-"""Where the workers run: processes on this machine, or Ray actors."""
 
 MAX_RETRIES = 3
 """How often a call is flown again after a worker died (the local pool; Ray's own retries of

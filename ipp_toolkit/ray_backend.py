@@ -50,7 +50,8 @@ from .process_pool import (
     temporary_environment,
 )
 
-__all__ = ["CONNECT_TIMEOUT_S", "INSTALL_COMMAND", "MAX_RETRIES", "RayCluster",
+__all__ = ["add_backend_flags", "check_backend_flags", "CONNECT_TIMEOUT_S", "INSTALL_COMMAND",
+           "MAX_RETRIES", "RayCluster",
            "RayUnavailableError", "connect", "probe", "require_ray", "run_calls", "run_ray",
            "session", "start_local"]
 
@@ -68,6 +69,43 @@ _HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
 
 class RayUnavailableError(ImportError):
     """``backend="ray"`` was asked and Ray cannot be imported; the message says how to install."""
+
+
+def add_backend_flags(parser: Any, backend_help: str, address_help: str) -> None:
+    """The command line's ``--backend local|ray`` and ``--address HOST:PORT`` (one spelling
+    for ``ipp-compare``, ``ipp-study`` and ``ipp-train coma``; check them with
+    :func:`check_backend_flags`).
+
+    Args:
+        parser: an ``argparse.ArgumentParser``.
+        backend_help: what runs where, e.g. "where the missions fly: processes on this
+            machine, or Ray tasks" (the install note is appended).
+        address_help: appended to the address's help after "as printed by `ray start
+            --head`", e.g. " (results are written here)".
+    """
+    from .evaluation import BACKENDS
+
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help=f"{backend_help} (needs the ray extra: {INSTALL_COMMAND}; see "
+                             "docs/ray.md)")
+    parser.add_argument("--address", default=None, metavar="HOST:PORT",
+                        help="with --backend ray: the Ray cluster's head, as printed by `ray "
+                             f"start --head`{address_help}; default: start a local Ray with "
+                             "--workers CPUs")
+
+
+def check_backend_flags(backend: str, address: str | None) -> None:
+    """Refuse the flags of :func:`add_backend_flags` that cannot run, before any work.
+
+    Raises:
+        ValueError: ``--address`` without ``--backend ray``.
+        RayUnavailableError: ``--backend ray`` without Ray (the message gives the install
+            command).
+    """
+    if address is not None and backend != "ray":
+        raise ValueError("--address needs --backend ray")
+    if backend == "ray":
+        require_ray()
 
 
 def require_ray() -> Any:

@@ -25,6 +25,7 @@ import numpy as np
 
 from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.progress import report_interrupt
+from ipp_toolkit.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
 from ipp_toolkit.settings import build_env_config, comm_label, describe_config, parse_comm
 
 
@@ -179,14 +180,8 @@ def _compare_parser() -> argparse.ArgumentParser:
                         default=min(2, os.cpu_count() or 1),
                         metavar="N", help="parallel evaluation processes; min(2, CPU count) "
                                           "(--backend ray: the CPUs of the local Ray)")
-    parser.add_argument("--backend", choices=("local", "ray"), default="local",
-                        help="where the missions fly: processes on this machine, or Ray tasks "
-                             "(needs the ray extra: pip install -c constraints.txt -e "
-                             "\".[ray]\"; see docs/ray.md)")
-    parser.add_argument("--address", default=None, metavar="HOST:PORT",
-                        help="with --backend ray: the Ray cluster's head, as printed by `ray "
-                             "start --head` (its CPUs fly the missions; results are written "
-                             "here, to --out); default: start a local Ray with --workers CPUs")
+    add_backend_flags(parser, "where the missions fly: processes on this machine, or Ray tasks",
+                      " (its CPUs fly the missions; results are written here, to --out)")
     parser.add_argument("--out", default=DEFAULT_COMPARE_OUT, metavar="DIR",
                         help="output folder; rerunning into it resumes the same configuration "
                              "and refuses another one")
@@ -241,15 +236,10 @@ def compare_main(argv: list[str] | None = None) -> int:
             area_size=args.area_size, grid_spacing=args.grid_spacing)
     except (ValueError, OSError) as err:
         return error(err)
-    if args.address is not None and args.backend != "ray":
-        return error("--address needs --backend ray")
-    if args.backend == "ray":
-        from ipp_toolkit.ray_backend import RayUnavailableError, require_ray
-
-        try:
-            require_ray()
-        except RayUnavailableError as err:
-            return error(err)
+    try:
+        check_backend_flags(args.backend, args.address)
+    except (ValueError, RayUnavailableError) as err:
+        return error(err)
     out = args.out
     if out == DEFAULT_COMPARE_OUT:
         out = out.format(agents=env_config.team.n_agents,
@@ -378,16 +368,10 @@ def study_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=_positive_int("--workers"), default=1,
                         help="evaluation processes and runs trained at once (--backend ray: "
                              "the CPUs of the local Ray)")
-    parser.add_argument("--backend", choices=("local", "ray"), default="local",
-                        help="where missions fly and runs train: processes on this machine, "
-                             "or Ray tasks on one Ray for the whole study (needs the ray "
-                             "extra: pip install -c constraints.txt -e \".[ray]\"; see "
-                             "docs/ray.md)")
-    parser.add_argument("--address", default=None, metavar="HOST:PORT",
-                        help="with --backend ray: the Ray cluster's head, as printed by `ray "
-                             "start --head` (results are written here, to --out, a folder "
-                             "the nodes share for credit/ablation); default: start a local "
-                             "Ray with --workers CPUs")
+    add_backend_flags(parser, "where missions fly and runs train: processes on this machine, "
+                      "or Ray tasks on one Ray for the whole study",
+                      " (results are written here, to --out, a folder the nodes share for "
+                      "credit/ablation)")
     parser.add_argument("--resolution", type=_positive_float, default=None)
     parser.add_argument("--out", default=None, help="study folder (default results/STUDY)")
     parser.add_argument("--variants", default="coma,central_qv,actor_independent,decentralised",
@@ -427,17 +411,11 @@ def study_main(argv: list[str] | None = None) -> int:
     from .studies import credit_assignment_study, robustness_study
 
     out = args.out or f"results/{args.study}"
-    if args.address is not None and args.backend != "ray":
-        print("ipp-study: error: --address needs --backend ray", file=sys.stderr)
+    try:
+        check_backend_flags(args.backend, args.address)
+    except (ValueError, RayUnavailableError) as err:
+        print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2
-    if args.backend == "ray":
-        from ipp_toolkit.ray_backend import RayUnavailableError, require_ray
-
-        try:
-            require_ray()
-        except RayUnavailableError as err:
-            print(f"ipp-study: error: {err}", file=sys.stderr)
-            return 2
     backend = {"backend": args.backend, "address": args.address}
     if args.sweep and args.study != "sweep":
         print(f"ipp-study: error: --sweep is for ipp-study sweep, not {args.study}",
