@@ -49,6 +49,16 @@ def _prefetch_line(row):
 
 
 @_jit
+def _prefetch_cache_row(value_index, prob, entropy, wentropy, m, i, c0, c1):
+    """Prefetch row ``i``, columns ``c0:c1``, of map ``m``'s index and three caches (the
+    row the refresh loops read next)."""
+    _prefetch_line(value_index[m, i, c0:c1])
+    _prefetch_line(prob[m, i, c0:c1])
+    _prefetch_line(entropy[m, i, c0:c1])
+    _prefetch_line(wentropy[m, i, c0:c1])
+
+
+@_jit
 def find_or_add(bits, slot, table_bits, size, shift, multiplier, out):
     """See :func:`ipp_toolkit.kernels.find_or_add`."""
     mask = slot.shape[0] - 1
@@ -456,10 +466,8 @@ def apply_targets(value_index, prob, entropy, wentropy, table_prob, table_entrop
             if t != stats_target:
                 for i in range(r0, r1):
                     if i + 1 < r1:
-                        _prefetch_line(value_index[m, i + 1, c0:c1])
-                        _prefetch_line(prob[m, i + 1, c0:c1])
-                        _prefetch_line(entropy[m, i + 1, c0:c1])
-                        _prefetch_line(wentropy[m, i + 1, c0:c1])
+                        _prefetch_cache_row(value_index, prob, entropy, wentropy, m, i + 1,
+                                            c0, c1)
                     runs = _uncovered(rects, senders, first, u, i, c0, c1, lo_buf, hi_buf,
                                       seg_lo, seg_hi)
                     _apply_runs(value_index, prob, entropy, wentropy, table_prob,
@@ -476,10 +484,7 @@ def apply_targets(value_index, prob, entropy, wentropy, table_prob, table_entrop
             n2 = n3 = 0
             for i in range(r0, r1):
                 if i + 1 < r1:
-                    _prefetch_line(value_index[m, i + 1, c0:c1])
-                    _prefetch_line(prob[m, i + 1, c0:c1])
-                    _prefetch_line(entropy[m, i + 1, c0:c1])
-                    _prefetch_line(wentropy[m, i + 1, c0:c1])
+                    _prefetch_cache_row(value_index, prob, entropy, wentropy, m, i + 1, c0, c1)
                 runs = _uncovered(rects, senders, first, u, i, c0, c1, lo_buf, hi_buf, seg_lo,
                                   seg_hi)
                 indices, probs = value_index[m, i], prob[m, i]
