@@ -2,6 +2,7 @@
 
     python benchmarks/coma_rollout_workers.py                   # K = 1 and 2, local processes
     python benchmarks/coma_rollout_workers.py --workers 1,2,4 --backend ray
+    python benchmarks/coma_rollout_workers.py --workers 2 --backend ray --address 127.0.0.1:6379
 
 Flies the rollouts of ``--updates`` updates of the ``cpu`` preset (50 missions of 4 UAVs,
 r_M = 0.5 m, the ``own_position`` plane, random networks, eps = 0.1) through
@@ -31,6 +32,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", default="1,2", help="worker counts, e.g. 1,2")
     parser.add_argument("--backend", default="local", choices=["local", "ray"])
+    parser.add_argument("--address", default=None,
+                        help="a running Ray cluster (with --backend ray), e.g. 127.0.0.1:6379")
     parser.add_argument("--updates", type=int, default=4)
     parser.add_argument("--resolution", type=float, default=0.5)
     args = parser.parse_args()
@@ -46,7 +49,7 @@ def main() -> None:
     spec = RunSpec(config, env, (env,), (env,), 0)
     reference = None
     for count in (int(k) for k in args.workers.split(",")):
-        with make_workers(spec, count, args.backend) as pool:
+        with make_workers(spec, count, args.backend, args.address) as pool:
             pool.rollout(networks, 0, 10 ** 6, per_update, 0.1)  # warm-up, not timed
             start = time.perf_counter()
             rollouts = [pool.rollout(networks, 0, k * per_update, per_update, 0.1)

@@ -329,7 +329,6 @@ class ProcessWorkers(Workers):
         executor, self._executor = self._executor, None
         if executor is None:
             return
-        executor.shutdown(wait=False, cancel_futures=True)
         # An interrupt or a failed update must not wait for the running workers' blocks.
         stop_workers(executor)
 

@@ -205,7 +205,6 @@ def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers
             stored.add(future)
             bar.update(1)
     except BaseException:
-        executor.shutdown(wait=False, cancel_futures=True)
         stop_workers(executor)
         raise
     executor.shutdown(wait=True, cancel_futures=True)
@@ -239,20 +238,23 @@ def children_ignore_sigint() -> Iterator[None]:
 
 
 def stop_workers(executor: concurrent.futures.ProcessPoolExecutor) -> None:
-    """Terminate the pool's workers now (an interrupt: their running missions are dropped).
+    """Shut the pool down now: cancel its pending tasks and terminate its workers (an
+    interrupt: their running missions are dropped).
 
     ``shutdown(cancel_futures=True)`` only cancels tasks not yet started; the running ones
     would hold the terminal until they end. The executor exposes no public way to stop them,
-    so its process table is read defensively.
+    so its process table and manager thread are read defensively, and before ``shutdown``,
+    which drops both.
     """
-    processes = getattr(executor, "_processes", None) or {}
-    for process in list(processes.values()):
+    processes = list((getattr(executor, "_processes", None) or {}).values())
+    manager = getattr(executor, "_executor_manager_thread", None)
+    executor.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
         with contextlib.suppress(Exception):
             process.terminate()
     # Let the pool's manager thread see its workers gone and close its pipes now: left to the
-    # interpreter's exit, its wake-up could race with that close and print a traceback after
-    # the one-line interrupt message.
-    manager = getattr(executor, "_executor_manager_thread", None)
+    # interpreter's exit, concurrent.futures' exit hook could wake it while it closes them
+    # and print a traceback ("Bad file descriptor") after the one-line interrupt message.
     if manager is not None:
         with contextlib.suppress(Exception):
             manager.join(timeout=10)

@@ -141,3 +141,32 @@ def test_coma_training_refuses_failures_for_now(tmp_path):
 
     with pytest.raises(ValueError, match="team.failures.*COMA"):
         train(preset("cpu", missions=1), small_config(team={"failures": [[1, 3]]}), tmp_path)
+
+
+def test_stop_workers_ends_running_tasks_and_the_manager_thread_at_once():
+    """An interrupt must not wait for running missions: the workers are terminated and the
+    pool's manager thread has ended when stop_workers returns (else concurrent.futures' exit
+    hook can race with its pipe close and print a traceback after the interrupt message)."""
+    import concurrent.futures
+    import multiprocessing
+    import time
+
+    from ipp_toolkit.process_pool import stop_workers
+
+    executor = concurrent.futures.ProcessPoolExecutor(
+        max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+    running = executor.submit(time.sleep, 120)
+    pending = executor.submit(time.sleep, 120)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not running.running():
+        time.sleep(0.05)
+    processes = list(executor._processes.values())
+    manager = executor._executor_manager_thread
+    start = time.monotonic()
+    stop_workers(executor)
+    assert time.monotonic() - start < 15
+    assert pending.done() and running.done()
+    assert not manager.is_alive()
+    for process in processes:
+        process.join(timeout=5)
+        assert not process.is_alive()
