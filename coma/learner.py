@@ -364,11 +364,16 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     if last_path.exists() and not resume:
         raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
                               "(--resume) to continue it, or choose another folder")
-    # IG's reference flies in local processes even with the ray backend, whose actors hold
-    # the CPUs of a local Ray.
-    reference = (reference_scores(checks, coma_config.seed, coma_config.eval_missions,
-                                  workers=min(workers, os.cpu_count() or 1))
-                 if coma_config.selection == "worst_vs_ig" else None)
+    # IG's reference flies before the actors exist (they hold their CPUs for the whole run):
+    # on the cluster at --address, else in local processes (a local Ray of the run is not
+    # started yet, and would cost its start-up twice).
+    reference = None
+    if coma_config.selection == "worst_vs_ig":
+        on_cluster = backend == "ray" and address is not None
+        reference = reference_scores(
+            checks, coma_config.seed, coma_config.eval_missions,
+            workers=workers if on_cluster else min(workers, os.cpu_count() or 1),
+            backend="ray" if on_cluster else "local", address=address if on_cluster else None)
     spec = RunSpec(coma_config, env_config, tuple(settings), tuple(checks), coma_config.seed)
     known = {**{("train", k): g for k, g in enumerate(geometries)},
              **{("check", k): g for k, g in enumerate(check_geometries)}}

@@ -241,8 +241,10 @@ def test_bad_compute_flags_exit_2_naming_the_value(tmp_path, capsys, monkeypatch
     assert exit_.value.code == 2 and "--workers" in capsys.readouterr().err
     with pytest.raises(ValueError, match="workers = 0"):
         train_tiny(out, workers=0)
-    with pytest.raises(ValueError, match="backend = 'dask'"):
+    with pytest.raises(ValueError, match="backend must be one of local, ray, got 'dask'"):
         train_tiny(out, backend="dask")
+    with pytest.raises(ValueError, match="address is only used with backend='ray'"):
+        train_tiny(out, address="127.0.0.1:6379")
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` now raises ImportError
     assert coma_main(["--out", str(out), "--backend", "ray", "--workers", "2"]) == 2
     err = capsys.readouterr().err.strip()
@@ -340,6 +342,29 @@ def test_two_ray_actors_train_the_weights_of_one_process(ray_cluster, reference_
     while ray_cluster.available_resources().get("CPU", 0) < 2:
         assert time.monotonic() < deadline, ray_cluster.available_resources()
         time.sleep(0.5)
+
+
+@pytest.mark.slow
+def test_igs_reference_flies_on_the_cluster_at_the_address(ray_cluster, tmp_path, monkeypatch):
+    """With --address, ``selection = worst_vs_ig``'s IG reference flies on the cluster (before
+    the actors take its CPUs) and gives the numbers of local processes."""
+    from coma import learner
+
+    calls = []
+
+    def recording(*args, **kwargs):
+        calls.append((kwargs["backend"], kwargs["address"]))
+        return learner_reference(*args, **kwargs)
+
+    learner_reference = learner.reference_scores
+    monkeypatch.setattr(learner, "reference_scores", recording)
+    address = ray_cluster.get_runtime_context().gcs_address
+    coma = {"selection": "worst_vs_ig"}
+    on_ray = train_tiny(tmp_path / "ray", workers=2, backend="ray", address=address,
+                        coma=coma)
+    here = train_tiny(tmp_path / "here", coma=coma)
+    assert calls == [("ray", address), ("local", None)]
+    assert_same_run(here, on_ray)  # the gaps to IG (progress.csv) and the selected weights
 
 
 @pytest.mark.slow
