@@ -39,7 +39,8 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, MlpExtractor
 from torch import nn
 
-from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_from_dict, config_to_dict
 from ipp_toolkit.features import gain_plane_channels, option_gain_cells
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
 from ipp_toolkit.planners import resolve_shipped
@@ -60,6 +61,7 @@ __all__ = [
     "save_policy",
     "load_policy",
     "masked_greedy_actions",
+    "NoOptimizer",
     "CHECKPOINT_KIND",
     "TRAINING_KIND",
     "DEFAULT_CHECKPOINT",
@@ -415,11 +417,41 @@ def _observation_space(shape: tuple[int, ...]) -> spaces.Box:
     return spaces.Box(-1.0, 1.0, shape, dtype=np.float32)
 
 
+class NoOptimizer:
+    """The optimiser of a policy rebuilt only to act (:func:`load_policy`): it refuses to step.
+
+    SB3 policies build their optimiser in ``_build``, and constructing any torch optimiser
+    imports ``torch._dynamo`` (``Optimizer.add_param_group`` is wrapped by
+    ``torch._disable_dynamo``): about 3 s of the ``ppo`` planner's construction, paid by
+    ``ipp-compare``'s main process and by each of its workers. A loaded policy is never
+    trained (training resumes through SB3's own model), so it gets this stub instead.
+
+    Args:
+        params: the policy's parameters (unused).
+        **kwargs: the optimiser's options SB3 passes (``lr``, ...; unused).
+    """
+
+    def __init__(self, params: Any, **kwargs: Any) -> None:
+        self.param_groups: list[dict[str, Any]] = []
+
+    def zero_grad(self, set_to_none: bool = True) -> None:
+        raise RuntimeError("this policy was loaded to act, not to train: it has no optimiser")
+
+    def step(self, closure: Any = None) -> None:
+        raise RuntimeError("this policy was loaded to act, not to train: it has no optimiser")
+
+
 def _build_policy(config: PPOTrainConfig, env_config: EnvConfig, obs_shape: tuple[int, ...],
-                  device: str = "cpu") -> Any:
-    """A fresh (untrained) policy network of the architecture ``config`` describes."""
+                  device: str = "cpu", optimizer: bool = True) -> Any:
+    """A fresh (untrained) policy network of the architecture ``config`` describes.
+
+    ``optimizer=False`` gives it a :class:`NoOptimizer` (a policy that will only act).
+    """
+    kwargs = policy_kwargs(config, env_config)
+    if not optimizer:
+        kwargs["optimizer_class"] = NoOptimizer
     policy = policy_class(config)(_observation_space(obs_shape), spaces.Discrete(N_ACTIONS),
-                                  lambda _: config.lr, **policy_kwargs(config, env_config))
+                                  lambda _: config.lr, **kwargs)
     return policy.to(device)
 
 
@@ -461,6 +493,8 @@ def save_policy(path: str | Path, model: Any, config: PPOTrainConfig, env_config
 def load_policy(path: str | Path, device: str = "cpu") -> tuple[Any, dict[str, Any]]:
     """Rebuild the policy stored in a ``policy.pt`` (or ``checkpoint.pt``) and load its weights.
 
+    The policy is rebuilt to act: its optimiser is a :class:`NoOptimizer`.
+
     Returns:
         (policy in eval mode, metadata dict with ``obs_shape`` (tuple), ``ppo_config``
         (:class:`PPOTrainConfig`), ``env_config`` (:class:`EnvConfig`), ``algo`` and
@@ -498,7 +532,7 @@ def _rebuild(path: Path, data: dict[str, Any], device: str) -> tuple[Any, dict[s
         raise CheckpointError(f"checkpoint {str(path)!r} holds an invalid configuration: "
                               f"{error}") from None
     try:
-        policy = _build_policy(config, env_config, obs_shape, device)
+        policy = _build_policy(config, env_config, obs_shape, device, optimizer=False)
     except ValueError as error:
         raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
     try:

@@ -37,14 +37,15 @@ from sb3_contrib.qrdqn.policies import QRDQNPolicy
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.dqn.policies import DQNPolicy
 
-from ipp_toolkit.config import EnvConfig, config_from_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_from_dict
 from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, load_torch
 from ipp_toolkit.team import N_ACTIONS
 
 from .ppo import CHECKPOINT_KIND as PPO_KIND
 from .ppo import TRAINING_KIND as PPO_TRAINING_KIND
-from .ppo import SmallCNN, masked_greedy_actions
+from .ppo import NoOptimizer, SmallCNN, masked_greedy_actions
 from .ppo import load_policy as load_ppo_policy
 
 __all__ = [
@@ -176,10 +177,16 @@ def sb3_policy_kwargs(algo: str, architecture: PolicyArchitecture) -> dict[str, 
 
 def build_policy(algo: str, architecture: PolicyArchitecture, obs_shape: tuple[int, ...],
                  n_actions: int = N_ACTIONS, device: str = "cpu") -> BasePolicy:
-    """A fresh (untrained) policy of ``algo`` for (C, G, G) observations, in eval mode."""
+    """A fresh (untrained) policy of ``algo`` for (C, G, G) observations, in eval mode.
+
+    It is built to act (weights are loaded into it): its optimiser is a
+    :class:`~baselines.ppo.NoOptimizer`, as a torch optimiser's import of ``torch._dynamo``
+    costs seconds per process.
+    """
     observation_space = spaces.Box(-1.0, 1.0, tuple(obs_shape), dtype=np.float32)
     policy = policy_class(algo)(observation_space, spaces.Discrete(int(n_actions)),
-                                lambda _: 1e-4, **sb3_policy_kwargs(algo, architecture))
+                                lambda _: 1e-4, optimizer_class=NoOptimizer,
+                                **sb3_policy_kwargs(algo, architecture))
     policy = policy.to(device)
     policy.set_training_mode(False)
     return policy

@@ -32,7 +32,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from tqdm.auto import tqdm
 
-from ipp_toolkit.config import EnvConfig, config_from_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_from_dict
 from ipp_toolkit.io import load_torch, save_torch, write_json
 from ipp_toolkit.process_pool import limit_blas_threads
 

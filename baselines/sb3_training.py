@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ipp_toolkit.config import EnvConfig, config_to_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_to_dict
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.vec import make_sb3_vec_env

@@ -89,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--init", metavar="POLICY",
                         help="start from this COMA policy file instead of a warm start "
                              "(fine-tuning), or a shipped one: --init shipped:NAME "
-                             "(paper-actor, prior, mixed; plain 'shipped': coma's default)")
+                             "(paper-actor, prior, prior-mixture, spatial-mixture; plain "
+                             "'shipped': coma's default)")
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=VALUE",
                         help="set a feature of the mission config, e.g. --feature "
                              "own_position=true or --feature gain_smoothing=5 (repeatable)")
@@ -214,7 +215,7 @@ def stage_configs(args: argparse.Namespace) -> list[tuple[Stage, COMAConfig, Env
         fields = nested_fields(stage.coma, changes)
         if k == 0 and "init_policy" not in changes and stage.init is not None:
             fields["init_policy"] = str(resolve_policy(stage.init))
-        elif k > 0 and stage.init is not None and stage.init.startswith("previous"):
+        elif k > 0 and stage.init == "previous":
             fields.pop("init_policy", None)
         defaults = merge_sections(TRAINING_DEFAULTS, stage.env)
         stages.append((stage, preset("cpu", **fields), _env_from_args(args, defaults)))
@@ -268,9 +269,8 @@ def _train_stages(args: argparse.Namespace, stages: list[tuple[Stage, COMAConfig
     """Train every stage into its folder; the exit code of :func:`main`."""
     try:
         for k, (stage, coma_config, env_config) in enumerate(stages):
-            if k > 0 and stage.init is not None and stage.init.startswith("previous"):
-                start = "last.pt" if stage.init == "previous:last" else "best.pt"
-                coma_config = coma_config.replace(init_policy=str(folders[k - 1] / start))
+            if k > 0 and stage.init == "previous":
+                coma_config = coma_config.replace(init_policy=str(folders[k - 1] / "best.pt"))
             # A later stage not begun yet starts afresh; the first one must exist to resume.
             resume = args.resume and (k == 0 or (folders[k] / "last.pt").exists())
             if len(stages) > 1:

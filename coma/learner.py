@@ -33,7 +33,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ipp_toolkit.config import EnvConfig, config_to_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_to_dict
 from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, write_json
 from ipp_toolkit.mission import MissionGeometry

@@ -42,7 +42,6 @@ from typing import Any
 import torch
 
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import BACKENDS  # where workers run: local processes or Ray
 from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.process_pool import (
     children_ignore_sigint,
@@ -53,6 +52,7 @@ from ipp_toolkit.process_pool import (
     single_thread_variables,
     stop_workers,
 )
+from ipp_toolkit.ray_backend import check_backend
 
 from .config import COMAConfig
 from .networks import ConvNet
@@ -60,7 +60,7 @@ from .persistence import COMANetworks, build_networks
 from .rollout import Rollout, actor_batches, collect_rollout
 from .validation import GreedyFlights, fly_greedy
 
-__all__ = ["BACKENDS", "MAX_RETRIES", "RunSpec", "RolloutWorker", "Workers", "InProcess",
+__all__ = ["MAX_RETRIES", "RunSpec", "RolloutWorker", "Workers", "InProcess",
            "ProcessWorkers", "RayWorkers", "make_workers", "split_missions", "to_channels_last",
            "resolve_device", "check_workers", "cpu_actor_state"]
 
@@ -450,10 +450,13 @@ def make_workers(spec: RunSpec, workers: int = 1, backend: str = "local",
 
 
 def check_workers(workers: int, backend: str, address: str | None) -> None:
-    """Refuse bad worker settings by name (ValueError)."""
+    """Refuse bad worker settings by name, before anything is written.
+
+    Raises:
+        ValueError: ``workers`` below 1 or not an integer; a bad backend or address (as
+            :func:`ipp_toolkit.ray_backend.check_backend`).
+        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
+    """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers = {workers!r}: must be an integer >= 1")
-    if backend not in BACKENDS:
-        raise ValueError(f"backend = {backend!r}: choose from {list(BACKENDS)}")
-    if address is not None and backend != "ray":
-        raise ValueError("an address needs the ray backend (--address needs --backend ray)")
+    check_backend(backend, address)

@@ -22,7 +22,8 @@ from typing import Any
 
 import torch
 
-from ipp_toolkit.config import EnvConfig, config_from_dict, config_to_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_from_dict, config_to_dict
 from ipp_toolkit.features import actor_plane_names, gain_plane_channels
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
 from ipp_toolkit.planners import check_policy_transfer as check_transfer
@@ -35,12 +36,10 @@ from .networks import ConvNet, GainPriorActor
 
 __all__ = ["CHECKPOINT_KIND", "COMANetworks", "build_networks", "save_policy", "load_policy",
            "check_transfer", "shipped_policy", "resolve_policy", "SHIPPED_POLICIES",
-           "DEFAULT_SHIPPED", "SHIPPED_POLICY", "SHIPPED_MIXED_POLICY", "SHIPPED_PRIOR_POLICY"]
+           "DEFAULT_SHIPPED", "SHIPPED_POLICY", "SHIPPED_PRIOR_POLICY"]
 
 CHECKPOINT_KIND = "ipp-toolkit/coma"
 SHIPPED_POLICY = "coma_4agents_d25.pt"
-#: The policy fine-tuned on 2, 4 and 8 UAVs at D in {0, 25 m, inf} (planner ``coma_mixed``).
-SHIPPED_MIXED_POLICY = "coma_mixed.pt"
 #: The gain-prior policy (a residual over ``ig``'s objective), 4 agents, D = 25 m
 #: (planner ``coma_prior``).
 SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
@@ -49,8 +48,8 @@ SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 #: fractal, real), selected by its worst gap to IG over those families on validation missions.
 #: ``spatial-mixture``: the gain-prior actor over the ``ig_spatial`` objective
 #: (``features.gain_smoothing`` = 5 m), its residual trained by COMA on the terrain mixture.
+#: Removed names (``mixed``) are refused with a hint: ``ipp_toolkit.planners.REMOVED_NAMES``.
 SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
-                    "mixed": SHIPPED_MIXED_POLICY,
                     "prior-mixture": "coma_prior_mixture_4agents_d25.pt",
                     "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt"}
 #: The shipped policy the ``coma`` planner flies by default: the best on validation missions

@@ -28,7 +28,7 @@ from .persistence import (
     resolve_policy,
 )
 
-__all__ = ["COMAPlanner", "COMAMixedPlanner", "COMAPriorPlanner"]
+__all__ = ["COMAPlanner", "COMAPriorPlanner"]
 
 
 class COMAPlanner(Planner):
@@ -36,7 +36,8 @@ class COMAPlanner(Planner):
 
     Args:
         checkpoint: a policy file (``best.pt`` / ``last.pt`` of ``ipp-train coma``) or a
-            shipped policy by name, ``shipped:NAME`` (``paper-actor``, ``prior``, ``mixed``);
+            shipped policy by name, ``shipped:NAME`` (the keys of
+            :data:`coma.persistence.SHIPPED_POLICIES`);
             default: the best validated shipped policy (``DEFAULT_SHIPPED``).
     """
 
@@ -81,20 +82,6 @@ class COMAPlanner(Planner):
         observations = np.stack([view.observation for view in views])
         masks = np.stack([view.mask for view in views]).astype(bool)
         return greedy_actions(self.actor, observations, masks)
-
-
-class COMAMixedPlanner(COMAPlanner):
-    """Deprecated alias of ``coma=shipped:mixed``: the policy fine-tuned on mixed teams.
-
-    The shipped ``coma`` policy, fine-tuned with one (team size, range) pair per update from
-    2, 4, 8 UAVs x D in {0, 25 m, inf} (``ipp-train coma --init shipped --team-sizes 2,4,8
-    --comm-ranges 0,25,inf``; not in the paper, whose robustness study applies the 4-UAV
-    policy without retraining). ``checkpoint`` overrides the packaged file like ``coma``'s.
-    """
-
-    name = "coma_mixed"
-    shipped = "mixed"
-    deprecated = "coma=shipped:mixed"
 
 
 class COMAPriorPlanner(COMAPlanner):

@@ -3,10 +3,10 @@
 ``ipp-train coma --preset NAME --out DIR`` retrains the shipped policy ``NAME`` (the names of
 ``coma=shipped:NAME``): the learner's fields, the training missions (terrain, features, team
 settings) and, for fine-tuned policies, every stage in order. A multi-stage recipe trains
-stage k into ``DIR/stage-k`` and starts stage k + 1 from stage k's ``best.pt`` (or
-``last.pt`` where the shipped policy did); with ``--resume`` a finished stage is kept and the
-first unfinished one continues. Flags given with a recipe (``--seed``, ``--missions``,
-``--set``, ``--feature``, ...) change every stage, e.g. ``--missions 200`` for a quick try.
+stage k into ``DIR/stage-k`` and starts stage k + 1 from stage k's ``best.pt``; with
+``--resume`` a finished stage is kept and the first unfinished one continues. Flags given
+with a recipe (``--seed``, ``--missions``, ``--set``, ``--feature``, ...) change every stage,
+e.g. ``--missions 200`` for a quick try.
 
 The values are those recorded with the shipped weights (``coma/checkpoints/*.json``, the
 ``command`` entries), so a recipe is documentation that runs. Training is stochastic in the
@@ -32,8 +32,8 @@ class Stage:
             dict, ``{"warm_start": {"planner": ""}}``; see :func:`coma.config.nested_fields`).
         env: mission config sections over ``ipp-train coma``'s defaults (r_M = 0.5 m, the
             own-position plane), e.g. ``{"features": {"gain": True}}``.
-        init: where the networks start: None (fresh), ``shipped:NAME``, or ``previous`` /
-            ``previous:last`` for the previous stage's ``best.pt`` / ``last.pt``.
+        init: where the networks start: None (fresh), ``shipped:NAME``, or ``previous`` for
+            the previous stage's ``best.pt``.
     """
 
     name: str
@@ -46,7 +46,6 @@ _GAIN_PRIOR = {"warm_start": {"planner": ""}, "gain_prior": 50.0, "critic_warmup
                "eval_every": 5, "checkpoint_every": 5}
 _MIXTURE_SELECTION = {"validation_terrains": ("split", "blobs", "fractal", "real"),
                       "selection": "worst_vs_ig", "eval_missions": 30}
-_SETTINGS = {"team_sizes": (2, 4, 8), "comm_ranges": (0.0, 25.0, float("inf"))}
 
 #: Every shipped policy's recipe, by its ``shipped:NAME``.
 RECIPES: dict[str, tuple[Stage, ...]] = {
@@ -56,12 +55,6 @@ RECIPES: dict[str, tuple[Stage, ...]] = {
     "prior": (
         Stage("prior", {**_GAIN_PRIOR, "missions": 3000, "lr_actor": 3e-4,
                         "eval_missions": 20}, {"features": {"gain": True}}),
-    ),
-    "mixed": (
-        Stage("critic", {**_SETTINGS, "missions": 2250, "eps_start": 0.02, "lr_actor": 1e-8,
-                         "eval_missions": 20, "eval_every": 1000}, init="shipped:paper-actor"),
-        Stage("mixed", {**_SETTINGS, "missions": 25_000, "eps_start": 0.02, "lr_actor": 1e-4,
-                        "eval_missions": 20, "eval_every": 15}, init="previous:last"),
     ),
     "prior-mixture": (
         Stage("prior", {**_GAIN_PRIOR, "missions": 3000, "lr_actor": 3e-4,

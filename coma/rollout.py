@@ -4,7 +4,9 @@ This module owns :class:`Rollout` (one update's data: actor, critic and value in
 actions, the behaviour policy's probabilities, rewards; :meth:`Rollout.concatenate` joins the
 parts flown by several workers) and :func:`collect_rollout`, which plays E missions of B steps
 at once, sampling every agent's action from the bounded softmax of the actor (one forward
-pass per group of missions and step). The learner (``coma.learner``) trains on rollouts,
+pass per group of missions and step); the missions are reset and stepped by the mission
+driver (:mod:`ipp_toolkit.driver`), this module decides the actions and records the learner's
+inputs. The learner (``coma.learner``) trains on rollouts,
 ``coma.parallel`` splits their missions over workers, the warm start (``coma.warm_start``)
 fills them with a demonstrator's actions, and the throughput benchmark times them.
 
@@ -30,8 +32,9 @@ import numpy as np
 import torch
 
 from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.driver import fly_missions, start_missions
 from ipp_toolkit.features import actor_observations
-from ipp_toolkit.mission import MissionGeometry, MissionState, reset_mission, step_mission
+from ipp_toolkit.mission import MissionGeometry, MissionState
 from ipp_toolkit.planners import Planner, agent_views
 from ipp_toolkit.seeding import planner_seed
 from ipp_toolkit.team import N_ACTIONS
@@ -157,11 +160,12 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
     """Play ``n_missions`` missions in lock-step with the bounded-softmax policy.
 
     Missions ``first_mission ... first_mission + n_missions - 1`` of run ``seed`` are used, so
-    consecutive updates see fresh terrains. The actor runs once per step for all agents of
-    each group of :func:`actor_batches`; the critic inputs are built with the joint action just
-    sampled. Mission k draws its actions from its own stream (:func:`sampling_generator`), so
-    its content does not depend on the other missions of the call (as long as the call cuts no
-    group: ``coma.parallel`` splits at group boundaries).
+    consecutive updates see fresh terrains; :func:`ipp_toolkit.driver.fly_missions` flies them,
+    and the policy callback here records a step's inputs before the step. The actor runs once
+    per step for all agents of each group of :func:`actor_batches`; the critic inputs are built
+    with the joint action just sampled. Mission k draws its actions from its own stream
+    (:func:`sampling_generator`), so its content does not depend on the other missions of the
+    call (as long as the call cuts no group: ``coma.parallel`` splits at group boundaries).
 
     Args:
         demonstrators: one planner per mission that acts instead of the actor (demonstrations
@@ -169,8 +173,7 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
     """
     variant = networks.coma_config.variant
     features = env_config.features
-    states = [reset_mission(env_config, seed, first_mission + e, namespace, geometry)
-              for e in range(n_missions)]
+    states = start_missions(env_config, seed, first_mission, n_missions, namespace, geometry)
     groups = actor_batches(first_mission, n_missions)
     if demonstrators is not None:
         if len(demonstrators) != n_missions:
@@ -182,11 +185,11 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
     else:
         streams = [sampling_generator(seed, first_mission + e, namespace)
                    for e in range(n_missions)]
-    actor_frames, critic_frames, value_frames, mask_frames, action_frames, reward_frames = \
-        [], [], [], [], [], []
+    actor_frames, critic_frames, value_frames, mask_frames, action_frames = [], [], [], [], []
     behaviour_frames: list[np.ndarray] = []
-    returns = np.zeros(n_missions)
-    for _ in range(env_config.team.budget):
+
+    def act(states: Sequence[MissionState]) -> np.ndarray:
+        """(E, N) actions of this step; records the step's inputs (the critic's with them)."""
         obs = np.stack([actor_observations(s, features) for s in states])  # (E, N, C, G, G)
         masks = np.stack([_learning_masks(s) for s in states])  # (E, N, 6)
         if demonstrators is None:
@@ -212,13 +215,13 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
         if networks.value is not None:
             value_frames.append(np.stack([value_input(s, features, obs[e])
                                           for e, s in enumerate(states)]))
-        rewards = np.array([step_mission(s, actions[e]) for e, s in enumerate(states)])
-        returns += rewards
         actor_frames.append(obs)
         mask_frames.append(masks)
         action_frames.append(actions)
         behaviour_frames.append(behaviour)
-        reward_frames.append(rewards)
+        return actions
+
+    flight = fly_missions(states, act)
     return Rollout(
         actor_obs=_stack_time(actor_frames),
         critic_obs=_stack_time(critic_frames),
@@ -226,7 +229,7 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
         masks=_stack_time(mask_frames),
         actions=_stack_time(action_frames).long(),
         behaviour_probs=_stack_time(behaviour_frames).float(),
-        rewards=torch.from_numpy(np.stack(reward_frames, axis=1)).float(),
-        returns=returns,
-        final_entropy=np.array([s.history[-1].entropy for s in states]),
+        rewards=torch.from_numpy(flight.rewards).float(),
+        returns=flight.returns(),
+        final_entropy=flight.curve("entropy")[:, -1],
     )

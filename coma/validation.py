@@ -19,8 +19,9 @@ import numpy as np
 from torch import nn
 
 from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.driver import fly_missions, start_missions
 from ipp_toolkit.features import actor_observations
-from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
+from ipp_toolkit.mission import MissionGeometry, MissionState
 from ipp_toolkit.team import N_ACTIONS
 
 from .config import COMAConfig
@@ -69,28 +70,25 @@ def fly_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometr
                first_mission: int, n_missions: int, namespace: str = "validation"
                ) -> GreedyFlights:
     """Fly missions ``first_mission .. first_mission + n_missions - 1`` of run ``seed`` in
-    lock-step with the greedy policy and record each one (the actor scores the agents of
-    each group of :func:`coma.rollout.actor_batches` together, so a mission's record does not
-    depend on the missions flown beside it)."""
-    states = [reset_mission(env_config, seed, first_mission + m, namespace, geometry)
-              for m in range(n_missions)]
+    lock-step (:func:`ipp_toolkit.driver.fly_missions`) with the greedy policy and record
+    each one (the actor scores the agents of each group of :func:`coma.rollout.actor_batches`
+    together, so a mission's record does not depend on the missions flown beside it)."""
     features = env_config.features
     groups = actor_batches(first_mission, n_missions)
-    rewards = []
-    for _ in range(env_config.team.budget):
+
+    def act(states: Sequence[MissionState]) -> np.ndarray:
+        """(E, N) greedy actions of this step."""
         obs = np.stack([actor_observations(s, features) for s in states])
         masks = np.stack([s.masks() for s in states])
-        actions = np.concatenate([
+        return np.concatenate([
             greedy_actions(actor, obs[a:b].reshape(-1, *obs.shape[2:]),
                            masks[a:b].reshape(-1, N_ACTIONS)).reshape(b - a, -1)
             for a, b in groups])
-        rewards.append([step_mission(s, actions[e]) for e, s in enumerate(states)])
-    steps = range(env_config.team.budget + 1)
-    return GreedyFlights(
-        rewards=np.array(rewards, dtype=np.float64).T.reshape(n_missions, -1),
-        entropy=np.array([[s.history[t].entropy for t in steps] for s in states],
-                         dtype=np.float64),
-        f1=np.array([[s.history[t].f1 for t in steps] for s in states], dtype=np.float64))
+
+    flight = fly_missions(start_missions(env_config, seed, first_mission, n_missions,
+                                         namespace, geometry), act)
+    return GreedyFlights(rewards=flight.rewards, entropy=flight.curve("entropy"),
+                         f1=flight.curve("f1"))
 
 
 def evaluate_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometry,

@@ -5,7 +5,8 @@ PettingZoo view (:class:`IPPEnv`). Learners, planners and reports build on this 
 it imports none of them.
 """
 
-from .config import EnvConfig, load_config, save_config
+from .config import EnvConfig
+from .config_io import load_config, save_config
 from .env import IPPEnv, parallel_env
 from .mission import InvalidActionError, MissionState, reset_mission, step_mission
 

@@ -1,4 +1,5 @@
-"""Configuration of a mission: dataclasses with validation, YAML in and out.
+"""Configuration of a mission: dataclasses with validation (YAML in and out:
+:mod:`ipp_toolkit.config_io`).
 
 Every number of the simulator is a field here; the defaults reproduce the paper.
 Validation happens at construction and names the bad field and value, so a typo in a YAML
@@ -12,13 +13,9 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
-
-from .io import atomic_write, read_yaml
 
 __all__ = [
     "WorldConfig",
@@ -33,11 +30,6 @@ __all__ = [
     "start_for_team_size",
     "fixed_starts_fit",
     "fixed_start_waypoints",
-    "read_config_file",
-    "load_config",
-    "save_config",
-    "config_from_dict",
-    "config_to_dict",
     "check_int",
 ]
 
@@ -563,6 +555,7 @@ _SECTIONS: dict[str, type] = {
 }
 
 
+
 def _build(cls: type, values: Mapping[str, Any], section: str) -> Any:
     if not isinstance(values, Mapping):
         raise ValueError(f"invalid config: section {section!r} must be a mapping, got {values!r}")
@@ -573,76 +566,15 @@ def _build(cls: type, values: Mapping[str, Any], section: str) -> Any:
                          f"known keys: {sorted(known)}")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
-
-def _check_keys(values: Mapping[str, Any]) -> None:
-    """Refuse unknown sections, sections that are not mappings and unknown keys."""
-    unknown = sorted(set(values) - set(_SECTIONS))
-    if unknown:
-        raise ValueError(f"invalid config: unknown section(s) {unknown}; "
-                         f"known sections: {sorted(_SECTIONS)}")
-    for name, section in values.items():
-        if not isinstance(section, Mapping):
-            raise ValueError(f"invalid config: section {name!r} must be a mapping, "
-                             f"got {section!r}")
-        known = {f.name for f in fields(_SECTIONS[name])}
-        unknown = sorted(set(section) - known)
-        if unknown:
-            raise ValueError(f"invalid config: unknown key(s) {unknown} in section {name!r}; "
-                             f"known keys: {sorted(known)}")
+_MOVED_TO_CONFIG_IO = ("read_config_file", "load_config", "save_config", "config_from_dict",
+                       "config_to_dict")
 
 
-def config_from_dict(values: Mapping[str, Any] | None) -> EnvConfig:
-    """Build an :class:`EnvConfig` from nested dicts; unknown sections or keys are rejected."""
-    values = dict(values or {})
-    _check_keys(values)
-    return EnvConfig(**{name: _build(cls, values[name], name)
-                        for name, cls in _SECTIONS.items() if name in values})
+def __getattr__(name: str) -> Any:
+    """The dict and YAML functions live in :mod:`ipp_toolkit.config_io`; importing them from
+    here still works (scripts written before the split)."""
+    if name in _MOVED_TO_CONFIG_IO:
+        from . import config_io
 
-
-def config_to_dict(config: EnvConfig) -> dict[str, Any]:
-    """Nested plain dict of a config (tuples as lists, inf as the string 'inf'), YAML/JSON-safe."""
-
-    def plain(value: Any) -> Any:
-        if isinstance(value, tuple):
-            return [plain(v) for v in value]
-        if isinstance(value, float) and math.isinf(value):
-            return "inf"
-        return value
-
-    return {name: {k: plain(v) for k, v in dataclasses.asdict(getattr(config, name)).items()}
-            for name in _SECTIONS}
-
-
-def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """The sections a YAML config file writes, as nested dicts, checked but not filled.
-
-    Raises:
-        ValueError: the file cannot be read, is not YAML, writes a key twice, is not a mapping
-            of sections, or has an unknown section or key (the message names the file).
-    """
-    path = Path(path)
-    values = read_yaml(path, "config file")
-    if values is None:
-        return {}
-    if not isinstance(values, Mapping):
-        raise ValueError(f"config file {str(path)!r} must hold a mapping of sections")
-    try:
-        _check_keys(values)
-    except ValueError as err:
-        raise ValueError(f"{err} (in config file {str(path)!r})") from None
-    return {name: dict(section) for name, section in values.items()}
-
-
-def load_config(path: str | os.PathLike[str]) -> EnvConfig:
-    """Read a YAML config; missing sections and keys take their defaults."""
-    values = read_config_file(path)
-    try:
-        return config_from_dict(values)
-    except ValueError as err:
-        raise ValueError(f"{err} (in config file {os.fspath(path)!r})") from None
-
-
-def save_config(config: EnvConfig, path: str | os.PathLike[str]) -> None:
-    """Write a config as YAML (atomically: a temporary file renamed into place)."""
-    text = yaml.safe_dump(config_to_dict(config), sort_keys=False).encode()
-    atomic_write(path, lambda handle: handle.write(text))
+        return getattr(config_io, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

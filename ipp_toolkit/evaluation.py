@@ -14,16 +14,19 @@ Results are tidy rows, one per (planner, mission, step) with the columns
 :data:`RESULT_COLUMNS`; :meth:`EvaluationResult.curves` turns them into (missions, B + 1)
 arrays. :func:`load_results` reads a folder back.
 
-This module owns the mission loop (:func:`run_mission`), the task runner that flies one
-(planner label, mission) with cached planners, and :func:`evaluate`. Its neighbours own the
-rest: planner specs and their syntax (:mod:`ipp_toolkit.planner_specs`), the planner seed
-(:func:`ipp_toolkit.seeding.planner_seed`), the worker processes
-(:mod:`ipp_toolkit.process_pool`), the optional Ray backend (:mod:`ipp_toolkit.ray_backend`,
-imported only when asked) and the folder layout (:mod:`ipp_toolkit.result_store`).
+This module owns one planner's mission (:func:`run_mission`: its views, its timed ``act``,
+its rows), the task runner that flies one (planner label, mission) with cached planners, and
+:func:`evaluate`. Its neighbours own the rest: the mission loop (:mod:`ipp_toolkit.driver`,
+shared with COMA's rollouts), planner specs and their syntax
+(:mod:`ipp_toolkit.planner_specs`), the planner seed (:func:`ipp_toolkit.seeding.planner_seed`),
+the worker processes (:mod:`ipp_toolkit.process_pool`), the backend check and the optional
+Ray backend (:mod:`ipp_toolkit.ray_backend`, which imports Ray only when asked) and the
+folder layout (:mod:`ipp_toolkit.result_store`).
 """
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import time
@@ -35,9 +38,11 @@ from typing import Any
 
 import numpy as np
 
-from .config import EnvConfig, check_int, config_from_dict
+from .config import EnvConfig, check_int
+from .config_io import config_from_dict
+from .driver import fly_missions, start_missions
 from .io import write_json
-from .mission import MissionGeometry, MissionState, reset_mission, step_mission
+from .mission import MissionGeometry, MissionState
 from .planner_specs import PlannerSpec, as_specs
 from .planners import Planner, PlannerFactory, agent_views, make_planner, planner_factory
 from .process_pool import (
@@ -47,6 +52,7 @@ from .process_pool import (
     transferable_factory,
 )
 from .progress import progress_bar
+from .ray_backend import check_backend
 from .result_store import (
     RESULT_COLUMNS,
     EvaluationError,
@@ -74,14 +80,11 @@ __all__ = [
     "run_mission",
     "evaluate",
     "load_results",
-    "BACKENDS",
 ]
 
 METRICS = ("entropy", "f1", "rmse", "reward", "plan_ms")
 """The numeric per-step columns that :meth:`EvaluationResult.curves` accepts."""
 
-BACKENDS = ("local", "ray")
-"""Where :func:`evaluate` flies its missions: this machine's processes, or Ray tasks."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -125,10 +128,8 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
         ``final_prob`` (H, W) float16 of the global map, ``area_size`` and ``resolution``
         (floats, metres).
     """
-    state = reset_mission(config, seed, mission, namespace, geometry)
+    state, = start_missions(config, seed, mission, 1, namespace, geometry)
     planner.reset(config, seed=planner_seed(seed, mission, namespace))
-    if observer is not None:
-        observer(state)
     base = {
         "planner": label if label is not None else str(getattr(planner, "name", "planner")),
         "agents": int(config.team.n_agents),
@@ -137,22 +138,27 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
         "seed": int(seed),
         "mission": int(mission),
     }
-    rewards = [math.nan]
     times = [math.nan]
-    positions = [state.positions_m().astype(np.float64)]
-    footprints = [state.footprints.astype(np.int64)]
-    while not state.done:
-        views = agent_views(state, planner.needs_observations,
-                            getattr(planner, "observation_features", None))
+    positions: list[np.ndarray] = []
+    footprints: list[np.ndarray] = []
+    features = getattr(planner, "observation_features", None)
+
+    def act(states: Sequence[MissionState]) -> list[Sequence[int]]:
+        views = agent_views(states[0], planner.needs_observations, features)
         start = time.perf_counter()
         actions = planner.act(views)
         times.append((time.perf_counter() - start) * 1000.0)
-        rewards.append(float(step_mission(state, actions)))
+        return [actions]
+
+    def watch(states: Sequence[MissionState]) -> None:
         if observer is not None:
-            observer(state)
+            observer(states[0])
         if record_trajectory:
-            positions.append(state.positions_m().astype(np.float64))
-            footprints.append(state.footprints.astype(np.int64))
+            positions.append(states[0].positions_m().astype(np.float64))
+            footprints.append(states[0].footprints.astype(np.int64))
+
+    flight = fly_missions([state], act, watch)
+    rewards = [math.nan, *flight.rewards[0].tolist()]
     rows = []
     for step, metrics in enumerate(state.history):
         rows.append({**base, "step": step, "entropy": float(metrics.entropy),
@@ -225,6 +231,7 @@ class _Runner:
         return planner
 
     def run(self, label: str, mission: int) -> tuple[str, int, dict[str, Any]]:
+        fresh = label not in self._planners
         planner = self.planner(label)
         try:
             result = run_mission(self.config, planner, self.seed, mission, self.namespace,
@@ -236,6 +243,12 @@ class _Runner:
             raise
         if self.single_thread:
             limit_torch_threads()
+            if fresh:
+                # A worker's first mission with a planner has imported what it needs (torch,
+                # SB3) and loaded the compiled kernels; those objects live as long as the
+                # worker, so they leave the collector's generations: its full passes, and
+                # the one when the worker exits (about 1 s with torch loaded), skip them.
+                gc.freeze()
         return label, mission, result
 
 
@@ -401,16 +414,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     seed = check_int("seed", seed, 0)
     if not isinstance(namespace, str) or not namespace:
         raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    if address is not None and (not isinstance(address, str) or not address.strip()):
-        raise ValueError(f"address must be a non-empty string or None, got {address!r}")
-    if address is not None and backend != "ray":
-        raise ValueError("address is only used with backend='ray'")
-    if backend == "ray":
-        from .ray_backend import require_ray
-
-        require_ray()  # a missing Ray is reported even when every mission is stored already
+    check_backend(backend, address)  # a missing Ray is reported even when nothing is left to fly
     if isinstance(record_missions, int | np.integer):
         record_missions = (int(record_missions),)
     record = frozenset(check_int("record_missions", k, 0) for k in record_missions)

@@ -176,6 +176,7 @@ class FootprintGainCache:
             self.totals[:, iz] = area[iz] * np.float64(gain)
         self.row_bounds, self.col_bounds = _separable_bounds(camera.rects)
         self.owner = np.zeros(n_maps, dtype=np.int64)  # all identical at the prior
+        self._overlap_cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
         self.table = _GainTable(maps, camera, gain_of)
         # 0/1 row and column memberships of every footprint over the whole map, for
         # weighted_sums: (Z, G, H) and (Z, W, G).
@@ -210,10 +211,17 @@ class FootprintGainCache:
         # and so their weights are identical.
         owners, inverse = np.unique(self.owner, return_inverse=True)
         weight = cell_weight if len(owners) == n_maps else cell_weight[owners]
-        if block > 1:  # two repeats of the small array beat broadcasting over 5 x 5 squares
-            weight = np.repeat(np.repeat(weight, block, axis=-2), block, axis=-1)
         cells = self.cells if len(owners) == n_maps else self.cells[owners]
-        weighted = cells * weight[:, None]
+        if block > 1:
+            # The weights repeated along the rows only: broadcast over each square's rows,
+            # the product still runs along whole rows (faster than repeating both ways, and
+            # than broadcasting over 5 x 5 squares). The same products either way.
+            weight = np.repeat(weight, block, axis=-1)  # (maps, H / block, W)
+            shape = cells.shape
+            weighted = (cells.reshape(shape[:2] + (size // block, block, size))
+                        * weight[:, None, :, None, :]).reshape(shape)
+        else:
+            weighted = cells * weight[:, None]
         sums = self.rows_full @ weighted @ self.cols_full_t
         return sums[inverse].astype(np.float64)
 
@@ -270,9 +278,20 @@ class FootprintGainCache:
         # The part of footprint (y, x) inside the region is rows(y) x cols(x), so all G x G
         # sums of the change are one matrix product: rows @ delta @ cols.T.
         for iz in range(self.n_altitudes):
-            rows = _overlap_matrix(self.row_bounds[iz], r0, r1)
-            cols = _overlap_matrix(self.col_bounds[iz], c0, c1)
+            rows, cols = self._overlaps(iz, region)
             self.totals[k, iz] += rows @ delta[iz] @ cols.T
+
+    def _overlaps(self, iz: int, region: Rect) -> tuple[np.ndarray, np.ndarray]:
+        """(G, rows) and (G, cols) float64 memberships of ``region``'s rows and columns in the
+        footprints at altitude ``iz`` (:func:`_overlap_matrix`), kept per region: a step
+        refreshes the same footprints in every map that heard them, and UAVs come back."""
+        key = (iz, *region)
+        found = self._overlap_cache.get(key)
+        if found is None:
+            r0, r1, c0, c1 = region
+            found = self._overlap_cache[key] = (_overlap_matrix(self.row_bounds[iz], r0, r1),
+                                                _overlap_matrix(self.col_bounds[iz], c0, c1))
+        return found
 
 
 class _GainTable:

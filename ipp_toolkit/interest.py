@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-__all__ = ["InterestSmoother", "interest_smoother", "smoothing_matrix"]
+__all__ = ["InterestSmoother", "block_means", "interest_smoother", "smoothing_matrix"]
 
 #: Side of the blocks the probabilities are averaged over before smoothing, in metres.
 BLOCK_METRES = 0.5
@@ -50,6 +50,54 @@ def _block_side(size: int, resolution: float) -> int:
     """The largest divisor of ``size`` not above BLOCK_METRES / resolution cells (>= 1)."""
     target = max(1, int(round(BLOCK_METRES / resolution)))
     return max(b for b in range(1, target + 1) if size % b == 0)
+
+
+def _numpy_block_means(prob: np.ndarray, block: int) -> np.ndarray:
+    n = prob.shape[-1] // block
+    return prob.reshape(prob.shape[:-2] + (n, block, n, block)).mean(axis=(-3, -1),
+                                                                     dtype=np.float32)
+
+
+def _ordered_block_means(prob: np.ndarray, block: int) -> np.ndarray:
+    n = prob.shape[-1] // block
+    cells = prob.reshape(prob.shape[:-2] + (n, block, n, block))
+    rows = cells[..., 0].astype(np.float32)  # (..., n, block, n): each block row, left to right
+    for j in range(1, block):
+        rows += cells[..., j]
+    sums = rows[..., 0, :].copy()  # then the block's rows, top to bottom
+    for i in range(1, block):
+        sums += rows[..., i, :]
+    return np.true_divide(sums, np.intp(block * block), out=sums, casting="unsafe")
+
+
+#: Per (shape, block): whether :func:`_ordered_block_means` gave NumPy's numbers on a probe.
+_ORDER_CHECKED: dict[tuple[tuple[int, ...], int], bool] = {}
+
+
+def block_means(prob: np.ndarray, block: int) -> np.ndarray:
+    """(..., n, n) float32 mean of every ``block`` x ``block`` square of (..., n * block,
+    n * block) float32 ``prob``: bit for bit ``prob.reshape(..., n, block, n, block)
+    .mean(axis=(-3, -1), dtype=np.float32)``, about seven times faster.
+
+    NumPy adds a square's cells in a fixed order here: each of its rows left to right, then
+    the row sums top to bottom (its pairwise summation unrolls only runs of 8 or more, so
+    ``block < 8``; with one block per side a square is one contiguous run, summed pairwise).
+    The whole-array additions below keep that order; they are checked against NumPy's mean
+    on a random probe once per shape (a NumPy that adds otherwise gets its own mean back).
+    """
+    n = prob.shape[-1] // block
+    if prob.dtype != np.float32 or not prob.flags.c_contiguous or n < 2 or block >= 8:
+        return _numpy_block_means(prob, block)
+    key = (prob.shape, block)
+    if key not in _ORDER_CHECKED:
+        rng = np.random.default_rng(0)
+        probe = (rng.standard_normal(prob.shape)
+                 * 10.0 ** rng.uniform(-3, 3, prob.shape)).astype(np.float32)
+        _ORDER_CHECKED[key] = np.array_equal(_ordered_block_means(probe, block),
+                                             _numpy_block_means(probe, block))
+    if not _ORDER_CHECKED[key]:
+        return _numpy_block_means(prob, block)
+    return _ordered_block_means(prob, block)
 
 
 class InterestSmoother:
@@ -84,10 +132,7 @@ class InterestSmoother:
         if prob.shape[-2:] != (self.size, self.size):
             raise ValueError(f"expected maps of {self.size} x {self.size} cells, got shape "
                              f"{prob.shape}")
-        b, n = self.block, self.size // self.block
-        blocks = prob.reshape(prob.shape[:-2] + (n, b, n, b)).mean(axis=(-3, -1),
-                                                                   dtype=np.float32)
-        return self.matrix @ blocks @ self.matrix.T
+        return self.matrix @ block_means(prob, self.block) @ self.matrix.T
 
     def window(self, block_values: np.ndarray, rows: slice, cols: slice) -> np.ndarray:
         """The per-cell values of ``block_values`` (one map) inside ``[rows, cols]`` only.

@@ -48,9 +48,24 @@ __all__ = [
     "check_policy_transfer",
     "resolve_shipped",
     "ENTRY_POINT_GROUP",
+    "REMOVED_NAMES",
 ]
 
 ENTRY_POINT_GROUP = "ipp_toolkit.planners"
+
+_COMA_MIXED_GONE = ("removed 2026-12-01: dominated by the default coma on validation missions, "
+                    "see docs/generalisation.md; use coma, whose default policy is "
+                    "coma=shipped:spatial-mixture")
+
+#: Names that earlier versions accepted and that were removed, with when, why and what to use
+#: instead: a planner name (``coma_mixed``) or a shipped policy as ``PLANNER=shipped:NAME``.
+#: :func:`planner_factory` and :func:`resolve_shipped` consult it before refusing a name as
+#: unknown, so an old command fails with the way forward. Names only: the planners' packages
+#: are not imported for it.
+REMOVED_NAMES: dict[str, str] = {
+    "coma_mixed": _COMA_MIXED_GONE,
+    "coma=shipped:mixed": _COMA_MIXED_GONE,
+}
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -193,10 +208,17 @@ def available_planners() -> list[str]:
 
 
 def planner_factory(name: str) -> PlannerFactory:
-    """The factory registered under ``name`` (loading its entry point if needed)."""
+    """The factory registered under ``name`` (loading its entry point if needed).
+
+    Raises:
+        ValueError: an unknown name (the message lists the registered ones) or a removed one
+            (the message says what to use instead, :data:`REMOVED_NAMES`).
+    """
     if name not in _REGISTRY:
         entry = _entry_points().get(name)
         if entry is None:
+            if name in REMOVED_NAMES:
+                raise ValueError(f"planner {name!r} was {REMOVED_NAMES[name]}")
             raise ValueError(f"unknown planner {name!r}; registered planners: "
                              f"{', '.join(available_planners()) or 'none'}")
         factory = entry.load()
@@ -263,13 +285,17 @@ def resolve_shipped(policy: str | os.PathLike[str], shipped: Mapping[str, Path],
     resolve their names here, each with its own table of shipped files.
 
     Raises:
-        ValueError: ``shipped:`` with an unknown name (the message lists ``planner``'s names).
+        ValueError: ``shipped:`` with an unknown name (the message lists ``planner``'s names)
+            or a removed one (the message says what to use instead, :data:`REMOVED_NAMES`).
     """
     text = os.fspath(policy)
     if not text.startswith("shipped:"):
         return Path(text)
     name = text.removeprefix("shipped:")
     if name not in shipped:
+        removed = REMOVED_NAMES.get(f"{planner}={text}")
+        if removed is not None:
+            raise ValueError(f"shipped policy {text!r} of the {planner} planner was {removed}")
         raise ValueError(f"unknown shipped policy {name!r}; shipped policies: "
                          f"{', '.join(f'shipped:{n}' for n in shipped)} (of the {planner} "
                          "planner)")

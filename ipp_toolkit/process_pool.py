@@ -28,7 +28,7 @@ from .planner_specs import PlannerSpec
 from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
 __all__ = ["TaskRunner", "children_ignore_sigint", "stop_workers", "guard_worker",
-           "limit_blas_threads", "limit_torch_threads",
+           "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
            "single_thread_environment", "single_thread_variables", "temporary_environment",
            "transferable_factory", "run_parallel"]
 
@@ -58,6 +58,38 @@ def limit_blas_threads() -> Any:
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=1, user_api="blas")
+
+
+#: glibc's ``mallopt`` parameters (malloc.h).
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+
+
+def retain_freed_memory() -> bool:
+    """Let this process reuse the memory it frees instead of handing it back (glibc only).
+
+    A mission allocates its maps afresh (about 40 MB at r_M = 0.1 m: five belief arrays, the
+    gain cache) and frees them when it ends. glibc gives blocks that large back to the kernel
+    at once, so every mission's arrays were new pages for the kernel to map and zero again:
+    about 13 ms of system time per mission on the 2-core VM (380,000 page faults in 93
+    missions, 58,000 with this). Served from the heap instead, and the heap never trimmed, a
+    worker reuses the same memory mission after mission and keeps its peak size until it
+    exits. Memory only: no number changes.
+
+    Returns:
+        whether the allocator took the settings (False off glibc, e.g. macOS or musl).
+    """
+    import ctypes
+    import platform
+
+    if platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    # The largest threshold glibc accepts on 64-bit systems; a mission's arrays are smaller.
+    return bool(mallopt(_M_MMAP_THRESHOLD, 32 * 1024 * 1024)
+                and mallopt(_M_TRIM_THRESHOLD, 1 << 30))
 
 
 def limit_torch_threads() -> None:
@@ -110,6 +142,7 @@ def _init_worker(runner: TaskRunner, parent: int) -> None:
     runner.single_thread = True
     limit_blas_threads()
     limit_torch_threads()
+    retain_freed_memory()
     _WORKER = runner
 
 

@@ -23,6 +23,9 @@ is stored.
   retried. Each worker process keeps the task runner (and so its built planners) across the
   tasks of one evaluation, runs one thread, and limits BLAS and torch to one thread, as the
   process pool's workers do.
+* :func:`check_backend` owns the rule for a backend (:data:`BACKENDS`) and an address, for
+  every caller (``evaluate``, ``compare``, the studies, COMA's workers);
+  :func:`add_backend_flags` and :func:`check_backend_flags` are its command-line spelling.
 
 Ray is optional (``pip install -c constraints.txt -e ".[ray]"``): this module imports it only
 inside :func:`require_ray`, so importing it costs nothing without Ray.
@@ -51,13 +54,17 @@ from .process_pool import (
     temporary_environment,
 )
 
-__all__ = ["add_backend_flags", "check_backend_flags", "CONNECT_TIMEOUT_S", "INSTALL_COMMAND",
-           "MAX_RETRIES", "RayCluster",
+__all__ = ["add_backend_flags", "BACKENDS", "check_backend", "check_backend_flags",
+           "CONNECT_TIMEOUT_S", "INSTALL_COMMAND", "MAX_RETRIES", "RayCluster",
            "RayUnavailableError", "connect", "probe", "require_ray", "run_calls", "run_ray",
            "session", "start_local"]
 
 INSTALL_COMMAND = 'pip install -c constraints.txt -e ".[ray]"'
 """How to install the optional Ray extra (from the repository root)."""
+
+BACKENDS = ("local", "ray")
+"""Where work runs (missions of ``evaluate``, a study's runs, COMA's rollout workers): this
+machine's processes, or Ray tasks and actors. :func:`check_backend` owns the rule."""
 
 MAX_RETRIES = 3
 """How often Ray reruns a task whose worker process or node died (not a planner's error)."""
@@ -87,8 +94,6 @@ def add_backend_flags(parser: Any, backend_help: str, address_help: str) -> None
         address_help: appended to the address's help after "as printed by `ray start
             --head`", e.g. " (results are written here)".
     """
-    from .evaluation import BACKENDS
-
     parser.add_argument("--backend", choices=BACKENDS, default="local",
                         help=f"{backend_help} (needs the ray extra: {INSTALL_COMMAND}; see "
                              "docs/ray.md)")
@@ -98,18 +103,49 @@ def add_backend_flags(parser: Any, backend_help: str, address_help: str) -> None
                              "--workers CPUs")
 
 
-def check_backend_flags(backend: str, address: str | None) -> None:
-    """Refuse the flags of :func:`add_backend_flags` that cannot run, before any work.
+def check_backend(backend: str, address: str | None, flags: bool = False) -> None:
+    """The one check of a backend and a Ray address, before any work: ``backend`` is one of
+    :data:`BACKENDS`, an ``address`` is a non-empty string and needs ``backend="ray"``, and
+    ``backend="ray"`` needs Ray installed (even where nothing would run, so a missing Ray is
+    reported at once). ``evaluate``, the studies, ``ipp-compare`` and COMA's workers call it.
+
+    Args:
+        backend: ``"local"`` or ``"ray"``.
+        address: the Ray cluster's ``HOST:PORT``, or None (a local Ray with ``backend="ray"``).
+        flags: word the messages as the command line's flags (``--address needs --backend
+            ray``) instead of the Python arguments (``address is only used with
+            backend='ray'``); see :func:`check_backend_flags`.
 
     Raises:
-        ValueError: ``--address`` without ``--backend ray``.
+        ValueError: an unknown backend, an empty address, or an address without Ray (each
+            naming the value).
+        RayUnavailableError: ``backend="ray"`` without Ray (the message gives the install
+            command).
+    """
+    backend_name, address_name = ("--backend", "--address") if flags else ("backend", "address")
+    if backend not in BACKENDS:
+        raise ValueError(f"{backend_name} must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if address is not None and (not isinstance(address, str) or not address.strip()):
+        raise ValueError(f"{address_name} must be a non-empty string (a Ray cluster's "
+                         f"HOST:PORT), got {address!r}")
+    if address is not None and backend != "ray":
+        raise ValueError("--address needs --backend ray" if flags else
+                         f"address is only used with backend='ray', got backend={backend!r}")
+    if backend == "ray":
+        require_ray()
+
+
+def check_backend_flags(backend: str, address: str | None) -> None:
+    """Refuse the flags of :func:`add_backend_flags` that cannot run, before any work: the
+    command-line wording of :func:`check_backend` (the caller prints the message and exits
+    with code 2).
+
+    Raises:
+        ValueError: ``--address`` without ``--backend ray``, or an empty ``--address``.
         RayUnavailableError: ``--backend ray`` without Ray (the message gives the install
             command).
     """
-    if address is not None and backend != "ray":
-        raise ValueError("--address needs --backend ray")
-    if backend == "ray":
-        require_ray()
+    check_backend(backend, address, flags=True)
 
 
 def require_ray() -> Any:

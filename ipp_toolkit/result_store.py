@@ -27,7 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .config import EnvConfig, config_from_dict, config_to_dict
+from .config import EnvConfig
+from .config_io import config_from_dict, config_to_dict
 from .io import atomic_write, write_json
 from .settings import safe_name
 

@@ -34,12 +34,10 @@ from .config import (
     TeamConfig,
     TerrainConfig,
     WorldConfig,
-    config_from_dict,
-    config_to_dict,
-    read_config_file,
     start_for_team_size,
     terrain_kinds,
 )
+from .config_io import config_from_dict, config_to_dict, read_config_file
 
 __all__ = [
     "build_env_config",

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import gc
 import math
 import os
 import sys
@@ -259,6 +260,9 @@ def compare_main(argv: list[str] | None = None) -> int:
         return error(err)
     except KeyboardInterrupt:
         return interrupted("ipp-compare", out_dir)
+    # Everything left lives until the process exits: the interpreter's last collection would
+    # walk it all (torch's and matplotlib's objects, about 1 s); frozen objects are skipped.
+    gc.freeze()
     print(comparison.table)
     print("Planning time per step:")
     width = max(len(label) for label in comparison.summary.planners)

@@ -27,9 +27,9 @@ from typing import TYPE_CHECKING, Any
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import write_json
 from ipp_toolkit.planners import Planner, available_planners, make_planner, planner_factory
+from ipp_toolkit.ray_backend import check_backend
 from ipp_toolkit.settings import build_env_config, format_comm, safe_name
 
-from .plots import plot_curves, plot_trajectories
 from .tables import Summary, summarise, to_markdown, write_tables
 
 if TYPE_CHECKING:
@@ -57,6 +57,8 @@ def draw_trajectory(out_dir: Path, config: EnvConfig, label: str, mission: int,
 
     ``final`` is the mission's final (entropy, F1), shown in the title when given.
     """
+    from .plots import plot_trajectories  # matplotlib only where figures are drawn
+
     title = (f"{label}, mission {mission}: {config.team.n_agents} UAVs, "
              f"D = {format_comm(config.team.comm_range)}")
     if final is not None:
@@ -101,6 +103,8 @@ class Comparison:
         Returns:
             every written path.
         """
+        from .plots import plot_curves
+
         out = Path(out_dir)
         paths = plot_curves(self.result.rows, out)
         final = self._final_metrics()
@@ -189,9 +193,9 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
         one ``PlannerSpec`` per planner, in the given order.
 
     Raises:
-        ValueError: an unknown planner (the message lists the registered ones), a planner
-            that cannot be built with its options (e.g. a missing checkpoint), a duplicate
-            label or an empty list.
+        ValueError: an unknown planner (the message lists the registered ones), a removed
+            one (the message says what to use instead), a planner that cannot be built with
+            its options (e.g. a missing checkpoint), a duplicate label or an empty list.
     """
     return [spec for spec, _ in _built_planners(planners, note)]
 
@@ -214,14 +218,11 @@ def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
         items = [item.strip() if isinstance(item, str) else item for item in planners]
     if not items:
         raise ValueError("no planner given")
-    registered = available_planners()
     built: list[tuple[PlannerSpec, Planner]] = []
     labels: set[str] = set()
     for item in items:
         spec = item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item)
-        if spec.name not in registered:
-            raise ValueError(f"unknown planner {spec.name!r}; registered planners: "
-                             f"{', '.join(registered) or 'none'}")
+        planner_factory(spec.name)  # an unknown or removed name: ValueError naming it
         label = spec.label or spec.name
         if label in labels:
             raise ValueError(f"planner {label!r} is given twice")
@@ -327,14 +328,7 @@ def compare(agents: int | None = None, comm: float | None = None,
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if namespace not in ("test", "validation"):
         raise ValueError(f"namespace must be 'test' or 'validation', got {namespace!r}")
-    if backend not in ("local", "ray"):
-        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
-    if address is not None and backend != "ray":
-        raise ValueError("address is only used with backend='ray'")
-    if backend == "ray":
-        from ipp_toolkit.ray_backend import require_ray
-
-        require_ray()  # before the planners are built
+    check_backend(backend, address)  # before the planners are built
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)

@@ -29,12 +29,13 @@ from pathlib import Path
 import numpy as np
 
 from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.ray_backend import check_backend
 from ipp_toolkit.settings import comm_label, format_comm
 from ipp_toolkit.terrain_families import real_raster_names
 
 from .compare import DEFAULT_PLANNERS, compare
 from .plots import _colour, _new_figure, save_figure
-from .studies import backend_session, check_backend
+from .studies import backend_session
 from .tables import Paired, Summary, atomic_write_text
 
 __all__ = ["Cell", "GeneralisationStudy", "generalisation_study", "study_cells"]

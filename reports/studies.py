@@ -27,7 +27,9 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig, config_to_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_to_dict
+from ipp_toolkit.ray_backend import check_backend
 from ipp_toolkit.settings import build_env_config, comm_label
 
 from .compare import compare
@@ -39,26 +41,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Setting", "RobustnessStudy", "robustness_study", "CreditStudy",
            "credit_assignment_study", "ablation_study", "seed_table", "ABLATIONS",
-           "backend_session", "check_backend", "TrainTask", "train_run", "train_runs",
+           "backend_session", "TrainTask", "train_run", "train_runs",
            "training_mission"]
-
-
-def check_backend(backend: str, address: str | None) -> None:
-    """Check a study's ``backend`` and ``address`` before any work.
-
-    Raises:
-        ValueError: an unknown backend, or an address without ``backend="ray"``.
-        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray installed
-            (the message gives the install command).
-    """
-    if backend not in ("local", "ray"):
-        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
-    if address is not None and backend != "ray":
-        raise ValueError("address is only used with backend='ray'")
-    if backend == "ray":
-        from ipp_toolkit.ray_backend import require_ray
-
-        require_ray()
 
 
 @contextlib.contextmanager
@@ -69,7 +53,8 @@ def backend_session(backend: str, address: str | None,
     study and shut down (disconnected) at its end; the evaluations inside reuse it.
 
     Raises:
-        as :func:`check_backend`; ConnectionError: no Ray cluster answers at ``address``.
+        as :func:`ipp_toolkit.ray_backend.check_backend`; ConnectionError: no Ray cluster
+        answers at ``address``.
     """
     check_backend(backend, address)
     if backend == "local":
@@ -247,7 +232,7 @@ def train_run(task: tuple[str, dict, dict, str, bool]) -> str:
 
     from coma.config import preset
     from coma.learner import train
-    from ipp_toolkit.config import config_from_dict
+    from ipp_toolkit.config_io import config_from_dict
 
     _label, coma_values, env_values, folder, progress = task
     torch.set_num_threads(1)

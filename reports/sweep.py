@@ -39,15 +39,16 @@ from typing import Any
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig, config_to_dict
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import config_to_dict
 from ipp_toolkit.io import write_json
+from ipp_toolkit.ray_backend import check_backend
 from ipp_toolkit.settings import build_env_config, describe_config, safe_name
 
 from .compare import compare
 from .studies import (
     TrainTask,
     backend_session,
-    check_backend,
     train_run,
     train_runs,
     training_mission,

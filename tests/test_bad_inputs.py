@@ -58,6 +58,30 @@ def test_unknown_shipped_policy_is_named(tmp_path, capsys):
     assert "unknown shipped policy 'best'" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(("main", "argv", "named"), [
+    (compare_main, ["--planners", "ig,coma_mixed"], "planner 'coma_mixed' was removed"),
+    (compare_main, ["--planners", "ig,coma=shipped:mixed"],
+     "shipped policy 'shipped:mixed' of the coma planner was removed"),
+    (lambda argv: train_main(["coma", *argv]), ["--init", "shipped:mixed"],
+     "shipped policy 'shipped:mixed' of the coma planner was removed"),
+])
+def test_removed_coma_mixed_is_refused_with_what_to_use_instead(tmp_path, capsys, main, argv,
+                                                                named):
+    from coma.persistence import DEFAULT_SHIPPED
+    from ipp_toolkit.planners import available_planners
+
+    out = tmp_path / "out"
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err
+    line = err.splitlines()[-1]  # ipp-compare prints the setting first
+    # The hint names the replacement as it is today: the default coma and its shipped policy.
+    assert ": error: " in line and named in line
+    assert "use coma" in line and f"coma=shipped:{DEFAULT_SHIPPED}" in line
+    assert not out.exists()
+    assert "coma_mixed" not in available_planners()
+
+
 def test_a_result_folder_is_a_growing_set(tmp_path, capsys):
     import csv
 
@@ -321,7 +345,7 @@ def test_compare_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, argv, me
     (": : :\n", "not valid YAML"),
 ])
 def test_bad_config_files_name_the_key_and_the_file(tmp_path, text, message):
-    from ipp_toolkit.config import load_config
+    from ipp_toolkit.config_io import load_config
 
     path = _yaml_file(tmp_path, text)
     with pytest.raises(ValueError, match=message) as error:

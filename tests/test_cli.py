@@ -237,3 +237,18 @@ def test_a_policy_for_another_grid_is_refused_before_anything_is_written(tmp_pat
     err = capsys.readouterr().err
     assert "'coma'" in err and "11-waypoint grid, requested 9" in err
     assert not out.exists()
+
+
+def test_the_console_scripts_leave_matplotlib_to_the_figures():
+    # ipp-compare's evaluation workers are spawned and import the console script's module:
+    # they never draw, so importing it must not import matplotlib (about 0.6 s each).
+    import subprocess
+    import sys
+
+    code = ("import sys, reports.cli; print('matplotlib' in sys.modules); "
+            "from reports import plot_curves; print('matplotlib' in sys.modules, "
+            "plot_curves.__module__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=300).stdout.split()
+    assert out == ["False", "True", "reports.plots"]
+

@@ -318,9 +318,9 @@ def test_nan_loss_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch
     config, env = tiny_coma(missions=6), tiny_env()
     train(config, env, tmp_path, progress=False, tensorboard=False, max_updates=1)
     before = (tmp_path / "last.pt").read_bytes()
-    import coma.rollout
+    import ipp_toolkit.driver  # the mission loop of COMA's rollouts
 
-    monkeypatch.setattr(coma.rollout, "step_mission", lambda state, actions: float("nan"))
+    monkeypatch.setattr(ipp_toolkit.driver, "step_mission", lambda state, actions: float("nan"))
     with pytest.raises(TrainingDiverged, match=r"critic loss is nan at update 2.*update 1"):
         train(config, env, tmp_path, resume=True, progress=False, tensorboard=False)
     assert (tmp_path / "last.pt").read_bytes() == before
@@ -438,8 +438,7 @@ def test_warm_start_settings_come_from_the_coma_config(tmp_path):
         tiny_coma(warm_start={"epochs": 0})
 
 
-@pytest.mark.parametrize("name", ["paper-actor", "mixed", "prior", "prior-mixture",
-                                  "spatial-mixture"])
+@pytest.mark.parametrize("name", ["paper-actor", "prior", "prior-mixture", "spatial-mixture"])
 def test_shipped_policies_load_by_name_and_fly(name):
     from ipp_toolkit.planners import make_planner
 
@@ -448,18 +447,14 @@ def test_shipped_policies_load_by_name_and_fly(name):
     config = small_config(n_agents=8, comm_range=math.inf, resolution=1.0)
     result = run_mission(config, planner, seed=0, mission=0)
     assert len(result["rows"]) == config.team.budget + 1
-    # The mixed policy trained on 8 UAVs at infinite range: no transfer to note there.
     transferred = [note for note in planner.transfer_notes if note.startswith("team.")]
-    if name == "mixed":
-        assert len(planner.trained_settings) == 9 and transferred == []
-    else:
-        assert transferred == ["team.n_agents: trained 4, running 8",
-                               "team.comm_range: trained 25.0, running inf"]
+    assert transferred == ["team.n_agents: trained 4, running 8",
+                           "team.comm_range: trained 25.0, running inf"]
 
 
 def test_cli_agents_keeps_the_configs_start_choice(tmp_path):
     from coma.cli import build_parser, configs_from_args
-    from ipp_toolkit.config import config_to_dict
+    from ipp_toolkit.config_io import config_to_dict
 
     random_starts = config_to_dict(tiny_env().replace(team={"start": "random"}))
     path = tmp_path / "mission.yaml"
@@ -583,17 +578,16 @@ def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
     assert resolve_policy("shipped:prior") == shipped_policy(SHIPPED_POLICIES["prior"])
     assert resolve_policy("runs/x/best.pt") == Path("runs/x/best.pt")
     with pytest.raises(ValueError, match="unknown shipped policy 'nope'; shipped policies: "
-                                         "shipped:paper-actor, shipped:prior, shipped:mixed, "
+                                         "shipped:paper-actor, shipped:prior, "
                                          "shipped:prior-mixture, shipped:spatial-mixture"):
         resolve_policy("shipped:nope")
     default = make_planner("coma")
     assert Path(default.checkpoint) == resolve_policy(f"shipped:{DEFAULT_SHIPPED}")
-    for alias, name in (("coma_prior", "prior"), ("coma_mixed", "mixed")):
-        with pytest.warns(DeprecationWarning, match=f"coma=shipped:{name}"):
-            assert Path(make_planner(alias).checkpoint) == resolve_policy(f"shipped:{name}")
+    with pytest.warns(DeprecationWarning, match="coma=shipped:prior"):
+        assert Path(make_planner("coma_prior").checkpoint) == resolve_policy("shipped:prior")
     coma_config, _ = configs_from_args(build_parser().parse_args(
-        ["--out", str(tmp_path), "--init", "shipped:mixed"]))
-    assert coma_config.init_policy == str(resolve_policy("shipped:mixed"))
+        ["--out", str(tmp_path), "--init", "shipped:prior"]))
+    assert coma_config.init_policy == str(resolve_policy("shipped:prior"))
     with pytest.raises(ValueError, match="unknown shipped policy"):
         configs_from_args(build_parser().parse_args(["--out", "x", "--init", "shipped:x"]))
 

@@ -60,7 +60,7 @@ def test_old_flat_dicts_load_to_the_same_config():
 
 def test_shipped_checkpoints_keep_their_flat_warm_start_settings():
     # The shipped files were written with the flat names: planner and size are still read.
-    wanted = {"paper-actor": "ig", "mixed": "ig", "prior": "", "prior-mixture": "",
+    wanted = {"paper-actor": "ig", "prior": "", "prior-mixture": "",
               "spatial-mixture": ""}
     assert set(wanted) == set(SHIPPED_POLICIES)
     for name, planner in wanted.items():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import platform
 from pathlib import Path
 from typing import ClassVar
 
@@ -390,3 +391,60 @@ def test_progress_bar_counts_missions(capsys):
     evaluate(tiny_config(), "test-eval-first,test-eval-seeded", missions=2, progress=True)
     err = capsys.readouterr().err
     assert "4/4" in err and "mission" in err
+
+
+def _python(code: str, *args: str) -> str:
+    """Run ``code`` in a fresh interpreter (what it changes in its process stays there)."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                          check=True, timeout=300)
+    return done.stdout.strip()
+
+
+def test_a_worker_freezes_what_its_first_mission_with_a_planner_loaded():
+    code = """
+import gc, sys
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.evaluation import _Entry, _Runner
+from ipp_toolkit.planner_specs import PlannerSpec
+config = EnvConfig().replace(world={"resolution": 0.5}, team={"budget": 3})
+entries = {name: _Entry(PlannerSpec.parse(name)) for name in ("random", "coverage")}
+runner = _Runner(config, 0, "test", entries, frozenset(), single_thread=sys.argv[1] == "worker")
+counts = [gc.get_freeze_count()]
+for label, mission in [("random", 0), ("random", 1), ("coverage", 1)]:
+    runner.run(label, mission)
+    counts.append(gc.get_freeze_count())
+print(*counts)
+"""
+    start, first, again, other = (int(n) for n in _python(code, "worker").split())
+    # Frozen once per planner, after its first mission, not after every one (a frozen object
+    # freed since leaves the count).
+    assert start == 0 and 0 < first and again <= first < other
+    assert _python(code, "main").split() == ["0"] * 4  # not in the calling process
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc",
+                    reason="retain_freed_memory sets glibc's allocator")
+def test_a_worker_reuses_freed_memory_without_new_page_faults():
+    code = """
+import resource, sys
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.planners import make_planner
+from ipp_toolkit.process_pool import retain_freed_memory
+if sys.argv[1] == "retain":
+    assert retain_freed_memory()
+config = EnvConfig().replace(team={"budget": 3})  # r_M = 0.1 m: 500 x 500 maps
+planner = make_planner("random")
+run_mission(config, planner, 0, 0)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+for mission in range(1, 4):
+    run_mission(config, planner, 0, mission)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+"""
+    plain, retained = int(_python(code, "plain")), int(_python(code, "retain"))
+    # Each mission's maps were new pages (about 3,300 faults); kept, they are reused.
+    assert plain > 3 * 1000 and retained < plain / 4
+

@@ -10,7 +10,7 @@ import pytest
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.features import footprint_gain, gain_planes
 from ipp_toolkit.gain import FootprintGainCache, footprint_sums, recomputed_footprint_sums
-from ipp_toolkit.interest import InterestSmoother
+from ipp_toolkit.interest import InterestSmoother, block_means
 from ipp_toolkit.mapping import interesting_gain
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.team import ACTION_NAMES
@@ -181,3 +181,41 @@ def test_interest_window_equals_the_full_map_slice():
     blocks = smoother.block_values(prob)
     rows, cols = slice(37, 212), slice(0, 499)
     np.testing.assert_array_equal(smoother.window(blocks, rows, cols), smoother(prob)[rows, cols])
+
+
+@pytest.mark.parametrize("block", [1, 2, 3, 5, 7, 8, 10])
+def test_block_means_are_numpys_means_to_the_bit(block):
+    # Values over six orders of magnitude: any other order of the additions shows at once.
+    rng = np.random.default_rng(block)
+    for shape in [(4, 20 * block, 20 * block), (1, 2 * block, 2 * block), (2, block, block)]:
+        prob = (rng.standard_normal(shape) * 10.0 ** rng.uniform(-3, 3, shape)
+                ).astype(np.float32)
+        n = shape[-1] // block
+        expected = prob.reshape(shape[:-2] + (n, block, n, block)).mean(axis=(-3, -1),
+                                                                       dtype=np.float32)
+        np.testing.assert_array_equal(block_means(prob, block), expected)
+
+
+def test_block_means_take_the_ordered_sums_on_the_default_maps():
+    import ipp_toolkit.interest as interest
+
+    prob = np.random.default_rng(0).random((4, 500, 500), dtype=np.float32)
+    block_means(prob, 5)
+    # This NumPy adds a block's cells in the order the whole-array sums copy (else they fall
+    # back to its mean: the same numbers, five times slower).
+    assert interest._ORDER_CHECKED[((4, 500, 500), 5)]
+
+
+def test_weighted_sums_multiply_as_the_repeated_weights_did():
+    config = EnvConfig().replace(features={"gain": True, "gain_smoothing": 5.0})  # 5 x 5 blocks
+    state = reset_mission(config, seed=1, mission=0)
+    rng = np.random.default_rng(2)
+    for _ in range(2):
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+    n = state.n_agents
+    cache = FootprintGainCache(state.maps, n, state.geometry.camera, (1.0, 0.0), "interesting")
+    weight = rng.random((n, 100, 100), dtype=np.float32)
+    cells = np.repeat(np.repeat(weight, 5, axis=-2), 5, axis=-1)
+    expected = cache.rows_full @ (cache.cells * cells[:, None]) @ cache.cols_full_t
+    np.testing.assert_array_equal(cache.weighted_sums(weight, 5), expected.astype(np.float64))
+

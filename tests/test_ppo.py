@@ -342,3 +342,23 @@ def test_gain_prior_without_gain_planes_is_refused_before_any_work(tmp_path, cap
     assert not out.exists()
     with pytest.raises(ValueError, match="gain_prior"):
         PPOTrainConfig(gain_prior=-1.0)
+
+
+def test_a_loaded_policy_acts_without_an_optimiser_or_torch_dynamo():
+    # Any torch optimiser imports torch._dynamo (about 3 s per process): a policy loaded to
+    # act gets a NoOptimizer instead, which refuses to train.
+    import subprocess
+    import sys
+
+    code = ("import sys; from ipp_toolkit.planners import make_planner; "
+            "planner = make_planner('ppo'); "
+            "print(type(planner.policy.optimizer).__name__, 'torch._dynamo' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=300)
+    assert out.stdout.split() == ["NoOptimizer", "False"]
+    optimiser = ppo.NoOptimizer([torch.zeros(1)], lr=1e-3)
+    with pytest.raises(RuntimeError, match="not to train"):
+        optimiser.step()
+    with pytest.raises(RuntimeError, match="not to train"):
+        optimiser.zero_grad()
+

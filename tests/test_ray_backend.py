@@ -145,6 +145,7 @@ def test_missing_ray_is_one_line_with_the_install_command(tmp_path, monkeypatch,
 @pytest.mark.parametrize(("argv", "message"), [
     (["--address", "127.0.0.1:6379"], "--address needs --backend ray"),
     (["--backend", "dask"], "invalid choice: 'dask'"),
+    (["--backend", "ray", "--address", " "], "--address must be a non-empty string"),
 ])
 def test_backend_flags_are_checked(tmp_path, capsys, argv, message):
     out = tmp_path / "out"
@@ -164,6 +165,42 @@ def test_evaluate_checks_backend_arguments(tmp_path, kwargs, message):
         evaluate(tiny_config(), "random", missions=1, progress=False,
                  out_dir=tmp_path / "out", **kwargs)
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("backend", "address", "message", "flag_message"), [
+    ("dask", None, "backend must be one of local, ray, got 'dask'",
+     "--backend must be one of local, ray, got 'dask'"),
+    ("local", "127.0.0.1:6379", "address is only used with backend='ray', got backend='local'",
+     "--address needs --backend ray"),
+    ("ray", " ", "address must be a non-empty string (a Ray cluster's HOST:PORT), got ' '",
+     "--address must be a non-empty string (a Ray cluster's HOST:PORT), got ' '"),
+])
+def test_one_backend_check_serves_every_caller(tmp_path, backend, address, message,
+                                               flag_message):
+    from coma.parallel import check_workers
+    from reports.compare import compare
+
+    out = tmp_path / "out"
+    callers = {
+        "check_backend": lambda: ray_backend.check_backend(backend, address),
+        "evaluate": lambda: evaluate(tiny_config(), "random", missions=1, progress=False,
+                                     out_dir=out, backend=backend, address=address),
+        "compare": lambda: compare(agents=2, planners="random", trials=1, resolution=1.0,
+                                   progress=False, out=out, backend=backend,
+                                   address=address),
+        "robustness_study": lambda: robustness_study(
+            "random", agents=(2,), comms=(0.0,), trials=1, out=out, progress=False,
+            backend=backend, address=address),
+        "coma check_workers": lambda: check_workers(1, backend, address),
+    }
+    for name, call in callers.items():
+        with pytest.raises(ValueError) as caught:
+            call()
+        assert str(caught.value) == message, name
+    with pytest.raises(ValueError) as caught:
+        ray_backend.check_backend_flags(backend, address)
+    assert str(caught.value) == flag_message
+    assert not out.exists()
 
 
 def test_the_toolkit_does_not_import_ray():
@@ -261,7 +298,7 @@ def test_ipp_study_backend_flags_are_checked(tmp_path, capsys, argv, message):
 
 
 @pytest.mark.parametrize(("kwargs", "message"), [
-    ({"backend": "dask"}, "backend must be 'local' or 'ray', got 'dask'"),
+    ({"backend": "dask"}, "backend must be one of local, ray, got 'dask'"),
     ({"address": "127.0.0.1:6379"}, "address is only used with backend='ray'"),
 ])
 def test_studies_check_backend_arguments(tmp_path, kwargs, message):
@@ -434,7 +471,7 @@ def train_or_die_once(task):
     """
     from coma.config import preset
     from coma.learner import train
-    from ipp_toolkit.config import config_from_dict
+    from ipp_toolkit.config_io import config_from_dict
 
     label, values, env, folder, _ = task
     marker = Path(folder).with_name(Path(folder).name + ".killed")
@@ -480,7 +517,7 @@ def test_a_killed_training_worker_is_retried_and_resumes_its_run(ray_cluster, tm
     import torch
 
     from coma.persistence import load_policy
-    from ipp_toolkit.config import config_to_dict
+    from ipp_toolkit.config_io import config_to_dict
     from reports.studies import training_mission
 
     env = config_to_dict(training_mission(1.0))
@@ -502,7 +539,7 @@ def test_a_killed_training_worker_is_retried_and_resumes_its_run(ray_cluster, tm
 
 @pytest.mark.slow
 def test_a_training_error_on_ray_is_the_runs_own_error(ray_cluster, tmp_path):
-    from ipp_toolkit.config import config_to_dict
+    from ipp_toolkit.config_io import config_to_dict
     from ipp_toolkit.io import CheckpointError
     from reports.studies import training_mission
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from coma.cli import build_parser, configs_from_args
-from ipp_toolkit.config import EnvConfig, load_config
+from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config_io import load_config
 from ipp_toolkit.settings import (
     build_env_config,
     comm_label,

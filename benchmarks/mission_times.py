@@ -1,0 +1,46 @@
+"""CPU time per test mission of each planner, in one process (what an evaluation worker pays).
+
+    python benchmarks/mission_times.py                        # ipp-compare's default planners
+    python benchmarks/mission_times.py --planners coma,ppo --missions 25
+
+Builds each planner, flies its mission 0 untimed (the compiled kernels load, the planner's
+lazy set-up), then times missions 1..N of ``ipp-compare``'s defaults (4 UAVs, D = 25 m,
+r_M = 0.1 m, test namespace, seed 0) with one BLAS and one torch thread, as a worker runs.
+Prints milliseconds of CPU and wall time per mission.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.planners import make_planner
+from ipp_toolkit.process_pool import limit_blas_threads, limit_torch_threads
+from ipp_toolkit.settings import build_env_config
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--planners", default="ig,coverage,random,coma,ppo")
+    parser.add_argument("--missions", type=int, default=20)
+    args = parser.parse_args()
+    limit_blas_threads()
+    config = build_env_config(None)
+    geometry = MissionGeometry(config)
+    print(f"{args.missions} test missions per planner, one process; ms per mission")
+    for name in args.planners.split(","):
+        planner = make_planner(name)
+        limit_torch_threads()
+        run_mission(config, planner, 0, 0, geometry=geometry)
+        wall, cpu = time.perf_counter(), time.process_time()
+        for mission in range(1, args.missions + 1):
+            run_mission(config, planner, 0, mission, geometry=geometry)
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        print(f"{name:10s} CPU {cpu / args.missions * 1000:7.1f}   "
+              f"wall {wall / args.missions * 1000:7.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
