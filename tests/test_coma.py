@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 import yaml
+from helpers import small_config
 
 from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from coma.config import VARIANTS, COMAConfig, mission_settings, preset
@@ -23,7 +24,6 @@ from ipp_toolkit.evaluation import run_mission
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.mission import MissionGeometry
 from reports.cli import train_main
-from tests.conftest import small_config
 
 # ---------------------------------------------------------------------------- TD(lambda)
 

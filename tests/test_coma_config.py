@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import pytest
+from helpers import small_config
 
 from coma.cli import build_parser, configs_from_args, main, stage_configs
 from coma.config import COMAConfig, WarmStartConfig, from_dict, nested_fields, preset
@@ -20,7 +21,6 @@ from coma.persistence import (
 )
 from coma.run_files import resume_fields
 from ipp_toolkit.io import load_torch
-from tests.conftest import small_config
 
 _FLAT = ("warm_start_missions", "warm_start_epochs")
 

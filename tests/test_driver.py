@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from helpers import random_valid_actions, small_config
 
 from coma.config import COMAConfig
 from coma.persistence import build_networks
@@ -23,7 +24,6 @@ from ipp_toolkit.driver import fly_missions, start_missions
 from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
 from ipp_toolkit.planners import make_planner
-from tests.conftest import random_valid_actions, small_config
 
 SEED, FIRST, MISSIONS = 5, 3, 2
 

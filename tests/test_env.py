@@ -3,7 +3,7 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import small_config
+from helpers import small_config
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 from pettingzoo.utils.conversions import parallel_to_aec
 

@@ -11,7 +11,7 @@ from typing import ClassVar
 
 import numpy as np
 import pytest
-from conftest import small_config
+from helpers import small_config
 
 from ipp_toolkit.evaluation import (
     RESULT_COLUMNS,

@@ -29,9 +29,10 @@ def test_matrix_game_shows_the_counterfactual_credit(monkeypatch, capsys):
 
 
 def test_uav_advantages_prints_and_draws(tmp_path, monkeypatch, capsys):
+    from helpers import small_config
+
     from coma.config import COMAConfig
     from coma.learner import train
-    from tests.conftest import small_config
 
     run = train(COMAConfig(width=8, hidden=16, missions=2, missions_per_update=2,
                            minibatch_size=60, eval_missions=1, warm_start=""),

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import random_valid_actions, small_config
+from helpers import random_valid_actions, small_config
 
 from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.evaluation import evaluate

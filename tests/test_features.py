@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import random_valid_actions, small_config
+from helpers import random_valid_actions, small_config
 
 from ipp_toolkit.features import (
     GAIN_PLANES,

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from conftest import random_valid_actions, small_config
+from helpers import random_valid_actions, small_config
 
 from ipp_toolkit.mapping import binary_entropy, class_weights
 from ipp_toolkit.mission import (

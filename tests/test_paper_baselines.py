@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import small_config
+from helpers import small_config
 from test_planners import fly, hand_built_state
 
 from baselines.coverage import CoveragePlanner, PaperCoveragePlanner, paper_lawnmower_paths

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from conftest import small_config
+from helpers import small_config
 
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.planners import (

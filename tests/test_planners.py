@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import small_config
+from helpers import small_config
 
 from baselines.coverage import CoveragePlanner, boustrophedon
 from baselines.information_gain import InformationGainPlanner, expected_gain

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import small_config
+from helpers import small_config
 from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
 
 from baselines.sb3_planner import SB3Planner

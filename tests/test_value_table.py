@@ -3,7 +3,7 @@ against their NumPy reference."""
 
 import numpy as np
 import pytest
-from conftest import random_valid_actions
+from helpers import random_valid_actions
 
 from ipp_toolkit import kernels, mission, value_table
 from ipp_toolkit.config import EnvConfig

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import small_config
 from gymnasium import spaces
+from helpers import small_config
 from stable_baselines3.common.vec_env import VecMonitor
 
 from ipp_toolkit.env import IPPEnv
@@ -162,7 +162,7 @@ def test_no_hang_at_exit_with_worker_processes(crash):
     script = textwrap.dedent(f"""
         import sys
         sys.path[:0] = [{str(ROOT)!r}, {str(ROOT / "tests")!r}]
-        from conftest import small_config
+        from helpers import small_config
         from ipp_toolkit.vec import make_sb3_vec_env
         vec = make_sb3_vec_env(small_config(n_agents=2), n_envs=2, seed=0, num_cpus=2)
         vec.reset()
