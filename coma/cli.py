@@ -28,6 +28,7 @@ from typing import Any
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.planners import REMOVED_NAMES
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.ray_backend import add_backend_flags, check_backend_flags, probe
 from ipp_toolkit.settings import build_env_config, merge_sections, parse_feature_flags
@@ -52,11 +53,21 @@ PAPER_TRAINING_DEFAULTS = {"world": {"resolution": 0.5}}
 """With ``--preset paper`` the actor sees the paper's inputs: no own-position plane."""
 
 
+def _preset_name(value: str) -> str:
+    """``--preset``'s value; the recipe of a removed shipped policy is refused with what to use
+    instead (argparse then checks the name against the presets and recipes)."""
+    removed = REMOVED_NAMES.get(f"coma=shipped:{value}")
+    if removed is not None:
+        raise argparse.ArgumentTypeError(f"the recipe of shipped:{value} was {removed}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-train coma",
         description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.")
-    parser.add_argument("--preset", choices=sorted(PRESETS) + sorted(RECIPES), default="cpu",
+    parser.add_argument("--preset", type=_preset_name,
+                        choices=sorted(PRESETS) + sorted(RECIPES), default="cpu",
                         help="hyper-parameter preset (default: cpu), or the recipe of a "
                              "shipped policy (its name in coma=shipped:NAME; every stage, "
                              "see coma/recipes.py)")

@@ -64,6 +64,8 @@ def test_unknown_shipped_policy_is_named(tmp_path, capsys):
      "shipped policy 'shipped:mixed' of the coma planner was removed"),
     (lambda argv: train_main(["coma", *argv]), ["--init", "shipped:mixed"],
      "shipped policy 'shipped:mixed' of the coma planner was removed"),
+    (lambda argv: train_main(["coma", *argv]), ["--preset", "mixed"],
+     "argument --preset: the recipe of shipped:mixed was removed"),
 ])
 def test_removed_coma_mixed_is_refused_with_what_to_use_instead(tmp_path, capsys, main, argv,
                                                                 named):
