@@ -370,11 +370,11 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     # started yet, and would cost its start-up twice).
     reference = None
     if coma_config.selection == "worst_vs_ig":
-        on_cluster = backend == "ray" and address is not None
+        # check_workers has refused an address without the ray backend.
         reference = reference_scores(
             checks, coma_config.seed, coma_config.eval_missions,
-            workers=workers if on_cluster else min(workers, os.cpu_count() or 1),
-            backend="ray" if on_cluster else "local", address=address if on_cluster else None)
+            workers=workers if address is not None else min(workers, os.cpu_count() or 1),
+            backend="local" if address is None else "ray", address=address)
     spec = RunSpec(coma_config, env_config, tuple(settings), tuple(checks), coma_config.seed)
     known = {**{("train", k): g for k, g in enumerate(geometries)},
              **{("check", k): g for k, g in enumerate(check_geometries)}}

@@ -46,10 +46,8 @@ from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.process_pool import (
     children_ignore_sigint,
     guard_worker,
-    limit_blas_threads,
-    limit_torch_threads,
     single_thread_environment,
-    single_thread_variables,
+    single_thread_process,
     stop_workers,
 )
 from ipp_toolkit.ray_backend import check_backend
@@ -267,9 +265,7 @@ def _init_process(spec: RunSpec, parent: int) -> None:
     """Pool initializer: exit with ``parent``, ignore Ctrl-C, one thread per library."""
     global _WORKER
     guard_worker(parent)
-    os.environ.update(single_thread_variables())
-    limit_blas_threads()
-    torch.set_num_threads(1)
+    single_thread_process()
     _WORKER = RolloutWorker(spec)
 
 
@@ -346,10 +342,7 @@ class RayRolloutWorker:
     def __init__(self, spec: RunSpec, cwd: str):
         if os.path.isdir(cwd):  # relative paths (terrain files) mean what they mean to the caller
             os.chdir(cwd)
-        os.environ.update(single_thread_variables())
-        limit_blas_threads()
-        limit_torch_threads()
-        torch.set_num_threads(1)
+        single_thread_process()
         self._worker = RolloutWorker(spec)
 
     def call(self, method: str, actor_state: dict[str, torch.Tensor], *args: Any) -> Any:

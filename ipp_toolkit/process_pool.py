@@ -29,8 +29,8 @@ from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
 __all__ = ["TaskRunner", "children_ignore_sigint", "stop_workers", "guard_worker",
            "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
-           "single_thread_environment", "single_thread_variables", "temporary_environment",
-           "transferable_factory", "run_parallel"]
+           "single_thread_environment", "single_thread_process", "single_thread_variables",
+           "temporary_environment", "transferable_factory", "run_parallel"]
 
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
@@ -138,10 +138,8 @@ def _init_worker(runner: TaskRunner, parent: int) -> None:
     """
     global _WORKER
     guard_worker(parent)
-    os.environ.update(single_thread_variables())
+    single_thread_process()
     runner.single_thread = True
-    limit_blas_threads()
-    limit_torch_threads()
     retain_freed_memory()
     _WORKER = runner
 
@@ -171,6 +169,15 @@ def temporary_environment(variables: Mapping[str, str]) -> Iterator[None]:
 def single_thread_variables() -> dict[str, str]:
     """The thread-count variables of a single-threaded worker (OpenMP, MKL, OpenBLAS)."""
     return dict.fromkeys(_THREAD_VARIABLES, "1")
+
+
+def single_thread_process() -> None:
+    """Make this worker process single-threaded for good: the thread-count variables (for
+    libraries it imports later), BLAS (threadpoolctl) and torch, if imported. Every kind of
+    worker (pool processes, Ray tasks and actors, COMA's rollout workers) starts with it."""
+    os.environ.update(single_thread_variables())
+    limit_blas_threads()
+    limit_torch_threads()
 
 
 def single_thread_environment() -> contextlib.AbstractContextManager[None]:

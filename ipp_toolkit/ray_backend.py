@@ -50,6 +50,7 @@ from .process_pool import (
     TaskRunner,
     limit_blas_threads,
     limit_torch_threads,
+    single_thread_process,
     single_thread_variables,
     temporary_environment,
 )
@@ -348,10 +349,8 @@ _RUNNERS: dict[str, TaskRunner] = {}
 
 
 def _single_thread(runner: TaskRunner) -> TaskRunner:
-    os.environ.update(single_thread_variables())
+    single_thread_process()
     runner.single_thread = True
-    limit_blas_threads()
-    limit_torch_threads()
     return runner
 
 
