@@ -158,7 +158,7 @@ class FootprintGainCache:
         self.objective = objective
         gain_of = cell_objective(objective, weights)
         self.n_altitudes = len(camera.accuracy)
-        size = maps.logodds.shape[1]
+        size = maps.value_index.shape[1]
         grid = camera.rects.shape[1]
         self.cells = np.empty((n_maps, self.n_altitudes, size, size), dtype=np.float32)
         self.totals = np.empty((n_maps, self.n_altitudes, grid, grid), dtype=np.float64)
@@ -251,13 +251,16 @@ class FootprintGainCache:
         union of both maps' regions. A map that leaves its group starts from copies of the
         group's old arrays (made before any group is refreshed) and is refreshed on its own.
         """
-        logodds = self.maps.logodds
+        # Equal indices are equal log-odds (the table interns bit patterns); comparing them
+        # leaves the maps' per-cell arrays unbuilt.
+        value_index = self.maps.value_index
         old_owner = self.owner.copy()
         for group_owner in np.unique(old_owner).tolist():
             leaders: list[int] = []
             for k in np.flatnonzero(old_owner == group_owner).tolist():
                 for leader in leaders:
-                    if all(np.array_equal(logodds[k, r0:r1, c0:c1], logodds[leader, r0:r1, c0:c1])
+                    if all(np.array_equal(value_index[k, r0:r1, c0:c1],
+                                          value_index[leader, r0:r1, c0:c1])
                            for r0, r1, c0, c1 in set(regions[k]) | set(regions[leader])):
                         self.owner[k] = leader
                         break

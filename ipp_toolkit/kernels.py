@@ -15,10 +15,15 @@ kernels, which do for every map at once what the per-rectangle calls above do on
 time, with the same float operations in the same order (so the same numbers to the last bit):
 :func:`read_cells` turns the sensor noise into readings and their block planes,
 :func:`fuse_evidence` adds the readings' log-odds to every receiving map and interns the new
-values, and :func:`apply_targets` writes the caches, block sums and metric sums. A cell that
-several footprints of one map cover is looked up and written once (a second refresh would move
-nothing); the statistics of the global map still count it once per footprint, as the reward
-always did. :func:`sensor_noise` draws the step's sensor noise (NumPy's streams, bit for bit;
+values (most cells through a table of known transitions, value index and reading -> value
+index), writing only the maps' index array and a list of (old, new) index pairs, and
+:func:`apply_targets` moves the block sums and metric sums from those pairs (after the new
+values' columns are derived). The per-cell log-odds and caches are looked up from the index
+array only when somebody reads them (:func:`gather_caches`;
+:class:`~ipp_toolkit.mapping.BeliefMaps`). A cell that several footprints of one map cover
+is looked up and written once (a second refresh would move nothing); the statistics of the
+global map still count it once per footprint, as the reward always did.
+:func:`sensor_noise` draws the step's sensor noise (NumPy's streams, bit for bit;
 :mod:`ipp_toolkit.sensor_noise`). The NumPy fallback keeps the per-rectangle code.
 
 Numba is a dependency of the toolkit; where it cannot be imported (an exotic platform, or
@@ -37,8 +42,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
-           "read_cells", "fuse_evidence", "apply_targets", "sensor_noise", "REGION_STATS",
-           "N_STATS"]
+           "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "sensor_noise",
+           "REGION_STATS", "N_STATS"]
 
 REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
                 "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
@@ -56,6 +61,7 @@ AVAILABLE = (os.environ.get("IPP_TOOLKIT_NO_NUMBA", "") in ("", "0")
 """Whether the compiled kernels are used (Numba importable and not switched off)."""
 
 _module: Any = None
+_step_module: Any = None
 _noise_module: Any = None
 
 
@@ -71,6 +77,16 @@ def _compiled() -> Any:
 
         _module = _compiled_kernels
     return _module
+
+
+def _compiled_step() -> Any:
+    """The whole-step kernels (:mod:`ipp_toolkit._compiled_step`), imported on first use."""
+    global _step_module
+    if _step_module is None:
+        from . import _compiled_step
+
+        _step_module = _compiled_step
+    return _step_module
 
 
 def find_or_add(bits: np.ndarray, slot: np.ndarray, table_bits: np.ndarray, size: int,
@@ -130,7 +146,7 @@ def read_cells(*arrays: np.ndarray) -> None:
     footprint's weights, summed exactly as two ``np.add.reduceat`` passes sum them
     (planning blocks of at most 129 cells a side).
     """
-    _compiled().read_cells(*arrays)
+    _compiled_step().read_cells(*arrays)
 
 
 def fuse_evidence(*arrays: Any) -> tuple[int, bool]:
@@ -139,35 +155,38 @@ def fuse_evidence(*arrays: Any) -> tuple[int, bool]:
     For each target t (map ``target_maps[t]``, its footprints
     ``senders[target_offsets[t]:target_offsets[t + 1]]``, indices into ``rects``), each cell
     of the footprints is visited once, in the first footprint that covers it: the log-odds
-    increments of every footprint over it are added in order (d1 where the reading is 1,
-    else d0, each sum clipped to [-clip, clip], as
-    :meth:`ipp_toolkit.mapping.BeliefMaps.add_evidence`), then its value is interned into
-    the open-addressing table (as :func:`find_or_add`) and its index written to
-    ``value_index``. Values are interned in the order the per-footprint refreshes intern
-    them, so they get the same indices.
+    increments of every footprint over it are added in order to its value (d1 where the
+    reading is 1, else d0, each sum clipped to [-clip, clip], as
+    :meth:`ipp_toolkit.mapping.BeliefMaps.add_evidence`), then the sum is interned into the
+    open-addressing table (as :func:`find_or_add`) and its index written to ``value_index``.
+    Values are interned in the order the per-footprint refreshes intern them, so they get
+    the same indices. A cell's value is the table's value at its index: the maps' index
+    array is the only map array read or written.
 
-    Args, in order: logodds (M, H, W) float32 and bits, its uint32 view; value_index (M, H,
-    W) the int32 array viewed as uint32; readings (cells,) bool and offsets (F + 1,) int64
-    as in :func:`read_cells`; rects (F, 4) int64; deltas (F, 2) float32 (d0, d1); clip
-    float32; target_maps (T,) int64; target_offsets (T + 1,) int64; senders (S,) int64;
-    slot, table_bits, size, shift, multiplier as in :func:`find_or_add`; limit, the most
-    values the table may hold; cursor (4,) int64, where to start (target, footprint, row,
-    whether that row has its evidence already), (0, 0, -1, 0) at first.
+    Args, in order: value_index (M, H, W) the int32 array viewed as uint32; readings
+    (cells,) bool and offsets (F + 1,) int64 as in :func:`read_cells`; rects (F, 4) int64;
+    deltas (F, 2) float32 (d0, d1); clip float32; target_maps (T,) int64; target_offsets
+    (T + 1,) int64; senders (S,) int64; slot, table_bits, size, shift, multiplier as in
+    :func:`find_or_add`; limit, the most values the table may hold; cursor (4,) int64, where
+    to start (target, footprint, row, position in ``pairs``), (0, 0, -1, 0) at first; pairs
+    (2 P,) uint32 output, the (old, new) index of every cell visited, in order, and on the
+    last target (the global map) also (current, current) of the cells of each footprint an
+    earlier one refreshed (P = the sum of the targets' footprint areas is always enough);
+    row_values (W,) float32 scratch.
 
     Returns:
-        (size, done): the table's new size, and whether the pass finished; if not, the table
-        reached ``limit`` and ``cursor`` says where the pass stopped: grow the table and call
-        again with the same cursor.
+        (size, done): the table's new size, and whether the pass finished; if not, the next
+        row could fill the table past ``limit`` and ``cursor`` says where the pass stopped:
+        grow the table (room for a row of cells) and call again with the same cursor.
     """
-    return _compiled().fuse_evidence(*arrays)
+    return _compiled_step().fuse_evidence(*arrays)
 
 
 def apply_targets(*arrays: np.ndarray) -> None:
-    """Write the caches of the targets of :func:`fuse_evidence` and move their block sums.
+    """Move the block sums of the targets of :func:`fuse_evidence`, with the statistics.
 
-    Args, in order: value_index (M, H, W) as in :func:`fuse_evidence` (the new indices),
-    prob, entropy, wentropy (M, H, W) the maps' caches;
-    table_prob, table_entropy, table_weights, table_wentropy the table's columns;
+    Args, in order: pairs (2 P,) uint32 of :func:`fuse_evidence`; table_prob, table_entropy,
+    table_weights, table_wentropy the table's columns (every pair's values derived);
     block_of_cell (H,) int64 and edges (G + 1,) int64 of the planning grid; prob_blocks and
     wentropy_blocks (M, G, G) float64; rects, target_maps, target_offsets, senders as in
     :func:`fuse_evidence`; truth (H, W) bool; stats (S_last, N_STATS) float64 output, one
@@ -175,7 +194,17 @@ def apply_targets(*arrays: np.ndarray) -> None:
     and summed over all of its cells as :func:`apply_values_with_stats` sums them. The
     block and metric sums take the cells in the order the per-footprint kernels take them.
     """
-    _compiled().apply_targets(*arrays)
+    _compiled_step().apply_targets(*arrays)
+
+
+def gather_caches(*arrays: np.ndarray) -> None:
+    """Write the log-odds and caches of several rectangles from the maps' value indices.
+
+    Args, in order: value_index (M, H, W) int32 viewed as uint32; values, table_prob,
+    table_entropy, table_wentropy the table's values and columns; maps (R,) int64 and rects
+    (R, 4) int64 the rectangles; logodds, prob, entropy, wentropy (M, H, W) float32 outputs.
+    """
+    _compiled().gather_caches(*arrays)
 
 
 def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:

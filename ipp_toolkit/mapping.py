@@ -1,13 +1,14 @@
 """Occupancy-grid beliefs: log-odds fusion, entropy, weighted entropy and metrics.
 
-The owner of every entropy computation in the toolkit. Maps are stored as log-odds
-(float32, ``[y, x]``); probabilities and per-cell entropies are cached beside them and
-refreshed only inside the rectangles a measurement touched, so a step costs in proportion to
-the footprints, not to the map. The 11 x 11 planning-grid planes (block sums of probability
-and of weighted entropy) are maintained incrementally the same way. A mission step fuses all
-its readings into every map in two compiled passes (:meth:`BeliefMaps.fuse_targets`), with
-the numbers of the per-rectangle :meth:`BeliefMaps.add_evidence` and
-:meth:`BeliefMaps.refresh`.
+The owner of every entropy computation in the toolkit. A map's state is each cell's index
+into a table of the log-odds values the maps hold (float32, ``[y, x]``), with each value's
+probability, entropy and weighted entropy computed once; the per-cell log-odds, probability
+and entropy arrays are looked up from it on demand, only inside the rectangles that changed
+since they were last read. The 11 x 11 planning-grid planes (block sums of probability and of
+weighted entropy) are maintained incrementally, so a step costs in proportion to the
+footprints, not to the map. A mission step fuses all its readings into every map in two
+compiled passes (:meth:`BeliefMaps.fuse_targets`), with the numbers of the per-rectangle
+:meth:`BeliefMaps.add_evidence` and :meth:`BeliefMaps.refresh`.
 """
 
 from __future__ import annotations
@@ -215,19 +216,32 @@ def belief_columns(logodds: np.ndarray, weight_interesting: float = 1.0,
 class BeliefMaps:
     """A stack of M occupancy maps in log-odds with cached probabilities and entropies.
 
+    The state is :attr:`value_index`: each cell's index into :attr:`table`, which holds
+    every log-odds value the maps hold with its :data:`BELIEF_COLUMNS`. The per-cell arrays
+    :attr:`logodds`, :attr:`prob`, :attr:`entropy` and :attr:`wentropy` are those columns
+    looked up at every cell, materialised on first use and brought up to date, inside the
+    rectangles refreshed since (:attr:`changes`), whenever one of them is read: a mission
+    step writes only the index array and the block sums, so a simulation that reads only
+    the planning-grid planes (the actors' default observations) never builds them.
+
     Attributes:
-        logodds: (M, H, W) float32, the belief; the only state, everything else is a cache.
         table: the :class:`~ipp_toolkit.value_table.ValueTable` of every log-odds value the
             maps hold, with their :data:`BELIEF_COLUMNS`.
         value_index: (M, H, W) int32, each cell's index into :attr:`table` (as of its last
             refresh).
+        logodds: (M, H, W) float32, the belief (the table's value at each cell).
         prob: (M, H, W) float32, sigmoid(logodds).
         entropy: (M, H, W) float32, binary entropy in bits.
         wentropy: (M, H, W) float32, weighted entropy W(p) H(p) in bits.
         prob_blocks: (M, G, G) float64 block sums of ``prob``.
         wentropy_blocks: (M, G, G) float64 block sums of the weighted entropy W(p) H(p).
         changes: every (map index, rect) refreshed so far, in order: caches built on the
-            maps (:class:`ipp_toolkit.gain.FootprintGainCache`) update only these regions.
+            maps (:class:`ipp_toolkit.gain.FootprintGainCache`, the arrays above) update
+            only these regions.
+
+    Writing :attr:`logodds` directly and then calling :meth:`refresh` over the written
+    region sets a belief by hand (tests, hand-built states); :meth:`refresh` interns what
+    :attr:`logodds` holds there.
     """
 
     def __init__(self, n_maps: int, blocks: BlockGrid, prior: float = 0.5,
@@ -237,21 +251,75 @@ class BeliefMaps:
         self.prior_logodds = float(logit(prior))
         self.weight_interesting = weight_interesting
         self.weight_uninteresting = weight_uninteresting
-        self.logodds = np.full((n_maps, size, size), self.prior_logodds, dtype=np.float32)
         self.table = ValueTable(partial(belief_columns, weight_interesting=weight_interesting,
                                         weight_uninteresting=weight_uninteresting),
-                                BELIEF_COLUMNS, first=self.logodds[0, 0, :1])
+                                BELIEF_COLUMNS,
+                                first=np.full(1, self.prior_logodds, dtype=np.float32))
+        # Zeros (the prior's index) from the allocator's zeroed pages: only the pages under
+        # footprints are ever touched.
         self.value_index = np.zeros((n_maps, size, size), dtype=np.int32)
         p0, h0, _, wh0 = (self.table.column(name)[0] for name in BELIEF_COLUMNS)
         self.prior_prob, self.prior_entropy = p0, h0  # the caches' value in every new cell
-        self.prob = np.full((n_maps, size, size), p0, dtype=np.float32)
-        self.entropy = np.full((n_maps, size, size), h0, dtype=np.float32)
-        self.wentropy = np.full((n_maps, size, size), wh0, dtype=np.float32)
+        self.prior_wentropy = wh0
         self.prob_blocks = np.broadcast_to(blocks.block_area * float(p0),
                                            (n_maps,) + blocks.block_area.shape).copy()
         self.wentropy_blocks = np.broadcast_to(blocks.block_area * float(wh0),
                                                (n_maps,) + blocks.block_area.shape).copy()
         self.changes: list[tuple[int, Rect]] = []
+        self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._synced = 0  # changes[:_synced] are in _arrays
+        self._pairs = np.empty(0, dtype=np.uint32)  # fuse_targets' scratch, kept between steps
+        # _transitions[k, 2 s + r]: the index of clip(value k + the increment of a reading r
+        # with the increments of delta slot s), -1 until first met (fuse_targets).
+        self._delta_slots: dict[tuple[float, float], int] = {}
+        self._transitions = np.full((0, 0), -1, dtype=np.int32)
+
+    @property
+    def logodds(self) -> np.ndarray:
+        """(M, H, W) float32 log-odds (see the class docstring)."""
+        return self._synced_arrays()[0]
+
+    @property
+    def prob(self) -> np.ndarray:
+        """(M, H, W) float32 sigmoid(logodds)."""
+        return self._synced_arrays()[1]
+
+    @property
+    def entropy(self) -> np.ndarray:
+        """(M, H, W) float32 binary entropy in bits."""
+        return self._synced_arrays()[2]
+
+    @property
+    def wentropy(self) -> np.ndarray:
+        """(M, H, W) float32 weighted entropy W(p) H(p) in bits."""
+        return self._synced_arrays()[3]
+
+    def _synced_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The per-cell arrays, built at the prior on first use, with every change since
+        the last call looked up from :attr:`value_index` (a lookup writes the values the
+        arrays already hold wherever they are current, so looking up too much is harmless)."""
+        if self._arrays is None:
+            shape = self.value_index.shape
+            self._arrays = tuple(np.full(shape, value, dtype=np.float32) for value in (
+                self.prior_logodds, self.prior_prob, self.prior_entropy, self.prior_wentropy))
+            self._synced = 0
+        if self._synced < len(self.changes):
+            pending = list(dict.fromkeys(self.changes[self._synced:]))
+            self._synced = len(self.changes)
+            prob, entropy, _, wentropy = (self.table.column(name) for name in BELIEF_COLUMNS)
+            values = self.table.values
+            if kernels.AVAILABLE:
+                kernels.gather_caches(self.value_index.view(np.uint32), values, prob, entropy,
+                                      wentropy, np.array([m for m, _ in pending], np.int64),
+                                      np.array([r for _, r in pending], np.int64).reshape(-1, 4),
+                                      *self._arrays)
+            else:
+                for m, (r0, r1, c0, c1) in pending:
+                    indices = self.value_index[m, r0:r1, c0:c1]
+                    for array, column in zip(self._arrays, (values, prob, entropy, wentropy),
+                                             strict=True):
+                        array[m, r0:r1, c0:c1] = column[indices]
+        return self._arrays
 
     def add_evidence(self, index: int, rect: Rect, delta_logodds: np.ndarray) -> None:
         """Fuse one measurement into map ``index`` (log-odds only; call :meth:`refresh` after).
@@ -288,15 +356,15 @@ class BeliefMaps:
 
     def _refresh(self, index: int, rect: Rect, truth: np.ndarray | None) -> np.ndarray | None:
         r0, r1, c0, c1 = (int(v) for v in rect)
+        arrays = self._synced_arrays()  # before the change is logged: it reads the log
         self.changes.append((index, (r0, r1, c0, c1)))
         cells = (index, slice(r0, r1), slice(c0, c1))
-        ids = self.table.indices(self.logodds[cells])
+        ids = self.table.indices(arrays[0][cells])
         if not kernels.AVAILABLE:
-            return self._apply_numpy(index, (r0, r1, c0, c1), ids, truth)
+            return self._apply_numpy(index, (r0, r1, c0, c1), ids, truth, arrays)
         prob, entropy, weights, wentropy = (self.table.column(name) for name in BELIEF_COLUMNS)
         rows, cols = self.blocks.block_of_cell[r0:r1], self.blocks.block_of_cell[c0:c1]
-        caches = (self.value_index[cells], self.prob[cells], self.entropy[cells],
-                  self.wentropy[cells])
+        caches = (self.value_index[cells], arrays[1][cells], arrays[2][cells], arrays[3][cells])
         if truth is None:
             kernels.apply_values(ids, *caches, prob, entropy, wentropy, rows, cols,
                                  self.prob_blocks[index], self.wentropy_blocks[index])
@@ -343,43 +411,66 @@ class BeliefMaps:
                          for t, index in enumerate(target_maps.tolist())
                          for u in sender_list[bounds[t]:bounds[t + 1]]]
         clip = np.float32(LOGODDS_CLIP)
-        bits = self.logodds.view(np.uint32)
         value_index = self.value_index.view(np.uint32)  # unsigned: cheaper indexing
-
-        cursor = np.array([0, 0, -1, 0], dtype=np.int64)  # target, footprint, row, resumed
+        areas = (rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2])
+        needed = 2 * int(areas[senders].sum())  # every target's footprints, overlaps twice
+        if len(self._pairs) < needed:
+            self._pairs = np.empty(needed, dtype=np.uint32)
+        pairs = self._pairs
+        delta_slots = np.array([self._delta_slot(pair) for pair in deltas.tolist()],
+                               dtype=np.int64)
+        cursor = np.array([0, 0, -1, 0], dtype=np.int64)  # target, footprint, row, pair
 
         def run(slot: np.ndarray, table_bits: np.ndarray, size: int, shift: np.uint32,
                 multiplier: np.uint32, limit: int) -> tuple[int, bool]:
-            return kernels.fuse_evidence(self.logodds, bits, value_index, readings, offsets,
-                                         rects, deltas, clip, target_maps, target_offsets,
-                                         senders, slot, table_bits, size, shift, multiplier,
-                                         limit, cursor)
+            transitions = self._grown_transitions(len(table_bits))
+            return kernels.fuse_evidence(value_index, readings, offsets, rects, deltas, clip,
+                                         target_maps, target_offsets, senders, slot,
+                                         table_bits, size, shift, multiplier, limit, cursor,
+                                         pairs, table_bits.view(np.float32), transitions,
+                                         delta_slots)
 
-        self.table.intern_resumable(run)
+        self.table.intern_resumable(run, room=self.value_index.shape[2])
         columns = (self.table.column(name) for name in BELIEF_COLUMNS)
         stats = np.zeros((target_offsets[-1] - target_offsets[-2], len(REGION_STATS)))
-        kernels.apply_targets(value_index, self.prob, self.entropy, self.wentropy, *columns,
-                              self.blocks.block_of_cell, self.blocks.edges, self.prob_blocks,
-                              self.wentropy_blocks, rects, target_maps, target_offsets, senders,
-                              truth, stats)
+        kernels.apply_targets(pairs, *columns, self.blocks.block_of_cell, self.blocks.edges,
+                              self.prob_blocks, self.wentropy_blocks, rects, target_maps,
+                              target_offsets, senders, truth, stats)
         return stats
 
-    def _apply_numpy(self, index: int, rect: Rect, new: np.ndarray, truth: np.ndarray | None
-                     ) -> np.ndarray | None:
+    def _delta_slot(self, pair: list[float]) -> int:
+        """The column pair of :attr:`_transitions` of a reading's increments (d0, d1)."""
+        slot = self._delta_slots.setdefault(tuple(pair), len(self._delta_slots))
+        self._grown_transitions(0, 2 * slot + 2)
+        return slot
+
+    def _grown_transitions(self, rows: int, columns: int = 0) -> np.ndarray:
+        """:attr:`_transitions`, grown to at least ``rows`` rows (one per table entry) and
+        ``columns`` columns; new entries unknown (-1)."""
+        old = self._transitions
+        if old.shape[0] < rows or old.shape[1] < columns:
+            shape = (max(rows, old.shape[0]), max(columns, old.shape[1]))
+            self._transitions = np.full(shape, -1, dtype=np.int32)
+            self._transitions[:old.shape[0], :old.shape[1]] = old
+        return self._transitions
+
+    def _apply_numpy(self, index: int, rect: Rect, new: np.ndarray, truth: np.ndarray | None,
+                     arrays: tuple[np.ndarray, ...]) -> np.ndarray | None:
         """The caches' update of :meth:`_refresh` in NumPy (the kernels' reference)."""
         r0, r1, c0, c1 = rect
         cells = (index, slice(r0, r1), slice(c0, c1))
         prob, entropy, weights, wentropy = (self.table.column(name) for name in BELIEF_COLUMNS)
+        cached_prob, cached_entropy, cached_wentropy = arrays[1], arrays[2], arrays[3]
         self.value_index[cells] = new
-        old_prob, old_entropy = self.prob[cells].copy(), self.entropy[cells].copy()
-        old_wentropy = self.wentropy[cells].copy()
+        old_prob, old_entropy = cached_prob[cells].copy(), cached_entropy[cells].copy()
+        old_wentropy = cached_wentropy[cells].copy()
         new_prob, new_entropy, new_wentropy = prob[new], entropy[new], wentropy[new]
         self.blocks.add_block_sums(self.prob_blocks[index], new_prob - old_prob, rect)
         self.blocks.add_block_sums(self.wentropy_blocks[index], new_wentropy - old_wentropy,
                                    rect)
-        self.prob[cells] = new_prob
-        self.entropy[cells] = new_entropy
-        self.wentropy[cells] = new_wentropy
+        cached_prob[cells] = new_prob
+        cached_entropy[cells] = new_entropy
+        cached_wentropy[cells] = new_wentropy
         if truth is None:
             return None
         # (1 - p')^2 - (1 - p)^2 = (p - p') (2 - p - p')

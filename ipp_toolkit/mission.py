@@ -245,17 +245,24 @@ def compute_metrics(ground_truth: np.ndarray, prob: np.ndarray, entropy: np.ndar
     )
 
 
-def _initial_stats(ground_truth: np.ndarray, maps: BeliefMaps, index: int) -> _GlobalStats:
-    prob, entropy = maps.prob[index], maps.entropy[index]
-    truth = ground_truth
-    predicted = prob > 0.5
+def _prior_stats(ground_truth: np.ndarray, maps: BeliefMaps) -> _GlobalStats:
+    """The running sums of a map at the prior (every cell holds the prior's values).
+
+    The same NumPy reductions over the same float32 values as :func:`compute_metrics` on the
+    full map (so the same numbers to the last bit), without building the map's arrays.
+    """
+    n = int(np.count_nonzero(ground_truth))
+    prior_prob = np.full(n, maps.prior_prob, dtype=np.float32)
+    positive = bool(maps.prior_prob > 0.5)
     return _GlobalStats(
-        n_interesting=int(np.count_nonzero(truth)),
-        entropy_interesting=float(entropy[truth].sum(dtype=np.float64)),
-        squared_error_interesting=float(np.sum((1.0 - prob[truth].astype(np.float64)) ** 2)),
-        true_positive=int(np.count_nonzero(truth & predicted)),
-        predicted_positive=int(np.count_nonzero(predicted)),
-        weighted_entropy=float(np.sum(maps.wentropy[index], dtype=np.float64)),
+        n_interesting=n,
+        entropy_interesting=float(np.full(n, maps.prior_entropy, dtype=np.float32)
+                                  .sum(dtype=np.float64)),
+        squared_error_interesting=float(np.sum((1.0 - prior_prob.astype(np.float64)) ** 2)),
+        true_positive=n if positive else 0,
+        predicted_positive=ground_truth.size if positive else 0,
+        weighted_entropy=float(np.sum(np.full(ground_truth.shape, maps.prior_wentropy,
+                                              dtype=np.float32), dtype=np.float64)),
     )
 
 
@@ -335,7 +342,7 @@ def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str
         ground_truth=truth,
         positions=_start_positions(config, geometry, streams),
         maps=maps,
-        stats=_initial_stats(truth, maps, n),
+        stats=_prior_stats(truth, maps),
         last_actions=np.full(n, -1, dtype=np.int64),
         blocked=np.zeros(n, dtype=bool),
         measurement_planes=np.zeros((n,) + geometry.blocks.block_area.shape),

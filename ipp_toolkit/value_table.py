@@ -87,14 +87,15 @@ class ValueTable:
             self._derive(old_size)
         return out
 
-    def intern_resumable(self, run: Callable[..., tuple[int, bool]]) -> None:
+    def intern_resumable(self, run: Callable[..., tuple[int, bool]], room: int = 0) -> None:
         """Let a compiled pass intern values into the table, growing it when the pass stops.
 
         ``run(slot, bits, size, shift, multiplier, limit)`` interns (as
         :func:`ipp_toolkit.kernels.find_or_add` does) and returns ``(size, True)`` when it is
-        done, or ``(size, False)`` when the table holds ``limit`` values; then the table
-        grows and ``run`` is called again, to go on where it stopped (it keeps its own
-        place). New values get their derived columns once, at the end. Unlike
+        done, or ``(size, False)`` when it stopped because the table might otherwise hold
+        more than ``limit`` values; then the table grows, with room for at least ``room``
+        more values, and ``run`` is called again, to go on where it stopped (it keeps its
+        own place). New values get their derived columns once, at the end. Unlike
         :meth:`indices`, which reserves room for every cell it is given, the hash table
         grows only with the values it holds, so it stays small enough for the CPU cache.
         """
@@ -105,7 +106,7 @@ class ValueTable:
                                   np.uint32(32 - self._slot_bits), _MULTIPLIER, limit)
             if done:
                 break
-            self._reserve(max(self.size, 1 << (_MIN_SLOT_BITS - 1)))
+            self._reserve(max(self.size, room, 1 << (_MIN_SLOT_BITS - 1)))
         if self.size > old_size:
             self._derive(old_size)
 

@@ -7,7 +7,7 @@ from helpers import random_valid_actions
 
 from ipp_toolkit import kernels, mission, value_table
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import BELIEF_COLUMNS, BlockGrid, belief_columns
+from ipp_toolkit.mapping import BELIEF_COLUMNS, LOGODDS_CLIP, BlockGrid, belief_columns
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.seeding import mission_streams
 from ipp_toolkit.sensor_noise import assembled_entropy, compiled_noise_ok
@@ -110,12 +110,14 @@ def test_compiled_and_numpy_refresh_agree_over_whole_missions(monkeypatch, team)
                                    rtol=1e-9, atol=1e-12)
 
 
-def _fly(config: EnvConfig, mission_index: int = 1):
+def _fly(config: EnvConfig, mission_index: int = 1, read_every_step: bool = False):
     state = reset_mission(config, seed=4, mission=mission_index)
     rng = np.random.default_rng(2)
     rewards = []
     while not state.done:
         rewards.append(step_mission(state, random_valid_actions(state.masks(), rng)))
+        if read_every_step:
+            state.maps.prob  # noqa: B018 (brings the per-cell arrays up to date)
     return state, rewards
 
 
@@ -219,3 +221,45 @@ def test_worlds_with_larger_blocks_take_the_per_rectangle_path(monkeypatch):
     state = reset_mission(config, seed=0, geometry=geometry)
     step_mission(state, random_valid_actions(state.masks(), np.random.default_rng(0)))
     assert state.step == 1 and mission.MissionGeometry(EnvConfig()).whole_step
+
+
+@needs_numba
+@pytest.mark.parametrize("case", ["d25", "inf"])
+def test_per_cell_arrays_are_built_only_when_read_and_then_match_reading_every_step(case):
+    """A step writes only the index array and the block sums; the log-odds and caches are
+    looked up on demand, the same whether read once at the end or after every step."""
+    team = _TEAMS[case] if case == "d25" else {**_TEAMS[case], "n_agents": 8}
+    config = EnvConfig().replace(world={"resolution": 0.5}, team=team)
+    (lazy, _), (eager, _) = _fly(config), _fly(config, read_every_step=True)
+    assert lazy.maps._arrays is None  # nobody read them: never built
+    np.testing.assert_array_equal(lazy.maps.value_index, eager.maps.value_index)
+    table = lazy.maps.table
+    expected = [table.values] + [table.column(name) for name in ("prob", "entropy",
+                                                                 "wentropy")]
+    for name, column in zip(("logodds", "prob", "entropy", "wentropy"), expected,
+                            strict=True):
+        got = getattr(lazy.maps, name)
+        np.testing.assert_array_equal(got.view(np.uint32),
+                                      getattr(eager.maps, name).view(np.uint32), err_msg=name)
+        np.testing.assert_array_equal(got, column[lazy.maps.value_index], err_msg=name)
+
+
+@needs_numba
+def test_known_transitions_lead_to_the_sums_of_their_values():
+    """Every transition the whole-step kernel remembered is the index of clip(value +
+    increment): the float32 sum the per-rectangle path computes."""
+    config = EnvConfig().replace(world={"resolution": 0.5}, team=_TEAMS["d25"])
+    state, _ = _fly(config)
+    maps = state.maps
+    values, clip = maps.table.values, np.float32(LOGODDS_CLIP)
+    assert len(maps._delta_slots) == len(config.world.altitudes)
+    known = 0
+    for (d0, d1), slot in maps._delta_slots.items():
+        for reading, delta in enumerate((d0, d1)):
+            targets = maps._transitions[:len(values), 2 * slot + reading]
+            hit = np.flatnonzero(targets >= 0)
+            known += len(hit)
+            sums = np.clip(values[hit] + np.float32(delta), -clip, clip)
+            np.testing.assert_array_equal(values[targets[hit]].view(np.uint32),
+                                          sums.view(np.uint32))
+    assert known > 50
