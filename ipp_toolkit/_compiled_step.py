@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ._compiled_kernels import _float_bits, _jit, _prefetch_line, intern_pattern
@@ -184,6 +185,18 @@ def _most_senders(target_offsets):
     return width
 
 
+@numba.njit(cache=True, nogil=True, boundscheck=False, inline="always")
+def _plus_reading(value, deltas, f, read, low, high):
+    """clip(value + the increment of reading ``read`` of footprint f, low, high): one
+    cell's addition in :meth:`ipp_toolkit.mapping.BeliefMaps.add_evidence`."""
+    value = value + (deltas[f, 1] if read else deltas[f, 0])
+    if value < low:
+        return low
+    if value > high:
+        return high
+    return value
+
+
 @_jit
 def _add_readings(row_values, rects, readings, offsets, deltas, senders, u, last, i, runs,
                   seg_lo, seg_hi, low, high):
@@ -285,6 +298,33 @@ def fuse_evidence(value_index, readings, offsets, rects, deltas, clip, target_ma
                     if s == runs:
                         break
                     covered_from = seg_hi[s]
+                    if not later:  # every cell under this footprint alone
+                        first_pair = position
+                        misses = 0
+                        for j in range(start, covered_from):
+                            old = indices[j]
+                            index = transitions[old, code + np.int64(readings[base + j])]
+                            misses += index < 0
+                            pairs[position] = old
+                            pairs[position + 1] = index
+                            position += 2
+                            indices[j] = index
+                        if misses:  # first meetings: the float sum, interned in cell order
+                            for j in range(start, covered_from):
+                                p = first_pair + 2 * (j - start)
+                                old = pairs[p]
+                                column = code + np.int64(readings[base + j])
+                                index = np.int64(transitions[old, column])
+                                if index < 0:
+                                    value = _plus_reading(values[old], deltas, f,
+                                                          readings[base + j], low, high)
+                                    index, size = intern_pattern(_float_bits(value), slot,
+                                                                 table_bits, size, shift,
+                                                                 multiplier)
+                                    transitions[old, column] = index
+                                pairs[p + 1] = index
+                                indices[j] = index
+                        continue
                     for j in range(start, covered_from):
                         old = indices[j]
                         column = code
@@ -295,13 +335,8 @@ def fuse_evidence(value_index, readings, offsets, rects, deltas, clip, target_ma
                             column = code + np.int64(readings[base + j])
                             index = np.int64(transitions[old, column])
                             if index < 0:
-                                value = values[old] + (deltas[f, 1] if readings[base + j]
-                                                       else deltas[f, 0])
-                                if value < low:
-                                    value = low
-                                elif value > high:
-                                    value = high
-                                pattern = _float_bits(value)
+                                pattern = _float_bits(_plus_reading(
+                                    values[old], deltas, f, readings[base + j], low, high))
                         if index < 0:
                             index, size = intern_pattern(pattern, slot, table_bits, size,
                                                          shift, multiplier)

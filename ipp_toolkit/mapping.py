@@ -13,13 +13,13 @@ compiled passes (:meth:`BeliefMaps.fuse_targets`), with the numbers of the per-r
 
 from __future__ import annotations
 
-from functools import partial
+from functools import cache, partial
 
 import numpy as np
 
 from . import kernels
 from .kernels import REGION_STATS
-from .value_table import ValueTable
+from .value_table import DerivedMemo, ValueTable
 
 __all__ = [
     "PROB_CLIP",
@@ -213,6 +213,14 @@ def belief_columns(logodds: np.ndarray, weight_interesting: float = 1.0,
     return prob, entropy, weights, weights * entropy
 
 
+@cache
+def _belief_memo(weight_interesting: float, weight_uninteresting: float) -> DerivedMemo:
+    """The process-wide :class:`~ipp_toolkit.value_table.DerivedMemo` of :func:`belief_columns`
+    with these class weights (every mission of a configuration meets the same values)."""
+    return DerivedMemo(partial(belief_columns, weight_interesting=weight_interesting,
+                               weight_uninteresting=weight_uninteresting), len(BELIEF_COLUMNS))
+
+
 class BeliefMaps:
     """A stack of M occupancy maps in log-odds with cached probabilities and entropies.
 
@@ -251,10 +259,10 @@ class BeliefMaps:
         self.prior_logodds = float(logit(prior))
         self.weight_interesting = weight_interesting
         self.weight_uninteresting = weight_uninteresting
-        self.table = ValueTable(partial(belief_columns, weight_interesting=weight_interesting,
-                                        weight_uninteresting=weight_uninteresting),
-                                BELIEF_COLUMNS,
-                                first=np.full(1, self.prior_logodds, dtype=np.float32))
+        memo = _belief_memo(weight_interesting, weight_uninteresting)
+        self.table = ValueTable(memo.derive, BELIEF_COLUMNS,
+                                first=np.full(1, self.prior_logodds, dtype=np.float32),
+                                memo=memo)
         # Zeros (the prior's index) from the allocator's zeroed pages: only the pages under
         # footprints are ever touched.
         self.value_index = np.zeros((n_maps, size, size), dtype=np.int32)

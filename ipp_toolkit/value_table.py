@@ -19,13 +19,60 @@ import numpy as np
 
 from . import kernels
 
-__all__ = ["ValueTable"]
+__all__ = ["ValueTable", "DerivedMemo"]
 
 _MULTIPLIER = np.uint32(2654435761)
 _MIN_SLOT_BITS = 12
 
 #: float32 values (n,) -> one (n,) float32 array per derived column.
 Derive = Callable[[np.ndarray], Sequence[np.ndarray]]
+
+
+class DerivedMemo:
+    """The derived columns of every value ``derive`` was given, kept for the whole process.
+
+    Tables that share one ``derive`` (every mission of a configuration) meet the same values
+    over and over; a table given a memo computes a value's columns once per process instead
+    of once per table. A looked-up column is the one ``derive`` computed, which is the one it
+    would compute again: NumPy's element-wise functions give an element the same result
+    wherever it sits in the array. That is checked once (:meth:`exact`); where it does not
+    hold, the memo is not used and every table derives its own values.
+    """
+
+    def __init__(self, derive: Derive, n_columns: int):
+        self.derive = derive
+        self._row: dict[int, int] = {}
+        self._columns = np.empty((n_columns, 256), dtype=np.float32)
+        self._exact: bool | None = None
+
+    def exact(self) -> bool:
+        """Whether ``derive`` gives each value the same columns in any position of its input
+        (checked on a spread of values, whole and one at a time, on first call)."""
+        if self._exact is None:
+            values = np.linspace(-10.0, 10.0, 67, dtype=np.float32)
+            whole = np.stack(self.derive(values))
+            alone = np.concatenate([np.stack(self.derive(values[i:i + 1]))
+                                    for i in range(len(values))], axis=1)
+            shifted = np.stack(self.derive(values[5:]))
+            self._exact = (np.array_equal(whole.view(np.uint32), alone.view(np.uint32))
+                           and np.array_equal(whole[:, 5:].view(np.uint32),
+                                              shifted.view(np.uint32)))
+        return self._exact
+
+    def columns(self, values: np.ndarray) -> np.ndarray:
+        """(n_columns, n) float32 derived columns of (n,) float32 values."""
+        patterns = values.view(np.uint32).tolist()
+        new = [pattern for pattern in dict.fromkeys(patterns) if pattern not in self._row]
+        if new:
+            derived = np.stack(self.derive(np.array(new, dtype=np.uint32).view(np.float32)))
+            start = len(self._row)
+            if start + len(new) > self._columns.shape[1]:
+                grown = np.empty((len(self._columns), 2 * (start + len(new))), np.float32)
+                grown[:, :start] = self._columns[:, :start]
+                self._columns = grown
+            self._columns[:, start:start + len(new)] = derived
+            self._row.update(zip(new, range(start, start + len(new)), strict=True))
+        return self._columns[:, [self._row[pattern] for pattern in patterns]]
 
 
 class ValueTable:
@@ -35,13 +82,17 @@ class ValueTable:
         derive: computes the derived columns of new values (element-wise NumPy code).
         names: the names of the columns ``derive`` returns, in order.
         first: values to intern at once (index 0 for the first).
+        memo: a :class:`DerivedMemo` of ``derive`` shared with other tables (used where it
+            is exact).
 
     Attributes:
         size: how many distinct values are interned.
     """
 
-    def __init__(self, derive: Derive, names: Sequence[str], first: np.ndarray | None = None):
+    def __init__(self, derive: Derive, names: Sequence[str], first: np.ndarray | None = None,
+                 memo: DerivedMemo | None = None):
         self.derive = derive
+        self.memo = memo if memo is not None and memo.exact() else None
         self.names = tuple(names)
         self.size = 0
         self._capacity = 0
@@ -114,7 +165,8 @@ class ValueTable:
 
     def _derive(self, start: int) -> None:
         """Fill the values and derived columns of indices ``start..size``."""
-        derived = self.derive(self._bits[start:self.size].view(np.float32))
+        values = self._bits[start:self.size].view(np.float32)
+        derived = self.memo.columns(values) if self.memo is not None else self.derive(values)
         if len(derived) != len(self.names):
             raise ValueError(f"derive returned {len(derived)} columns, expected {self.names}")
         for name, column in zip(self.names, derived, strict=True):

@@ -11,7 +11,7 @@ from ipp_toolkit.mapping import BELIEF_COLUMNS, LOGODDS_CLIP, BlockGrid, belief_
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.seeding import mission_streams
 from ipp_toolkit.sensor_noise import assembled_entropy, compiled_noise_ok
-from ipp_toolkit.value_table import ValueTable
+from ipp_toolkit.value_table import DerivedMemo, ValueTable
 
 needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not importable")
 
@@ -263,3 +263,36 @@ def test_known_transitions_lead_to_the_sums_of_their_values():
             np.testing.assert_array_equal(values[targets[hit]].view(np.uint32),
                                           sums.view(np.uint32))
     assert known > 50
+
+
+def test_a_shared_memo_gives_the_columns_deriving_gives(path):
+    """Tables sharing a DerivedMemo get, for every value, the columns their own derive
+    gives; each value is derived once for all of them."""
+    calls = []
+
+    def counted(values):
+        calls.append(len(values))
+        return _square(values)
+
+    memo = DerivedMemo(counted, 2)
+    assert memo.exact()
+    calls.clear()
+    rng = np.random.default_rng(3)
+    values = rng.normal(size=(3, 40)).astype(np.float32)
+    values[1, :20] = values[0, :20]  # the second table meets half of the first one's values
+    for row in values:
+        table = ValueTable(counted, ("square", "plus_one"), memo=memo)
+        index = table.indices(row)
+        square, plus_one = _square(row)
+        np.testing.assert_array_equal(table.column("square")[index].view(np.uint32),
+                                      square.view(np.uint32))
+        np.testing.assert_array_equal(table.column("plus_one")[index], plus_one)
+    assert sum(calls) == len(np.unique(values))
+
+
+def test_a_memo_whose_derive_depends_on_position_is_not_used():
+    memo = DerivedMemo(lambda values: (values + np.arange(len(values), dtype=np.float32),),
+                       1)
+    assert not memo.exact()
+    table = ValueTable(memo.derive, ("shifted",), memo=memo)
+    assert table.memo is None
