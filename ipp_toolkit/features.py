@@ -16,7 +16,7 @@ import numpy as np
 
 from .config import ACTOR_PLANES, FeatureConfig
 from .gain import FootprintGainCache
-from .interest import interest_smoother
+from .interest import BlockMeanCache, interest_smoother
 from .mission import MissionState
 from .team import ACTION_DELTAS, N_ACTIONS
 
@@ -214,8 +214,11 @@ def footprint_gain(state: MissionState, smoothing: float | None = None) -> np.nd
     if smoothing > 0:
         world = state.config.world
         smoother = interest_smoother(world.map_cells, world.resolution, smoothing)
-        sums = cache.weighted_sums(smoother.block_values(state.maps.prob[:state.n_agents]),
-                                   smoother.block)
+        means = state.block_mean_cache
+        if means is None or means.maps is not state.maps or means.block != smoother.block:
+            means = state.block_mean_cache = BlockMeanCache(state.maps, state.n_agents,
+                                                            smoother.block)
+        sums = cache.weighted_sums(smoother.smooth(means.means()), smoother.block)
         scale = 1.0
     else:
         sums = cache.sums()

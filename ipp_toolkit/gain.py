@@ -185,6 +185,7 @@ class FootprintGainCache:
         self.cols_full_t = np.stack([_overlap_matrix(b, 0, size).T for b in self.col_bounds]
                                     ).astype(np.float32)
         self.seen = 0
+        self._product: np.ndarray | None = None  # weighted_sums' buffer, (Z, H, W) float32
         self.update()
 
     def sums(self) -> np.ndarray:
@@ -208,21 +209,29 @@ class FootprintGainCache:
             raise ValueError(f"cell_weight must have shape {(n_maps,) + (size // block,) * 2} "
                              f"for blocks of {block} cells, got {cell_weight.shape}")
         # Maps that share one belief (every map at D = inf) share one product: their cells
-        # and so their weights are identical.
+        # and so their weights are identical. One map at a time through one buffer: the same
+        # products and the same matrix products per altitude as one stacked expression,
+        # without a temporary the size of every map's cells.
         owners, inverse = np.unique(self.owner, return_inverse=True)
-        weight = cell_weight if len(owners) == n_maps else cell_weight[owners]
-        cells = self.cells if len(owners) == n_maps else self.cells[owners]
-        if block > 1:
-            # The weights repeated along the rows only: broadcast over each square's rows,
-            # the product still runs along whole rows (faster than repeating both ways, and
-            # than broadcasting over 5 x 5 squares). The same products either way.
-            weight = np.repeat(weight, block, axis=-1)  # (maps, H / block, W)
-            shape = cells.shape
-            weighted = (cells.reshape(shape[:2] + (size // block, block, size))
-                        * weight[:, None, :, None, :]).reshape(shape)
-        else:
-            weighted = cells * weight[:, None]
-        sums = self.rows_full @ weighted @ self.cols_full_t
+        if self._product is None:
+            self._product = np.empty(self.cells.shape[1:], dtype=np.float32)
+        product = self._product
+        n_altitudes = self.cells.shape[1]
+        sums = np.empty((len(owners),) + self.totals.shape[1:], dtype=np.float32)
+        for row, owner in enumerate(owners.tolist()):
+            cells = self.cells[owner]
+            if block > 1:
+                # The weights repeated along the rows only: broadcast over each square's
+                # rows, the product still runs along whole rows (faster than repeating both
+                # ways, and than broadcasting over 5 x 5 squares). The same products either
+                # way.
+                weight = np.repeat(cell_weight[owner], block, axis=-1)  # (H / block, W)
+                squares = (n_altitudes, size // block, block, size)
+                np.multiply(cells.reshape(squares), weight[None, :, None, :],
+                            out=product.reshape(squares))
+            else:
+                np.multiply(cells, cell_weight[owner][None], out=product)
+            sums[row] = self.rows_full @ product @ self.cols_full_t
         return sums[inverse].astype(np.float64)
 
     def update(self) -> None:

@@ -24,10 +24,15 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["InterestSmoother", "block_means", "interest_smoother", "smoothing_matrix"]
+if TYPE_CHECKING:
+    from .mapping import BeliefMaps
+
+__all__ = ["BlockMeanCache", "InterestSmoother", "block_means", "interest_smoother",
+           "smoothing_matrix"]
 
 #: Side of the blocks the probabilities are averaged over before smoothing, in metres.
 BLOCK_METRES = 0.5
@@ -59,14 +64,14 @@ def _numpy_block_means(prob: np.ndarray, block: int) -> np.ndarray:
 
 
 def _ordered_block_means(prob: np.ndarray, block: int) -> np.ndarray:
-    n = prob.shape[-1] // block
-    cells = prob.reshape(prob.shape[:-2] + (n, block, n, block))
-    rows = cells[..., 0].astype(np.float32)  # (..., n, block, n): each block row, left to right
+    rows, cols = prob.shape[-2] // block, prob.shape[-1] // block  # any rectangle of blocks
+    cells = prob.reshape(prob.shape[:-2] + (rows, block, cols, block))
+    row_sums = cells[..., 0].astype(np.float32)  # each block row, left to right
     for j in range(1, block):
-        rows += cells[..., j]
-    sums = rows[..., 0, :].copy()  # then the block's rows, top to bottom
+        row_sums += cells[..., j]
+    sums = row_sums[..., 0, :].copy()  # then the block's rows, top to bottom
     for i in range(1, block):
-        sums += rows[..., i, :]
+        sums += row_sums[..., i, :]
     return np.true_divide(sums, np.intp(block * block), out=sums, casting="unsafe")
 
 
@@ -132,7 +137,12 @@ class InterestSmoother:
         if prob.shape[-2:] != (self.size, self.size):
             raise ValueError(f"expected maps of {self.size} x {self.size} cells, got shape "
                              f"{prob.shape}")
-        return self.matrix @ block_means(prob, self.block) @ self.matrix.T
+        return self.smooth(block_means(prob, self.block))
+
+    def smooth(self, means: np.ndarray) -> np.ndarray:
+        """(..., size / block, size / block) float32 smoothed values of the block means
+        ``means`` (:func:`block_means` of the probabilities, same shape)."""
+        return self.matrix @ means @ self.matrix.T
 
     def window(self, block_values: np.ndarray, rows: slice, cols: slice) -> np.ndarray:
         """The per-cell values of ``block_values`` (one map) inside ``[rows, cols]`` only.
@@ -149,3 +159,49 @@ class InterestSmoother:
 def interest_smoother(size: int, resolution: float, sigma: float) -> InterestSmoother:
     """The shared :class:`InterestSmoother` of a map size, resolution and sigma (memoised)."""
     return InterestSmoother(size, resolution, sigma)
+
+
+class BlockMeanCache:
+    """``block_means(maps.prob[:n_maps], block)``, kept up to date from the maps' change log.
+
+    Only the blocks a refreshed rectangle touches are summed again, from the probabilities
+    their cells hold now (looked up from the maps' value table, so the maps' per-cell arrays
+    are never built), each block in the order :func:`block_means` sums it: the same numbers.
+    Where that order could not be checked for the full maps' shape (:func:`block_means` then
+    takes NumPy's mean), the means are taken from the whole maps at every call instead.
+
+    Args:
+        maps: the :class:`~ipp_toolkit.mapping.BeliefMaps` of a mission.
+        n_maps: the first ``n_maps`` maps of the stack.
+        block: side of the squares in cells (divides the map size).
+    """
+
+    def __init__(self, maps: BeliefMaps, n_maps: int, block: int) -> None:
+        self.maps, self.n_maps, self.block = maps, n_maps, block
+        size = maps.value_index.shape[-1]
+        shape = (n_maps, size, size)
+        block_means(np.zeros(shape, dtype=np.float32), block)  # checks the order, once
+        self.incremental = _ORDER_CHECKED.get((shape, block), False)
+        prior = np.full((1, block, block), maps.prior_prob, dtype=np.float32)
+        self._means = np.broadcast_to(_ordered_block_means(prior, block),
+                                      (n_maps, size // block, size // block)).copy()
+        self._seen = 0
+
+    def means(self) -> np.ndarray:
+        """(n_maps, size / block, size / block) float32 block means of the current maps."""
+        maps, b = self.maps, self.block
+        if not self.incremental:
+            return block_means(maps.prob[:self.n_maps], b)
+        changes = maps.changes
+        if len(changes) < self._seen:
+            raise RuntimeError("the maps' change log was cut: build a new BlockMeanCache")
+        prob = maps.table.column("prob")
+        for m, (r0, r1, c0, c1) in dict.fromkeys(changes[self._seen:]):
+            if m >= self.n_maps:
+                continue
+            r0, c0 = r0 // b * b, c0 // b * b  # the blocks the rectangle touches
+            r1, c1 = -(-r1 // b) * b, -(-c1 // b) * b
+            cells = prob[self.maps.value_index[m, r0:r1, c0:c1]]
+            self._means[m, r0 // b:r1 // b, c0 // b:c1 // b] = _ordered_block_means(cells, b)
+        self._seen = len(changes)
+        return self._means

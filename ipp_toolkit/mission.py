@@ -157,6 +157,8 @@ class MissionState:
         gain_cache: the footprint gain cache of the local maps
             (:class:`ipp_toolkit.gain.FootprintGainCache`), built on first use by
             :func:`ipp_toolkit.features.footprint_gain`; None until then.
+        block_mean_cache: the local maps' block means of probability
+            (:class:`ipp_toolkit.interest.BlockMeanCache`), likewise.
     """
 
     config: EnvConfig
@@ -179,6 +181,7 @@ class MissionState:
     _drop_rng: np.random.Generator | None = None
     _noise_prefix: list[int] | None = field(default=None, repr=False, compare=False)
     gain_cache: Any = field(default=None, repr=False, compare=False)
+    block_mean_cache: Any = field(default=None, repr=False, compare=False)
 
     @property
     def n_agents(self) -> int:

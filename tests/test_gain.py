@@ -10,7 +10,7 @@ import pytest
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.features import footprint_gain, gain_planes
 from ipp_toolkit.gain import FootprintGainCache, footprint_sums, recomputed_footprint_sums
-from ipp_toolkit.interest import InterestSmoother, block_means
+from ipp_toolkit.interest import BlockMeanCache, InterestSmoother, block_means
 from ipp_toolkit.mapping import interesting_gain
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.team import ACTION_NAMES
@@ -219,3 +219,38 @@ def test_weighted_sums_multiply_as_the_repeated_weights_did():
     expected = cache.rows_full @ (cache.cells * cells[:, None]) @ cache.cols_full_t
     np.testing.assert_array_equal(cache.weighted_sums(weight, 5), expected.astype(np.float64))
 
+
+
+@pytest.mark.parametrize("agents, comm, resolution", [(4, 25.0, 0.1), (8, math.inf, 0.25),
+                                                     (2, 0.0, 0.5)])
+def test_block_mean_cache_equals_the_full_maps_block_means_at_every_step(agents, comm,
+                                                                         resolution):
+    """Only the blocks under refreshed rectangles are summed again, from the table's
+    probabilities: the same numbers as the whole maps' block means, to the bit."""
+    config = EnvConfig().replace(world={"resolution": resolution},
+                                 team={"n_agents": agents, "comm_range": comm})
+    block = InterestSmoother(config.world.map_cells, resolution, 4.0).block
+    state = reset_mission(config, seed=5, mission=1)
+    cache = BlockMeanCache(state.maps, agents, block)
+    assert cache.incremental
+    rng = np.random.default_rng(4)
+    while True:
+        got = cache.means().copy()
+        assert state.maps._arrays is None  # the per-cell arrays were not needed
+        expected = block_means(state.maps.prob[:agents], block)
+        state.maps._arrays = None  # forget them again (they are rebuilt from the log)
+        np.testing.assert_array_equal(got.view(np.uint32), expected.view(np.uint32))
+        if state.done:
+            break
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+
+
+def test_block_mean_cache_takes_the_whole_maps_where_the_order_is_unchecked(monkeypatch):
+    import ipp_toolkit.interest as interest
+
+    config = EnvConfig().replace(world={"resolution": 0.5})
+    state = reset_mission(config, seed=0)
+    monkeypatch.setattr(interest, "_ORDER_CHECKED", {((4, 100, 100), 1): False})
+    cache = BlockMeanCache(state.maps, 4, 1)
+    assert not cache.incremental
+    np.testing.assert_array_equal(cache.means(), state.maps.prob[:4])
