@@ -299,53 +299,62 @@ def fuse_evidence(value_index, readings, offsets, rects, deltas, clip, target_ma
                         break
                     covered_from = seg_hi[s]
                     if not later:  # every cell under this footprint alone
-                        first_pair = position
                         misses = 0
-                        for j in range(start, covered_from):
-                            old = indices[j]
-                            index = transitions[old, code + np.int64(readings[base + j])]
+                        count = covered_from - start
+                        # Views indexed from 0: Numba's negative-index handling drops out.
+                        run_indices = indices[start:covered_from]
+                        run_reads = readings[base + start:base + covered_from]
+                        run_pairs = pairs[position:position + 2 * count]
+                        for q in range(count):
+                            old = run_indices[q]
+                            index = transitions[old, code + np.int64(run_reads[q])]
                             misses += index < 0
-                            pairs[position] = old
-                            pairs[position + 1] = index
-                            position += 2
-                            indices[j] = index
+                            run_pairs[2 * q] = old
+                            run_pairs[2 * q + 1] = index
+                            run_indices[q] = index
+                        position += 2 * count
                         if misses:  # first meetings: the float sum, interned in cell order
-                            for j in range(start, covered_from):
-                                p = first_pair + 2 * (j - start)
-                                old = pairs[p]
-                                column = code + np.int64(readings[base + j])
+                            for q in range(count):
+                                old = run_pairs[2 * q]
+                                column = code + np.int64(run_reads[q])
                                 index = np.int64(transitions[old, column])
                                 if index < 0:
-                                    value = _plus_reading(values[old], deltas, f,
-                                                          readings[base + j], low, high)
+                                    value = _plus_reading(values[old], deltas, f, run_reads[q],
+                                                          low, high)
                                     index, size = intern_pattern(_float_bits(value), slot,
                                                                  table_bits, size, shift,
                                                                  multiplier)
                                     transitions[old, column] = index
-                                pairs[p + 1] = index
-                                indices[j] = index
+                                run_pairs[2 * q + 1] = index
+                                run_indices[q] = index
                         continue
-                    for j in range(start, covered_from):
-                        old = indices[j]
+                    count = covered_from - start
+                    run_indices = indices[start:covered_from]
+                    run_reads = readings[base + start:base + covered_from]
+                    run_pairs = pairs[position:position + 2 * count]
+                    run_shared = shared[start:covered_from]
+                    run_bits = row_bits[start:covered_from]
+                    for q in range(count):
+                        old = run_indices[q]
                         column = code
-                        if shared[j]:
+                        if run_shared[q]:
                             index = np.int64(-1)
-                            pattern = row_bits[j]
+                            pattern = run_bits[q]
                         else:
-                            column = code + np.int64(readings[base + j])
+                            column = code + np.int64(run_reads[q])
                             index = np.int64(transitions[old, column])
                             if index < 0:
                                 pattern = _float_bits(_plus_reading(
-                                    values[old], deltas, f, readings[base + j], low, high))
+                                    values[old], deltas, f, run_reads[q], low, high))
                         if index < 0:
                             index, size = intern_pattern(pattern, slot, table_bits, size,
                                                          shift, multiplier)
-                            if not shared[j]:
+                            if not run_shared[q]:
                                 transitions[old, column] = index
-                        pairs[position] = old
-                        pairs[position + 1] = index
-                        position += 2
-                        indices[j] = index
+                        run_pairs[2 * q] = old
+                        run_pairs[2 * q + 1] = index
+                        run_indices[q] = index
+                    position += 2 * count
                 if later:
                     shared[c0:c1] = False
     cursor[0], cursor[1], cursor[2], cursor[3] = target_maps.shape[0], 0, -1, position
@@ -362,14 +371,14 @@ def _apply_run(pairs, position, n, table_prob, table_wentropy, block_sums, block
     """
     prob_sum = block_sums[block_row, block_col]
     wentropy_sum = wentropy_sums[block_row, block_col]
-    for _ in range(n):
-        old, new = pairs[position], pairs[position + 1]
-        position += 2
+    run = pairs[position:position + 2 * n]  # indexed from 0: no negative-index handling
+    for q in range(n):
+        old, new = run[2 * q], run[2 * q + 1]
         prob_sum += np.float64(table_prob[new] - table_prob[old])
         wentropy_sum += np.float64(table_wentropy[new] - table_wentropy[old])
     block_sums[block_row, block_col] = prob_sum
     wentropy_sums[block_row, block_col] = wentropy_sum
-    return position
+    return position + 2 * n
 
 
 @_jit
@@ -443,16 +452,17 @@ def apply_targets(pairs, table_prob, table_entropy, table_weights, table_wentrop
                         end = min(covered_from, edges[block_col + 1])
                         prob_sum = prob_sums[block_row, block_col]
                         wentropy_sum = wentropy_sums[block_row, block_col]
-                        for k in range(j, end):
-                            old, index = pairs[position], pairs[position + 1]
-                            position += 2
+                        run = pairs[position:position + 2 * (end - j)]  # from 0: see above
+                        run_truth = interesting[j:end]
+                        for q in range(end - j):
+                            old, index = run[2 * q], run[2 * q + 1]
                             old_prob = table_prob[old]
                             old_entropy = table_entropy[old]
                             old_wentropy = table_wentropy[old]
                             new_prob = table_prob[index]
                             new_wentropy = table_wentropy[index]
                             positive = int(new_prob > half) - int(old_prob > half)
-                            if interesting[k]:
+                            if run_truth[q]:
                                 s0 += np.float64(table_entropy[index] - old_entropy)
                                 s1 += np.float64((old_prob - new_prob)
                                                  * (two - old_prob - new_prob))
@@ -465,6 +475,7 @@ def apply_targets(pairs, table_prob, table_entropy, table_weights, table_wentrop
                             wentropy_sum += np.float64(new_wentropy - old_wentropy)
                         prob_sums[block_row, block_col] = prob_sum
                         wentropy_sums[block_row, block_col] = wentropy_sum
+                        position += 2 * (end - j)
                         j = end
             row = u - first
             stats[row, 0] = s0
