@@ -3,6 +3,7 @@
     git archive bbe960b ipp_toolkit | tar -x -C /tmp/before     # the version to compare with
     taskset -c 1 python benchmarks/env_ab.py --old /tmp/before   # this tree against it
     taskset -c 1 python benchmarks/env_ab.py --old /tmp/before --observe --missions 0-9
+    taskset -c 1 python benchmarks/env_ab.py --old /tmp/before --gain 5   # coma/ppo's planes
 
 On a shared VM the speed of one core drifts by tens of percent within minutes, so two runs of
 ``env_throughput.py`` taken one after the other compare the machine's moods as much as the
@@ -11,8 +12,9 @@ and fly the same missions with the same actions in turns, several times each, ke
 one's fastest run of each mission: what is left of the drift hits both alike.
 
 Prints, per version, the mean over missions of the fastest joint step (``step_mission``, with
-``--observe`` also every agent's observations and the global state) and of the fastest reset,
-and the new/old ratio mission by mission.
+``--observe`` also every agent's observations and the global state; ``--gain S`` adds the
+three gain planes with smoothing S metres, as the shipped ``coma`` and ``ppo`` policies see
+them) and of the fastest reset, and the new/old ratio mission by mission.
 """
 
 from __future__ import annotations
@@ -71,7 +73,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--observe", action="store_true",
                         help="also build every agent's observations and the global state")
+    parser.add_argument("--gain", type=float, default=None, metavar="S",
+                        help="observe with the gain planes, smoothing S metres (0: ig's)")
     args = parser.parse_args()
+    args.observe = args.observe or args.gain is not None
     args.workdir.mkdir(parents=True, exist_ok=True)
     import ipp_toolkit.config as new_config
     import ipp_toolkit.features as new_features
@@ -81,9 +86,11 @@ def main() -> None:
                 "new": (new_config, new_mission, new_features)}
     setups = {}
     for name, (config_module, mission_module, features_module) in versions.items():
+        features = ({} if args.gain is None
+                    else {"features": {"gain": True, "gain_smoothing": args.gain}})
         config = config_module.EnvConfig().replace(
             world={"resolution": args.resolution},
-            team={"n_agents": args.agents, "comm_range": args.comm})
+            team={"n_agents": args.agents, "comm_range": args.comm}, **features)
         setups[name] = (config, mission_module.MissionGeometry(config), mission_module,
                         features_module)
 
@@ -118,7 +125,8 @@ def main() -> None:
                 reset[name][i] = min(reset[name][i], reset_s)
     print(f"{args.agents} agents, D = {args.comm} m, r_M = {args.resolution} m, missions "
           f"{args.missions}, fastest of {args.repeats} runs each"
-          + (", with observations" if args.observe else ""))
+          + (", with observations" if args.observe else "")
+          + (f" and gain planes (smoothing {args.gain} m)" if args.gain is not None else ""))
     for name in setups:
         mean = step[name].mean()
         print(f"{name}: step {mean * 1e3:.3f} ms ({1 / mean:.0f} joint steps/s), reset "

@@ -166,3 +166,18 @@ def gather_caches(value_index, values, table_prob, table_entropy, table_wentropy
                 prob_row[j] = table_prob[index]
                 entropy_row[j] = table_entropy[index]
                 wentropy_row[j] = table_wentropy[index]
+
+
+@_jit
+def gain_changes(values, value_index, cells, r0, r1, c0, c1, delta):
+    """See :func:`ipp_toolkit.kernels.gain_changes`."""
+    for i in range(r1 - r0):
+        indices = value_index[r0 + i, c0:c1]
+        for z in range(values.shape[0]):
+            column = values[z]
+            row = cells[z, r0 + i, c0:c1]
+            out = delta[z, i]
+            for j in range(c1 - c0):
+                new = column[indices[j]]
+                out[j] = np.float64(new) - np.float64(row[j])
+                row[j] = new

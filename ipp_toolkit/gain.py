@@ -37,6 +37,7 @@ from functools import partial
 
 import numpy as np
 
+from . import kernels
 from .mapping import BeliefMaps, expected_gain, interesting_gain
 from .sensor import Camera
 
@@ -282,11 +283,16 @@ class FootprintGainCache:
 
     def _refresh(self, k: int, region: Rect) -> None:
         r0, r1, c0, c1 = region
-        new = self.table.lookup(k, region)  # (Z, rows, cols)
-        old = self.cells[k, :, r0:r1, c0:c1]
-        delta = new.astype(np.float64)
-        delta -= old
-        old[...] = new
+        if kernels.AVAILABLE:
+            delta = np.empty((self.n_altitudes, r1 - r0, c1 - c0))
+            kernels.gain_changes(self.table.up_to_date(), self.maps.value_index[k].view(np.uint32),
+                                 self.cells[k], r0, r1, c0, c1, delta)
+        else:
+            new = self.table.lookup(k, region)  # (Z, rows, cols)
+            old = self.cells[k, :, r0:r1, c0:c1]
+            delta = new.astype(np.float64)
+            delta -= old
+            old[...] = new
         # The part of footprint (y, x) inside the region is rows(y) x cols(x), so all G x G
         # sums of the change are one matrix product: rows @ delta @ cols.T.
         for iz in range(self.n_altitudes):
@@ -323,17 +329,25 @@ class _GainTable:
         self.gain_of = gain_of
         self.values = np.empty((len(camera.accuracy), 0), dtype=np.float32)
 
+    def _derive(self, logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray
+                ) -> np.ndarray:
+        """(Z, n) float32 per-altitude gain of n values (their probability and entropy)."""
+        camera = self.camera
+        return np.stack([self.gain_of(logodds, prob, entropy, camera.accuracy[iz],
+                                      camera.delta_logodds[iz])
+                         for iz in range(len(camera.accuracy))])
+
+    def up_to_date(self) -> np.ndarray:
+        """(Z, V) float32 gain of every value of the maps' table, new ones computed now."""
+        table, known = self.maps.table, self.values.shape[1]
+        if known < len(table):
+            size = len(table)
+            new = self._derive(table.values[known:], table.column("prob")[known:size],
+                               table.column("entropy")[known:size])
+            self.values = np.concatenate([self.values, new], axis=1)
+        return self.values
+
     def lookup(self, k: int, region: Rect) -> np.ndarray:
         """(Z, rows, cols) float32 expected gain of map ``k``'s cells inside ``region``."""
         r0, r1, c0, c1 = region
-        table, known = self.maps.table, self.values.shape[1]
-        if known < len(table):
-            camera, size = self.camera, len(table)
-            logodds = table.values[known:]
-            prob = table.column("prob")[known:size]
-            entropy = table.column("entropy")[known:size]
-            new = np.stack([self.gain_of(logodds, prob, entropy, camera.accuracy[iz],
-                                         camera.delta_logodds[iz])
-                            for iz in range(len(camera.accuracy))])
-            self.values = np.concatenate([self.values, new], axis=1)
-        return self.values[:, self.maps.value_index[k, r0:r1, c0:c1]]
+        return self.up_to_date()[:, self.maps.value_index[k, r0:r1, c0:c1]]

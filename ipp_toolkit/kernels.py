@@ -42,8 +42,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
-           "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "sensor_noise",
-           "REGION_STATS", "N_STATS"]
+           "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "gain_changes",
+           "sensor_noise", "REGION_STATS", "N_STATS"]
 
 REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
                 "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
@@ -205,6 +205,24 @@ def gather_caches(*arrays: np.ndarray) -> None:
     (R, 4) int64 the rectangles; logodds, prob, entropy, wentropy (M, H, W) float32 outputs.
     """
     _compiled().gather_caches(*arrays)
+
+
+def gain_changes(values: np.ndarray, value_index: np.ndarray, cells: np.ndarray, r0: int,
+                 r1: int, c0: int, c1: int, delta: np.ndarray) -> None:
+    """Look a region's per-cell gains up anew and return how they changed, in one pass.
+
+    For the cells of rows r0..r1, columns c0..c1: ``delta[z] = float64(new) -
+    float64(cells[z])`` and then ``cells[z] = new``, with ``new = values[z, value_index]``
+    (the float64 difference of the two float32 numbers, as NumPy takes it).
+
+    Args:
+        values: (Z, V) float32 gain of every table value per altitude.
+        value_index: (H, W) the map's int32 value indices viewed as uint32.
+        cells: (Z, H, W) float32 the cached per-cell gains of the map, updated in place.
+        r0, r1, c0, c1: the region.
+        delta: (Z, r1 - r0, c1 - c0) float64 output.
+    """
+    _compiled().gain_changes(values, value_index, cells, r0, r1, c0, c1, delta)
 
 
 def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:
