@@ -76,6 +76,7 @@ class CoveragePlanner(Planner):
 
     name = "coverage"
     needs_observations = False
+    needs_local_maps = False
 
     def __init__(self, altitude_index: int = 0) -> None:
         if not isinstance(altitude_index, int | np.integer) or altitude_index < 0:

@@ -20,6 +20,7 @@ class RandomPlanner(Planner):
 
     name = "random"
     needs_observations = False
+    needs_local_maps = False
 
     def __init__(self) -> None:
         # Usable without reset (seed 0); reset() reseeds for every mission.

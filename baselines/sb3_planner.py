@@ -51,6 +51,7 @@ class SB3Planner(Planner):
 
     name = "sb3"
     needs_observations = True
+    needs_local_maps = False
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
         # Batches of N observations: extra intra-op threads only spin on busy cores.

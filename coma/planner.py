@@ -43,6 +43,7 @@ class COMAPlanner(Planner):
 
     name = "coma"
     needs_observations = True
+    needs_local_maps = False
     #: Name of the shipped policy used when no checkpoint is given.
     shipped = DEFAULT_SHIPPED
 

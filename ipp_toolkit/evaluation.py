@@ -109,8 +109,8 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
 
     Args:
         config: the mission configuration (budget B, N agents).
-        planner: the planner; ``planner.needs_observations`` decides whether the views carry
-            the actor planes.
+        planner: the planner; ``planner.needs_observations`` and ``needs_local_maps`` decide
+            whether the views carry the actor planes and the local maps' per-cell arrays.
         seed: run seed (>= 0).
         mission: mission index (>= 0).
         namespace: random-stream namespace (``test`` for held-out terrains).
@@ -144,7 +144,8 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
     features = getattr(planner, "observation_features", None)
 
     def act(states: Sequence[MissionState]) -> list[Sequence[int]]:
-        views = agent_views(states[0], planner.needs_observations, features)
+        views = agent_views(states[0], planner.needs_observations, features,
+                            getattr(planner, "needs_local_maps", True))
         start = time.perf_counter()
         actions = planner.act(views)
         times.append((time.perf_counter() - start) * 1000.0)

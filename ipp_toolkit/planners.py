@@ -109,8 +109,13 @@ class AgentView:
     observation: np.ndarray
 
 
+_NO_MAP = _read_only(np.zeros((0, 0), dtype=np.float32))
+"""The local-map arrays of views built without them (``with_local_maps=False``)."""
+
+
 def agent_views(state: MissionState, with_observations: bool = True,
-                features: FeatureConfig | None = None) -> list[AgentView]:
+                features: FeatureConfig | None = None,
+                with_local_maps: bool = True) -> list[AgentView]:
     """One read-only :class:`AgentView` per agent of a mission.
 
     Args:
@@ -119,6 +124,9 @@ def agent_views(state: MissionState, with_observations: bool = True,
             do not read them: an empty (0, G, G) array is given instead).
         features: which planes to build (default: the mission config's); a learned planner
             observes with the features it was trained on (``Planner.observation_features``).
+        with_local_maps: give each view its local map's per-cell arrays (skip for planners
+            that do not read them: empty (0, 0) arrays are given instead, and the maps'
+            per-cell arrays are not brought up to date).
     """
     n = state.n_agents
     masks = state.masks()
@@ -135,9 +143,9 @@ def agent_views(state: MissionState, with_observations: bool = True,
             step=state.step,
             budget=state.budget,
             position=_read_only(state.positions[k].copy()),
-            local_logodds=_read_only(state.maps.logodds[k]),
-            local_prob=_read_only(state.maps.prob[k]),
-            local_entropy=_read_only(state.maps.entropy[k]),
+            local_logodds=_read_only(state.maps.logodds[k]) if with_local_maps else _NO_MAP,
+            local_prob=_read_only(state.maps.prob[k]) if with_local_maps else _NO_MAP,
+            local_entropy=_read_only(state.maps.entropy[k]) if with_local_maps else _NO_MAP,
             mask=_read_only(masks[k]),
             teammates=_read_only(mates),
             teammate_positions=_read_only(state.positions[mates].copy()),
@@ -153,11 +161,14 @@ class Planner(abc.ABC):
 
     Lifecycle: ``reset(config, seed)`` once per mission, then ``act(views)`` once per step.
     Set ``needs_observations = False`` on planners that never read ``AgentView.observation``
-    to skip building the feature planes.
+    to skip building the feature planes, and ``needs_local_maps = False`` on planners that
+    never read ``AgentView.local_logodds`` / ``local_prob`` / ``local_entropy`` to skip
+    bringing the maps' per-cell arrays up to date (they get empty (0, 0) arrays instead).
     """
 
     name: str = "planner"
     needs_observations: bool = True
+    needs_local_maps: bool = True
     #: The feature planes ``AgentView.observation`` carries for this planner; ``None``: those
     #: of the mission config. Learned planners set the features they were trained on.
     observation_features: FeatureConfig | None = None

@@ -211,7 +211,11 @@ def test_the_cpu_update_gives_the_numbers_of_the_learner_before_devices():
     with torch.no_grad():
         for name, want in BEFORE_DEVICES_SUMS.items():
             total = float(sum(p.double().sum() for p in getattr(networks, name).parameters()))
-            assert total == pytest.approx(want, rel=1e-5), name
+            # Adam's normalised step moves a parameter with a near-zero gradient by up to the
+            # learning rate whichever way a last-bit difference tips it, so on another CPU
+            # (AVX-512 against AVX2) the sums drift by ~3e-4; the two updates move them by
+            # 0.13 (actor) and 1.3 (critic), which a wrong update would not match to 1e-3.
+            assert total == pytest.approx(want, abs=1e-3), name
 
 
 needs_no_cuda = pytest.mark.skipif(torch.cuda.is_available(), reason="CUDA is available here")

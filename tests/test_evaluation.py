@@ -437,7 +437,7 @@ from ipp_toolkit.process_pool import retain_freed_memory
 if sys.argv[1] == "retain":
     assert retain_freed_memory()
 config = EnvConfig().replace(team={"budget": 3})  # r_M = 0.1 m: 500 x 500 maps
-planner = make_planner("random")
+planner = make_planner("ig")  # reads the local maps: their per-cell arrays are built
 run_mission(config, planner, 0, 0)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
 for mission in range(1, 4):

@@ -46,6 +46,36 @@ def test_views_are_read_only_and_local():
     assert agent_views(state, with_observations=False)[0].observation.shape[0] == 0
 
 
+def test_planners_without_local_maps_get_empty_ones_and_the_maps_stay_unbuilt():
+    from ipp_toolkit import kernels
+    from ipp_toolkit.evaluation import run_mission
+
+    state = reset_mission(small_config(), seed=0)
+    views = agent_views(state, with_observations=False, with_local_maps=False)
+    assert all(v.local_prob.shape == (0, 0) and v.local_logodds.size == 0 for v in views)
+    seen = []
+
+    class Watching(FirstValid):
+        needs_local_maps = False
+
+        def act(self, views):
+            seen.append(self.state.maps._arrays is None)
+            return super().act(views)
+
+    planner = Watching()
+    planner.state = None
+
+    def observe(mission_state):
+        planner.state = mission_state
+
+    rows = run_mission(small_config(), planner, seed=0, mission=0, observer=observe)["rows"]
+    assert len(rows) == small_config().team.budget + 1
+    assert all(seen) or not kernels.AVAILABLE  # nobody built the per-cell arrays
+    for name in ("random", "coverage"):
+        assert not make_planner(name).needs_local_maps
+    assert make_planner("ig").needs_local_maps
+
+
 def test_views_list_heard_teammates():
     state = reset_mission(small_config(comm_range=float("inf")), seed=0)
     view = agent_views(state)[1]
