@@ -26,13 +26,16 @@ Two per-cell objectives are kept this way (``objective``): ``"ig"``, the ``ig`` 
 :func:`~ipp_toolkit.mapping.interesting_gain` (the entropy a reading removes from a cell
 that is interesting). The second is meant to be weighted by how likely each cell is to be
 interesting (:mod:`ipp_toolkit.interest`); that weight moves everywhere at every step, so
-:meth:`FootprintGainCache.weighted_sums` multiplies and sums whole maps (two matrix products
-per map and altitude), while the per-cell gains under it are still kept incrementally.
+:meth:`FootprintGainCache.weighted_sums` multiplies and sums whole maps, while the per-cell
+gains under it are still kept incrementally. It adds each product once per segment of the
+cuts the footprints make in the rows and columns (:class:`BoxLayout`; one compiled pass per
+map and altitude), with exact products and float64 sums in a fixed order: the same numbers
+on every CPU, unlike float32 matrix products, whose rounding depends on the BLAS kernel.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 
 import numpy as np
@@ -179,14 +182,9 @@ class FootprintGainCache:
         self.owner = np.zeros(n_maps, dtype=np.int64)  # all identical at the prior
         self._overlap_cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
         self.table = _GainTable(maps, camera, gain_of)
-        # 0/1 row and column memberships of every footprint over the whole map, for
-        # weighted_sums: (Z, G, H) and (Z, W, G).
-        self.rows_full = np.stack([_overlap_matrix(b, 0, size) for b in self.row_bounds]
-                                  ).astype(np.float32)
-        self.cols_full_t = np.stack([_overlap_matrix(b, 0, size).T for b in self.col_bounds]
-                                    ).astype(np.float32)
+        self.layouts = [BoxLayout(rows, cols, size)
+                        for rows, cols in zip(self.row_bounds, self.col_bounds, strict=True)]
         self.seen = 0
-        self._product: np.ndarray | None = None  # weighted_sums' buffer, (Z, H, W) float32
         self.update()
 
     def sums(self) -> np.ndarray:
@@ -196,6 +194,9 @@ class FootprintGainCache:
 
     def weighted_sums(self, cell_weight: np.ndarray, block: int = 1) -> np.ndarray:
         """(n_maps, Z, G, G) float64 footprint sums of a per-cell weight times the per-cell gain.
+
+        Each product is exact and the sums are float64, added in a fixed order
+        (:class:`BoxLayout`): the same numbers on every CPU and with or without Numba.
 
         Args:
             cell_weight: (n_maps, H / block, W / block) float32 weight of every map's cells,
@@ -209,31 +210,15 @@ class FootprintGainCache:
         if block < 1 or size % block or cell_weight.shape != (n_maps,) + (size // block,) * 2:
             raise ValueError(f"cell_weight must have shape {(n_maps,) + (size // block,) * 2} "
                              f"for blocks of {block} cells, got {cell_weight.shape}")
-        # Maps that share one belief (every map at D = inf) share one product: their cells
-        # and so their weights are identical. One map at a time through one buffer: the same
-        # products and the same matrix products per altitude as one stacked expression,
-        # without a temporary the size of every map's cells.
+        cell_weight = np.ascontiguousarray(cell_weight, dtype=np.float32)
+        # Maps that share one belief (every map at D = inf) share one sum: their cells and so
+        # their weights are identical.
         owners, inverse = np.unique(self.owner, return_inverse=True)
-        if self._product is None:
-            self._product = np.empty(self.cells.shape[1:], dtype=np.float32)
-        product = self._product
-        n_altitudes = self.cells.shape[1]
-        sums = np.empty((len(owners),) + self.totals.shape[1:], dtype=np.float32)
+        sums = np.empty((len(owners),) + self.totals.shape[1:], dtype=np.float64)
         for row, owner in enumerate(owners.tolist()):
-            cells = self.cells[owner]
-            if block > 1:
-                # The weights repeated along the rows only: broadcast over each square's
-                # rows, the product still runs along whole rows (faster than repeating both
-                # ways, and than broadcasting over 5 x 5 squares). The same products either
-                # way.
-                weight = np.repeat(cell_weight[owner], block, axis=-1)  # (H / block, W)
-                squares = (n_altitudes, size // block, block, size)
-                np.multiply(cells.reshape(squares), weight[None, :, None, :],
-                            out=product.reshape(squares))
-            else:
-                np.multiply(cells, cell_weight[owner][None], out=product)
-            sums[row] = self.rows_full @ product @ self.cols_full_t
-        return sums[inverse].astype(np.float64)
+            for iz, layout in enumerate(self.layouts):
+                sums[row, iz] = layout.sums(self.cells[owner, iz], cell_weight[owner], block)
+        return sums[inverse]
 
     def update(self) -> None:
         """Fold the maps' changes since the last call into the cache."""
@@ -310,6 +295,87 @@ class FootprintGainCache:
             found = self._overlap_cache[key] = (_overlap_matrix(self.row_bounds[iz], r0, r1),
                                                 _overlap_matrix(self.col_bounds[iz], c0, c1))
         return found
+
+
+class BoxLayout:
+    """How the footprints of one altitude cut a map into segments, for weighted box sums.
+
+    The footprints' row bounds cut the rows [0, H) into segments, their column bounds the
+    columns; footprint (y, x) covers whole row segments ``row_segments[y]`` and whole column
+    segments ``col_segments[x]`` (half-open index ranges). :meth:`sums` adds every product
+    once per segment pair, then each footprint's segment pairs: about one addition per cell
+    instead of one per cell and footprint covering it, in one fixed order.
+
+    Attributes:
+        row_edges: (R + 1,) int64 cuts from 0 to H; row_covered (R,) bool, whether any
+            footprint covers the segment; row_segments (G, 2) int64.
+        col_edges, col_covered, col_segments: the same for the columns.
+        col_runs: (K, 2) int64 [start, end) of the maximal runs of covered columns.
+    """
+
+    def __init__(self, row_bounds: np.ndarray, col_bounds: np.ndarray, size: int) -> None:
+        self.row_edges, self.row_covered, self.row_segments = _segments(row_bounds, size)
+        self.col_edges, self.col_covered, self.col_segments = _segments(col_bounds, size)
+        # Maximal runs of covered columns: where a covered segment starts after an uncovered
+        # one (or at 0) and ends before one (or at W).
+        padded = np.concatenate([[False], self.col_covered, [False]])
+        change = np.flatnonzero(padded[1:] != padded[:-1])  # alternately run starts and ends
+        self.col_runs = self.col_edges[change].reshape(-1, 2)
+
+    def sums(self, cells: np.ndarray, weight: np.ndarray, block: int) -> np.ndarray:
+        """(G, G) float64 sums over every footprint of ``cells`` times the blockwise ``weight``.
+
+        Args:
+            cells: (H, W) float32 per-cell values.
+            weight: (H / block, W / block) float32 weight of each block x block square.
+            block: side of the squares in cells.
+        """
+        if not kernels.AVAILABLE:
+            return self.reference_sums(cells, weight, block)
+        out = np.empty((len(self.row_segments), len(self.col_segments)), dtype=np.float64)
+        kernels.weighted_box_sums(cells, weight, block, self.row_edges, self.row_covered,
+                                  self.col_edges, self.col_covered, self.col_runs,
+                                  self.row_segments, self.col_segments, out)
+        return out
+
+    def reference_sums(self, cells: np.ndarray, weight: np.ndarray, block: int) -> np.ndarray:
+        """:meth:`sums` in NumPy, in the kernel's order (every sum is ``np.add.reduce`` along
+        axis 0 of a C-contiguous array, which NumPy adds one row after another; its
+        ``reduceat`` would not: it sums each column pairwise)."""
+        weights = np.repeat(np.repeat(weight, block, axis=0), block, axis=1)
+        products = cells.astype(np.float64) * weights  # exact: two float32 factors
+        # Per row segment, per column: the rows added one after another.
+        by_rows = _sums_along_rows(products, _pairs(self.row_edges))
+        # Per (row segment, column segment): the columns added one after another.
+        segment_sums = _sums_along_rows(np.ascontiguousarray(by_rows.T),
+                                        _pairs(self.col_edges))
+        # Per footprint column its column segments, then per footprint row its row segments.
+        by_columns = _sums_along_rows(segment_sums, self.col_segments)  # (G_x, R)
+        return _sums_along_rows(np.ascontiguousarray(by_columns.T), self.row_segments)
+
+
+def _pairs(edges: np.ndarray) -> np.ndarray:
+    """(len(edges) - 1, 2) the [start, end) of every segment between consecutive edges."""
+    return np.stack([edges[:-1], edges[1:]], axis=1)
+
+
+def _sums_along_rows(values: np.ndarray, ranges: Iterable[Sequence[int]]) -> np.ndarray:
+    """(len(ranges), ...) the rows ``values[start:end]`` added one after another, per range."""
+    return np.stack([np.add.reduce(values[start:end], axis=0) for start, end in ranges])
+
+
+def _segments(bounds: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut [0, size) at every bound: (edges, covered, ranges) as :class:`BoxLayout` keeps."""
+    bounds = np.asarray(bounds, dtype=np.int64)
+    if bounds.min() < 0 or bounds.max() > size or np.any(bounds[:, 0] > bounds[:, 1]):
+        raise ValueError(f"footprint bounds must be ordered and lie within [0, {size}]")
+    edges = np.unique(np.concatenate([[0, size], bounds.ravel()]))
+    ranges = np.searchsorted(edges, bounds)  # (G, 2) first and past-the-last segment
+    starts = np.zeros(len(edges), dtype=np.int64)
+    np.add.at(starts, ranges[:, 0], 1)
+    np.add.at(starts, ranges[:, 1], -1)
+    covered = np.cumsum(starts)[:-1] > 0
+    return edges, covered, ranges
 
 
 class _GainTable:

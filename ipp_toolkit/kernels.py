@@ -43,7 +43,7 @@ import numpy as np
 
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
            "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "gain_changes",
-           "sensor_noise", "REGION_STATS", "N_STATS"]
+           "weighted_box_sums", "sensor_noise", "REGION_STATS", "N_STATS"]
 
 REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
                 "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
@@ -223,6 +223,38 @@ def gain_changes(values: np.ndarray, value_index: np.ndarray, cells: np.ndarray,
         delta: (Z, r1 - r0, c1 - c0) float64 output.
     """
     _compiled().gain_changes(values, value_index, cells, r0, r1, c0, c1, delta)
+
+
+def weighted_box_sums(cells: np.ndarray, weight: np.ndarray, block: int,
+                      row_edges: np.ndarray, row_covered: np.ndarray, col_edges: np.ndarray,
+                      col_covered: np.ndarray, col_runs: np.ndarray, row_segments: np.ndarray,
+                      col_segments: np.ndarray, out: np.ndarray) -> None:
+    """Sums of ``cells`` times a blockwise weight over every footprint box of one altitude.
+
+    The footprints' row bounds cut the rows into segments (``row_edges``), their column
+    bounds the columns; footprint (y, x) is the row segments ``row_segments[y]`` times the
+    column segments ``col_segments[x]``. Each product ``float64(cell) * float64(weight)`` is
+    exact; the products of a row segment are added row by row into one float64 sum per
+    column, those column by column into one sum per (row segment, column segment); per row
+    segment, a footprint column's segments are added in order, and per footprint row its
+    row segments: a fixed order, on any CPU
+    (:class:`ipp_toolkit.gain.BoxLayout` holds the NumPy reference, in the same order).
+
+    Args:
+        cells: (H, W) float32 per-cell values (one map, one altitude).
+        weight: (H / block, W / block) float32, one weight per block x block square.
+        block: side of the squares in cells.
+        row_edges: (R + 1,) int64 increasing cuts of the rows, from 0 to H.
+        row_covered: (R,) bool, whether any footprint covers row segment r (others are
+            skipped).
+        col_edges, col_covered: the same for the columns.
+        col_runs: (K, 2) int64 [start, end) of the maximal runs of covered columns.
+        row_segments: (G, 2) int64 first and past-the-last row segment of each footprint row.
+        col_segments: (G, 2) int64 the same for each footprint column.
+        out: (G, G) float64 output.
+    """
+    _compiled().weighted_box_sums(cells, weight, block, row_edges, row_covered, col_edges,
+                                  col_covered, col_runs, row_segments, col_segments, out)
 
 
 def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:

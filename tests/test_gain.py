@@ -10,7 +10,13 @@ import pytest
 from ipp_toolkit import kernels
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.features import footprint_gain, gain_planes
-from ipp_toolkit.gain import FootprintGainCache, footprint_sums, recomputed_footprint_sums
+from ipp_toolkit.gain import (
+    BoxLayout,
+    FootprintGainCache,
+    _overlap_matrix,
+    footprint_sums,
+    recomputed_footprint_sums,
+)
 from ipp_toolkit.interest import BlockMeanCache, InterestSmoother, block_means
 from ipp_toolkit.mapping import interesting_gain
 from ipp_toolkit.mission import reset_mission, step_mission
@@ -207,19 +213,47 @@ def test_block_means_take_the_ordered_sums_on_the_default_maps():
     assert interest._ORDER_CHECKED[((4, 500, 500), 5)]
 
 
-def test_weighted_sums_multiply_as_the_repeated_weights_did():
-    config = EnvConfig().replace(features={"gain": True, "gain_smoothing": 5.0})  # 5 x 5 blocks
+def test_box_layout_on_a_hand_sized_map():
+    # Footprint rows [0, 2) and [1, 4); columns [0, 1) and [3, 4) of a 5 x 5 map: column 1-2
+    # and row 4 lie under no footprint.
+    layout = BoxLayout(np.array([[0, 2], [1, 4]]), np.array([[0, 1], [3, 4]]), 5)
+    assert layout.row_edges.tolist() == [0, 1, 2, 4, 5]
+    assert layout.row_covered.tolist() == [True, True, True, False]
+    assert layout.row_segments.tolist() == [[0, 2], [1, 3]]
+    assert layout.col_edges.tolist() == [0, 1, 3, 4, 5]
+    assert layout.col_covered.tolist() == [True, False, True, False]
+    assert layout.col_runs.tolist() == [[0, 1], [3, 4]]
+    cells = np.arange(25, dtype=np.float32).reshape(5, 5)
+    weight = np.full((5, 5), 0.5, dtype=np.float32)
+    weight[1, 3] = 2.0
+    expected = [[(0 + 5) / 2, (3 / 2 + 8 * 2)], [(5 + 10 + 15) / 2, (8 * 2 + 13 / 2 + 18 / 2)]]
+    assert layout.sums(cells, weight, 1).tolist() == expected
+    assert layout.reference_sums(cells, weight, 1).tolist() == expected
+
+
+@pytest.mark.parametrize("block", [1, 5])
+def test_weighted_sums_are_exact_products_summed_in_float64_in_a_fixed_order(block):
+    config = EnvConfig().replace(features={"gain": True, "gain_smoothing": 5.0})
     state = reset_mission(config, seed=1, mission=0)
     rng = np.random.default_rng(2)
     for _ in range(2):
         step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
-    n = state.n_agents
+    n, size = state.n_agents, state.maps.value_index.shape[-1]
     cache = FootprintGainCache(state.maps, n, state.geometry.camera, (1.0, 0.0), "interesting")
-    weight = rng.random((n, 100, 100), dtype=np.float32)
-    cells = np.repeat(np.repeat(weight, 5, axis=-2), 5, axis=-1)
-    expected = cache.rows_full @ (cache.cells * cells[:, None]) @ cache.cols_full_t
-    np.testing.assert_array_equal(cache.weighted_sums(weight, 5), expected.astype(np.float64))
-
+    weight = rng.random((n, size // block, size // block), dtype=np.float32)
+    cells = np.repeat(np.repeat(weight, block, axis=-2), block, axis=-1).astype(np.float64)
+    got = cache.weighted_sums(weight, block)
+    # The float64 reference: every product exact, summed by matrix products.
+    rows = np.stack([_overlap_matrix(b, 0, size) for b in cache.row_bounds])
+    cols = np.stack([_overlap_matrix(b, 0, size).T for b in cache.col_bounds])
+    expected = rows @ (cache.cells.astype(np.float64) * cells[:, None]) @ cols
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    # The compiled kernel and its NumPy reference add in the same order: the same bits.
+    for k in range(n):
+        for iz, layout in enumerate(cache.layouts):
+            np.testing.assert_array_equal(
+                got[k, iz], layout.reference_sums(cache.cells[cache.owner[k], iz], weight[k],
+                                                  block))
 
 
 @pytest.mark.parametrize("agents, comm, resolution", [(4, 25.0, 0.1), (8, math.inf, 0.25),
