@@ -188,13 +188,19 @@ class BlockGrid:
                                self.edges[:-1], axis=1)
         return sums / self.block_area
 
-    def coverage(self, rect: Rect) -> np.ndarray:
-        """(G, G) fraction of each block covered by the map-cell rectangle ``rect``."""
-        r0, r1, c0, c1 = rect
+    def coverage(self, rects: Rect | np.ndarray) -> np.ndarray:
+        """(..., G, G) fraction of each block covered by map-cell rectangles.
+
+        Args:
+            rects: one rectangle (r0, r1, c0, c1), or an array (..., 4) of them.
+        """
+        rects = np.asarray(rects)[..., None]  # (..., 4, 1) against the (G,) block edges
         lo, hi = self.edges[:-1], self.edges[1:]
-        rows = np.clip(np.minimum(r1, hi) - np.maximum(r0, lo), 0, None) / self.block_sizes
-        cols = np.clip(np.minimum(c1, hi) - np.maximum(c0, lo), 0, None) / self.block_sizes
-        return np.outer(rows, cols)
+        rows = np.clip(np.minimum(rects[..., 1, :], hi) - np.maximum(rects[..., 0, :], lo), 0,
+                       None) / self.block_sizes
+        cols = np.clip(np.minimum(rects[..., 3, :], hi) - np.maximum(rects[..., 2, :], lo), 0,
+                       None) / self.block_sizes
+        return rows[..., :, None] * cols[..., None, :]
 
 
 BELIEF_COLUMNS = ("prob", "entropy", "weights", "wentropy")

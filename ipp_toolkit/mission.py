@@ -79,13 +79,7 @@ class MissionGeometry:
         self.n_altitudes = len(world.altitudes)
         self.start_altitude_index = self.camera.altitude_index(config.team.start_altitude)
         # Footprint coverage of every planning block, per waypoint: (Z, G, G, G, G).
-        g = self.grid_points
-        cover = np.empty((self.n_altitudes, g, g, g, g), dtype=np.float32)
-        for iz in range(self.n_altitudes):
-            for iy in range(g):
-                for ix in range(g):
-                    cover[iz, iy, ix] = self.blocks.coverage(tuple(self.camera.rects[iz, iy, ix]))
-        self.coverage = cover
+        self.coverage = self.blocks.coverage(self.camera.rects).astype(np.float32)
         # The whole-step kernels sum a reading's planes as np.add.reduceat does for blocks
         # of up to 129 cells (every world at r_M >= 0.04 m with waypoints 5 m apart).
         self.whole_step = bool(self.blocks.block_sizes.max() <= 129)
