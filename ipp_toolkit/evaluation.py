@@ -46,6 +46,7 @@ from .mission import MissionGeometry, MissionState
 from .planner_specs import PlannerSpec, as_specs
 from .planners import Planner, PlannerFactory, agent_views, make_planner, planner_factory
 from .process_pool import (
+    WorkerPool,
     limit_blas_threads,
     limit_torch_threads,
     run_parallel,
@@ -361,7 +362,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
              record_missions: Sequence[int] = (0,),
              on_recorded: Callable[[str, int, dict[str, Any], list[dict[str, Any]]], None]
              | None = None, backend: str = "local",
-             address: str | None = None) -> EvaluationResult:
+             address: str | None = None, pool: WorkerPool | None = None) -> EvaluationResult:
     """Fly missions ``0 .. missions - 1`` of run ``seed`` with every planner.
 
     Every input is checked before any work or file: planner names (an unknown one raises
@@ -396,6 +397,9 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             ``ray start --head``, ``ray://HOST:PORT`` or ``auto``; its CPUs decide how many
             missions fly at once); None starts a local Ray with ``workers`` CPUs for this
             call (a process already connected to Ray uses that connection).
+        pool: worker processes started ahead (:class:`~ipp_toolkit.process_pool.WorkerPool`)
+            for ``workers > 1`` on the local backend; the evaluation shuts it down when its
+            missions are done. The caller closes it where it goes unused (``finally``).
 
     Returns:
         the :class:`EvaluationResult`; its rows are ordered by planner, mission, step.
@@ -518,7 +522,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                         finish, bar)
             elif tasks:
                 runner = _Runner(config, seed, namespace, entries, record)
-                run_parallel(runner, tasks, n_workers, finish, bar)
+                run_parallel(runner, tasks, n_workers, finish, bar, pool)
     finally:
         if cluster is not None:
             cluster.close()

@@ -1,18 +1,24 @@
 """The process pool of the evaluation runner: tasks flown in spawned, single-threaded workers.
 
 This module owns how :func:`ipp_toolkit.evaluation.evaluate` runs with ``workers > 1``: a
-"spawn" process pool whose workers each keep one task runner (sent once, at start) and run
-one intra-op thread (:func:`single_thread_environment`, :func:`limit_torch_threads`); which
-planner factories can travel to a worker (:func:`transferable_factory`); and
-:func:`run_parallel`, which stores results as they arrive and, on a failed task, keeps the
-finished ones and raises the first error. The runner itself (what one task does) belongs to
-the evaluation module; any object with ``single_thread`` and ``run(label, mission)`` serves.
+"spawn" process pool (:class:`WorkerPool`) whose workers run one intra-op thread
+(:func:`single_thread_environment`, :func:`limit_torch_threads`) and keep the task runner
+that comes with their tasks (pickled once, unpickled once per worker); which planner
+factories can travel to a worker (:func:`transferable_factory`); and :func:`run_parallel`,
+which stores results as they arrive and, on a failed task, keeps the finished ones and raises
+the first error. The runner itself (what one task does) belongs to the evaluation module; any
+object with ``single_thread`` and ``run(label, mission)`` serves.
+
+A pool can be started ahead of its tasks (``ipp-compare`` starts it before it builds and
+checks its planners): its workers spawn and import the planners' modules (torch, SB3) on the
+second core while the main process does its own start-up.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import contextlib
+import importlib
 import multiprocessing
 import os
 import pickle
@@ -27,8 +33,9 @@ from typing import Any, Protocol
 from .planner_specs import PlannerSpec
 from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
-__all__ = ["TaskRunner", "children_ignore_sigint", "stop_workers", "guard_worker",
-           "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
+__all__ = ["TaskRunner", "WorkerPool", "children_ignore_sigint", "planner_modules",
+           "stop_workers", "guard_worker", "limit_blas_threads", "limit_torch_threads",
+           "retain_freed_memory",
            "single_thread_environment", "single_thread_process", "single_thread_variables",
            "temporary_environment", "transferable_factory", "run_parallel"]
 
@@ -103,6 +110,7 @@ def limit_torch_threads() -> None:
 
 
 _WORKER: TaskRunner | None = None
+_WORKER_RUNNER: bytes | None = None  # the pickled runner _WORKER was made from
 _PARENT_POLL_S = 1.0
 
 
@@ -126,8 +134,8 @@ def guard_worker(parent: int) -> None:
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
 
 
-def _init_worker(runner: TaskRunner, parent: int) -> None:
-    """Process-pool initializer: one thread per worker, then keep the runner for the tasks.
+def _init_worker(parent: int, modules: tuple[str, ...]) -> None:
+    """Process-pool initializer: one thread per worker, then import ``modules`` ahead.
 
     Ctrl-C reaches every process of the terminal's group; only the main process handles it
     (it stops the pool), so a worker ignores it instead of printing its own traceback. A
@@ -136,18 +144,64 @@ def _init_worker(runner: TaskRunner, parent: int) -> None:
     still starting when the main process died has already been handed to another parent,
     and would wait for tasks forever (every worker holds the task queue's write end).
     """
-    global _WORKER
     guard_worker(parent)
     single_thread_process()
-    runner.single_thread = True
     retain_freed_memory()
-    _WORKER = runner
+    for module in modules:
+        # Ahead of the tasks only: a module that fails to import fails the task that needs
+        # it, with the planner's own error.
+        with contextlib.suppress(Exception):
+            importlib.import_module(module)
 
 
-def _worker_task(label: str, mission: int) -> TaskResult:
-    if _WORKER is None:  # pragma: no cover - only if the initializer did not run
-        raise RuntimeError("evaluation worker used without its initializer")
+def _worker_ready() -> None:
+    """The task each worker is started with (the pool spawns a process per pending task)."""
+
+
+def _worker_task(runner: bytes, label: str, mission: int) -> TaskResult:
+    """Fly one task with the pickled ``runner``, unpickled once per worker and kept."""
+    global _WORKER, _WORKER_RUNNER
+    if runner != _WORKER_RUNNER:
+        _WORKER = pickle.loads(runner)
+        _WORKER.single_thread = True
+        _WORKER_RUNNER = runner
+    assert _WORKER is not None
     return _WORKER.run(label, mission)
+
+
+def planner_modules(names: Sequence[str]) -> list[str]:
+    """The modules of the registered planners among ``names`` (for :class:`WorkerPool`)."""
+    wanted = set(names)
+    return list(dict.fromkeys(entry.module for entry in
+                              metadata.entry_points(group=ENTRY_POINT_GROUP)
+                              if entry.name in wanted))
+
+
+class WorkerPool:
+    """Spawned, single-threaded worker processes, started now for tasks to come.
+
+    The workers start at once (one pending no-op task each) and import ``modules`` (e.g.
+    :func:`planner_modules`), so a caller can start the pool, do its own start-up, then hand
+    the pool to :func:`run_parallel` (through ``evaluate(pool=...)``), which shuts it down.
+    :meth:`close` stops the workers of a pool that was not used (call it in a ``finally``).
+    """
+
+    def __init__(self, n_workers: int, modules: Sequence[str] = ()) -> None:
+        if n_workers < 1:
+            raise ValueError(f"n_workers must be >= 1, got {n_workers}")
+        self.n_workers = n_workers
+        self.executor = concurrent.futures.ProcessPoolExecutor(
+            max_workers=n_workers, mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker, initargs=(os.getpid(), tuple(modules)))
+        # Workers inherit one thread each and an ignored Ctrl-C (a worker still importing
+        # when it comes would otherwise print a traceback).
+        with single_thread_environment(), children_ignore_sigint():
+            for _ in range(n_workers):
+                self.executor.submit(_worker_ready)
+
+    def close(self) -> None:
+        """Stop the workers now (nothing if :func:`run_parallel` already shut the pool)."""
+        stop_workers(self.executor)
 
 
 @contextlib.contextmanager
@@ -218,25 +272,23 @@ def transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
 
 
 def run_parallel(runner: TaskRunner, tasks: Sequence[tuple[str, int]], n_workers: int,
-                 finish: Callable[[str, int, dict[str, Any]], None], bar: Any) -> None:
+                 finish: Callable[[str, int, dict[str, Any]], None], bar: Any,
+                 pool: WorkerPool | None = None) -> None:
     """Fly ``tasks`` in a spawn process pool; ``finish`` stores each result as it arrives.
 
-    On a failed mission the pending tasks are cancelled, the running ones are awaited and
-    stored, and the first error is raised. On KeyboardInterrupt nothing more is stored.
+    ``pool``: workers started ahead (else ``n_workers`` are started now); it is shut down
+    when the tasks are done. On a failed mission the pending tasks are cancelled, the
+    running ones are awaited and stored, and the first error is raised. On
+    KeyboardInterrupt nothing more is stored.
     """
-    context = multiprocessing.get_context("spawn")
-    executor = concurrent.futures.ProcessPoolExecutor(
-        max_workers=n_workers, mp_context=context, initializer=_init_worker,
-        initargs=(runner, os.getpid()))
     futures: list[concurrent.futures.Future] = []
     stored: set[concurrent.futures.Future] = set()
     error: BaseException | None = None
+    executor = (pool if pool is not None else WorkerPool(n_workers)).executor
     try:
-        # Workers start during the submissions; they inherit one thread each and an ignored
-        # Ctrl-C (a worker still importing when it comes would otherwise print a traceback).
-        with single_thread_environment(), children_ignore_sigint():
-            futures = [executor.submit(_worker_task, label, mission)
-                       for label, mission in tasks]
+        blob = pickle.dumps(runner)  # sent with every task (a few kB), unpickled once
+        futures = [executor.submit(_worker_task, blob, label, mission)
+                   for label, mission in tasks]
         for future in concurrent.futures.as_completed(futures):
             if future.exception() is not None:
                 error = future.exception()

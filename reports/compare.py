@@ -15,6 +15,7 @@ the tables and figures next to the raw results.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -27,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import write_json
 from ipp_toolkit.planners import Planner, available_planners, make_planner, planner_factory
+from ipp_toolkit.process_pool import WorkerPool, planner_modules
 from ipp_toolkit.ray_backend import check_backend
 from ipp_toolkit.settings import build_env_config, format_comm, safe_name
 
@@ -332,52 +334,79 @@ def compare(agents: int | None = None, comm: float | None = None,
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)
-    built = _built_planners(planners, note)
-    for spec, planner in built:
-        # A policy made for another grid or team is refused here, before anything is
-        # written, not when its first mission flies.
-        try:
-            planner.reset(env_config, seed=0)
-        except ValueError as err:
-            raise ValueError(f"planner {spec.effective_label!r} cannot fly this "
-                             f"configuration: {err}") from err
-    specs = [spec for spec, _ in built]
-    checkpoints = planner_checkpoints(built)
-    if out is not None:
-        _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
-    from ipp_toolkit.evaluation import evaluate
-
-    drawn: set[tuple[str, int]] = set()
-
-    def draw_now(label: str, mission: int, trajectory: dict[str, Any],
-                 rows: list[dict[str, Any]]) -> None:
-        # Drawn while the workers fly the other missions, not after all of them.
+    with contextlib.ExitStack() as stack:
+        pool = None
+        if backend == "local" and workers > 1:
+            # The workers start and import the planners' modules while this process builds
+            # and checks the planners; the evaluation hands them their tasks.
+            names = _requested_names(planners)
+            pool = WorkerPool(min(int(workers), int(trials) * max(len(names), 1)),
+                              planner_modules(names))
+            stack.callback(pool.close)  # stops them if the run ends before the evaluation
+        built = _built_planners(planners, note)
+        for spec, planner in built:
+            # A policy made for another grid or team is refused here, before anything is
+            # written, not when its first mission flies.
+            try:
+                planner.reset(env_config, seed=0)
+            except ValueError as err:
+                raise ValueError(f"planner {spec.effective_label!r} cannot fly this "
+                                 f"configuration: {err}") from err
+        specs = [spec for spec, _ in built]
+        checkpoints = planner_checkpoints(built)
         if out is not None:
-            draw_trajectory(Path(out), env_config, label, mission, trajectory,
-                            (float(rows[-1]["entropy"]), float(rows[-1]["f1"])))
-            drawn.add((label, mission))
+            _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
+        from ipp_toolkit.evaluation import evaluate
 
-    result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
-                      workers=int(workers), out_dir=out, progress=progress, namespace=namespace,
-                      record_missions=(0,),
-                      on_recorded=draw_now if workers > 1 or backend == "ray" else None,
-                      backend=backend, address=address)
-    if out is not None:
-        _record_checkpoints(Path(out), checkpoints, write=True)
-    summary = summarise(result.rows, reference=reference, checkpoints={
-        label: f"{record['checkpoint']} sha256:{record['sha256'][:16]}"
-        for label, record in checkpoints.items()})
-    comparison = Comparison(result=result, summary=summary)
-    if out is not None:
-        comparison.write(out, drawn)
-        if animate:
-            from .animation import animate_mission
+        drawn: set[tuple[str, int]] = set()
 
-            for spec in specs:
-                planner = make_planner(spec.name, **spec.options)
-                label = spec.effective_label
-                animate_mission(env_config, planner,
-                                Path(out) / "animations" / f"{safe_name(str(label))}.gif",
-                                seed=int(seed), mission=0)
-    return comparison
+        def draw_now(label: str, mission: int, trajectory: dict[str, Any],
+                     rows: list[dict[str, Any]]) -> None:
+            # Drawn while the workers fly the other missions, not after all of them.
+            if out is not None:
+                draw_trajectory(Path(out), env_config, label, mission, trajectory,
+                                (float(rows[-1]["entropy"]), float(rows[-1]["f1"])))
+                drawn.add((label, mission))
 
+        result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
+                          workers=int(workers), out_dir=out, progress=progress, namespace=namespace,
+                          record_missions=(0,),
+                          on_recorded=draw_now if workers > 1 or backend == "ray" else None,
+                          backend=backend, address=address, pool=pool)
+        if out is not None:
+            _record_checkpoints(Path(out), checkpoints, write=True)
+        summary = summarise(result.rows, reference=reference, checkpoints={
+            label: f"{record['checkpoint']} sha256:{record['sha256'][:16]}"
+            for label, record in checkpoints.items()})
+        comparison = Comparison(result=result, summary=summary)
+        if out is not None:
+            comparison.write(out, drawn)
+            if animate:
+                from .animation import animate_mission
+
+                for spec in specs:
+                    planner = make_planner(spec.name, **spec.options)
+                    label = spec.effective_label
+                    animate_mission(env_config, planner,
+                                    Path(out) / "animations" / f"{safe_name(str(label))}.gif",
+                                    seed=int(seed), mission=0)
+        return comparison
+
+
+def _requested_names(planners: str | Sequence[str | PlannerSpec] | None) -> list[str]:
+    """The planner names ``planners`` asks for, as far as they parse (to warm the workers)."""
+    from ipp_toolkit.planner_specs import PlannerSpec
+
+    if planners is None or (isinstance(planners, str) and planners.strip() == "default"):
+        return list(DEFAULT_PLANNERS)
+    if isinstance(planners, str) and planners.strip() == "all":
+        return available_planners()
+    items = planners.split(",") if isinstance(planners, str) else planners
+    names = []
+    for item in items:
+        try:
+            spec = item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item.strip())
+        except ValueError:
+            continue  # refused with its message when the planners are built
+        names.append(spec.name)
+    return names

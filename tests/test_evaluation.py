@@ -5,7 +5,10 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import multiprocessing
 import platform
+import sys
+import time
 from pathlib import Path
 from typing import ClassVar
 
@@ -24,6 +27,7 @@ from ipp_toolkit.evaluation import (
 from ipp_toolkit.mission import reset_mission
 from ipp_toolkit.planner_specs import PlannerSpec
 from ipp_toolkit.planners import Planner, available_planners, register_planner
+from ipp_toolkit.process_pool import WorkerPool, planner_modules
 from ipp_toolkit.seeding import planner_seed
 
 BUDGET = 4
@@ -170,6 +174,52 @@ def test_workers_do_not_change_results(tmp_path):
             np.testing.assert_array_equal(np.asarray(value),
                                           np.asarray(parallel.trajectories[key][name]))
     assert stripped(load_results(tmp_path / "par").rows) == stripped(serial.rows)
+
+
+def children_gone(timeout: float = 20.0) -> bool:
+    """Whether this process's child processes have all exited (waiting up to ``timeout``)."""
+    deadline = time.monotonic() + timeout
+    while multiprocessing.active_children():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def test_a_pool_started_ahead_flies_the_same_missions_and_is_shut_down():
+    assert planner_modules(["random", "no-such-planner"]) == ["baselines.random_planner"]
+    config = tiny_config()
+    serial = evaluate(config, ["random"], missions=3, seed=1, workers=1, progress=False)
+    pool = WorkerPool(2, planner_modules(["random"]))
+    try:
+        ahead = evaluate(config, ["random"], missions=3, seed=1, workers=2, progress=False,
+                         pool=pool)
+    finally:
+        pool.close()
+    assert stripped(ahead.rows) == stripped(serial.rows)
+    assert children_gone()
+
+
+def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path,
+                                                                        monkeypatch):
+    from reports.compare import compare
+
+    started: list[WorkerPool] = []
+
+    class Recorded(WorkerPool):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            started.append(self)
+
+    # The module, not the function the package exports under the same name.
+    monkeypatch.setattr(sys.modules["reports.compare"], "WorkerPool", Recorded)
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match="cannot be built"):
+        compare(planners=f"random,coma={tmp_path / 'missing.pt'}", trials=2, workers=2,
+                out=out, progress=False, config=tiny_config())
+    assert [pool.n_workers for pool in started] == [2]  # started before the planners' checks
+    assert not out.exists()
+    assert children_gone()
 
 
 def test_interrupted_run_resumes_without_redoing_missions(tmp_path):
