@@ -35,14 +35,16 @@ on every CPU, unlike float32 matrix products, whose rounding depends on the BLAS
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 
 import numpy as np
 
 from . import kernels
-from .mapping import BeliefMaps, expected_gain, interesting_gain
+from .mapping import BeliefMaps, belief_columns, expected_gain, interesting_gain
 from .sensor import Camera
+from .value_table import DerivedMemo
 
 __all__ = ["FootprintGainCache", "OBJECTIVES", "cell_objective", "footprint_sums",
            "recomputed_footprint_sums"]
@@ -126,6 +128,27 @@ def _overlap_matrix(bounds: np.ndarray, lo: int, hi: int) -> np.ndarray:
     return ((cells >= bounds[:, :1]) & (cells < bounds[:, 1:])).astype(np.float64)
 
 
+class _OverlapCache:
+    """Footprint memberships of refreshed regions, ``(iz, *region) -> (rows, cols)``."""
+
+    def __init__(self) -> None:
+        self.entries: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self.nbytes = 0
+
+
+_OVERLAP_CACHES: weakref.WeakKeyDictionary[Camera, _OverlapCache] = (
+    weakref.WeakKeyDictionary())
+_OVERLAP_CACHE_BYTES = 16 << 20  # per camera; cleared when full
+
+
+def _overlap_cache(camera: Camera) -> _OverlapCache:
+    """The overlap cache of ``camera``, shared by every mission that flies it."""
+    cache = _OVERLAP_CACHES.get(camera)
+    if cache is None:
+        cache = _OVERLAP_CACHES[camera] = _OverlapCache()
+    return cache
+
+
 def _coalesce(regions: list[Rect]) -> list[Rect]:
     """One bounding box for overlapping regions where it holds fewer cells than they do."""
     if len(regions) < 2:
@@ -180,8 +203,9 @@ class FootprintGainCache:
             self.totals[:, iz] = area[iz] * np.float64(gain)
         self.row_bounds, self.col_bounds = _separable_bounds(camera.rects)
         self.owner = np.zeros(n_maps, dtype=np.int64)  # all identical at the prior
-        self._overlap_cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
-        self.table = _GainTable(maps, camera, gain_of)
+        self._overlap_cache = _overlap_cache(camera)
+        self.table = _GainTable(maps, camera, gain_of,
+                                _gain_memo(objective, tuple(weights), camera))
         self.layouts = [BoxLayout(rows, cols, size)
                         for rows, cols in zip(self.row_bounds, self.col_bounds, strict=True)]
         self.seen = 0
@@ -287,13 +311,21 @@ class FootprintGainCache:
     def _overlaps(self, iz: int, region: Rect) -> tuple[np.ndarray, np.ndarray]:
         """(G, rows) and (G, cols) float64 memberships of ``region``'s rows and columns in the
         footprints at altitude ``iz`` (:func:`_overlap_matrix`), kept per region: a step
-        refreshes the same footprints in every map that heard them, and UAVs come back."""
+        refreshes the same footprints in every map that heard them, UAVs come back, and the
+        missions of one geometry (one camera) share them."""
         key = (iz, *region)
-        found = self._overlap_cache.get(key)
+        cache = self._overlap_cache
+        found = cache.entries.get(key)
         if found is None:
             r0, r1, c0, c1 = region
-            found = self._overlap_cache[key] = (_overlap_matrix(self.row_bounds[iz], r0, r1),
-                                                _overlap_matrix(self.col_bounds[iz], c0, c1))
+            found = (_overlap_matrix(self.row_bounds[iz], r0, r1),
+                     _overlap_matrix(self.col_bounds[iz], c0, c1))
+            size = found[0].nbytes + found[1].nbytes
+            if cache.nbytes + size > _OVERLAP_CACHE_BYTES:
+                cache.entries.clear()  # rarely: coalesced regions of many shapes
+                cache.nbytes = 0
+            cache.entries[key] = found
+            cache.nbytes += size
         return found
 
 
@@ -378,6 +410,36 @@ def _segments(bounds: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np
     return edges, covered, ranges
 
 
+def _camera_key(camera: Camera) -> tuple[bytes, ...]:
+    """What a cell's gain depends on besides its log-odds: the per-altitude accuracies and
+    log-odds increments, exactly (dtype and bits)."""
+    return tuple(np.asarray(a).dtype.str.encode() + np.asarray(a).tobytes()
+                 for a in (camera.accuracy, camera.delta_logodds))
+
+
+_GAIN_MEMOS: dict[tuple[object, ...], DerivedMemo] = {}
+
+
+def _gain_memo(objective: str, weights: tuple[float, ...], camera: Camera) -> DerivedMemo:
+    """The process-wide :class:`~ipp_toolkit.value_table.DerivedMemo` of the per-altitude
+    gains of a log-odds value for this objective and camera: every mission of a
+    configuration meets the same values, and computes their gains once per process."""
+    key = (objective, weights, _camera_key(camera))
+    memo = _GAIN_MEMOS.get(key)
+    if memo is None:
+        gain_of = cell_objective(objective, weights)
+        accuracy, delta = camera.accuracy.copy(), camera.delta_logodds.copy()
+
+        def derive(logodds: np.ndarray) -> list[np.ndarray]:
+            # A value's probability and entropy as the maps' table derives them.
+            prob, entropy = belief_columns(logodds)[:2]
+            return [gain_of(logodds, prob, entropy, accuracy[iz], delta[iz])
+                    for iz in range(len(accuracy))]
+
+        memo = _GAIN_MEMOS[key] = DerivedMemo(derive, len(accuracy))
+    return memo
+
+
 class _GainTable:
     """The per-cell expected gain per altitude of every log-odds value of the maps' table.
 
@@ -389,11 +451,13 @@ class _GainTable:
     computed cell by cell.
     """
 
-    def __init__(self, maps: BeliefMaps, camera: Camera, gain_of: CellGain):
+    def __init__(self, maps: BeliefMaps, camera: Camera, gain_of: CellGain,
+                 memo: DerivedMemo | None = None):
         self.maps = maps
         self.camera = camera
         self.gain_of = gain_of
         self.values = np.empty((len(camera.accuracy), 0), dtype=np.float32)
+        self.memo = memo if memo is not None and memo.exact() else None
 
     def _derive(self, logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray
                 ) -> np.ndarray:
@@ -408,8 +472,11 @@ class _GainTable:
         table, known = self.maps.table, self.values.shape[1]
         if known < len(table):
             size = len(table)
-            new = self._derive(table.values[known:], table.column("prob")[known:size],
-                               table.column("entropy")[known:size])
+            if self.memo is not None:
+                new = self.memo.columns(table.values[known:])
+            else:
+                new = self._derive(table.values[known:], table.column("prob")[known:size],
+                                   table.column("entropy")[known:size])
             self.values = np.concatenate([self.values, new], axis=1)
         return self.values
 

@@ -19,7 +19,7 @@ from ipp_toolkit.gain import (
 )
 from ipp_toolkit.interest import BlockMeanCache, InterestSmoother, block_means
 from ipp_toolkit.mapping import interesting_gain
-from ipp_toolkit.mission import reset_mission, step_mission
+from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
 from ipp_toolkit.team import ACTION_NAMES
 
 
@@ -61,6 +61,36 @@ def test_cache_equals_full_recomputation_over_whole_missions(agents, comm, drop)
                 break
             masks = state.masks()
             step_mission(state, [rng.choice(np.flatnonzero(m)) for m in masks])
+
+
+def test_missions_of_one_geometry_share_gains_and_overlaps_which_stay_exact(monkeypatch):
+    """The per-value gains (a process-wide memo) and the footprint overlaps of refreshed
+    regions (per camera, bounded) are shared by missions; the sums still equal a full
+    recomputation, also when the bounded overlap cache is cleared mid-mission."""
+    import ipp_toolkit.gain as gain
+
+    monkeypatch.setattr(gain, "_OVERLAP_CACHE_BYTES", 200_000)  # a few dozen regions
+    config = EnvConfig().replace(world={"resolution": 0.5})
+    geometry = MissionGeometry(config)
+    rng = np.random.default_rng(11)
+    caches = []
+    for mission in range(2):
+        state = reset_mission(config, seed=4, mission=mission, namespace="validation",
+                              geometry=geometry)
+        while True:
+            footprint_gain(state)
+            np.testing.assert_allclose(
+                state.gain_cache.sums(),
+                full_footprint_gain(state) * geometry.camera.largest_footprint_cells,
+                rtol=1e-9, atol=1e-9)
+            overlaps = state.gain_cache._overlap_cache
+            assert overlaps.nbytes <= gain._OVERLAP_CACHE_BYTES
+            if state.done:
+                break
+            step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+        caches.append(state.gain_cache)
+    assert caches[0]._overlap_cache is caches[1]._overlap_cache
+    assert caches[0].table.memo is not None and caches[0].table.memo is caches[1].table.memo
 
 
 def test_cache_follows_steps_it_was_not_asked_about():
