@@ -46,7 +46,7 @@ from .mapping import BeliefMaps, belief_columns, expected_gain, interesting_gain
 from .sensor import Camera
 from .value_table import DerivedMemo
 
-__all__ = ["FootprintGainCache", "OBJECTIVES", "cell_objective", "footprint_sums",
+__all__ = ["BoxLayout", "FootprintGainCache", "OBJECTIVES", "cell_objective", "footprint_sums",
            "recomputed_footprint_sums"]
 
 Rect = tuple[int, int, int, int]
