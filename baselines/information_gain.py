@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from functools import partial
 
 import numpy as np
 
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import OUTCOME_WEIGHTINGS, belief_columns, expected_gain
+from ipp_toolkit.gain import CellGain, gains_by_altitude
+from ipp_toolkit.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.planners import AgentView, Planner
 from ipp_toolkit.sensor import Camera
 from ipp_toolkit.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS
@@ -21,23 +21,6 @@ Rect = tuple[int, int, int, int]
 
 _HORIZONTAL = tuple(ACTION_NAMES.index(name) for name in ("north", "east", "south", "west"))
 _VERTICAL = tuple(ACTION_NAMES.index(name) for name in ("up", "down"))
-
-
-#: (logodds, prob, entropy, accuracy, delta_logodds) -> per-cell gain, all (n,) float32.
-CellGain = Callable[..., np.ndarray]
-
-
-def _gains_by_altitude(logodds: np.ndarray, camera: Camera, cell_gain: CellGain
-                       ) -> list[np.ndarray]:
-    """Per-cell gain of a reading at every altitude for (n,) float32 log-odds values.
-
-    Probability and entropy come from :func:`~ipp_toolkit.mapping.belief_columns`, the
-    function the maps' caches hold, so a gain looked up by log-odds is bit for bit the one
-    computed from the caches.
-    """
-    prob, entropy, _, _ = belief_columns(logodds)
-    return [cell_gain(logodds, prob, entropy, camera.accuracy[z], camera.delta_logodds[z])
-            for z in range(len(camera.accuracy))]
 
 
 def _bounding_box(rects: np.ndarray) -> Rect:
@@ -110,7 +93,8 @@ class InformationGainPlanner(Planner):
         if config != self._config:
             camera = Camera(config.world, config.sensor)
             weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
-            derive = partial(_gains_by_altitude, camera=camera,
+            derive = partial(gains_by_altitude, accuracy=camera.accuracy,
+                             delta_logodds=camera.delta_logodds,
                              cell_gain=self._cell_objective(weights))
             self._gains = ValueTable(derive, [f"altitude_{z}" for z in
                                               range(len(camera.accuracy))])

@@ -7,12 +7,13 @@ import math
 import numpy as np
 
 from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.gain import CellGain
 from ipp_toolkit.interest import InterestSmoother, interest_smoother
 from ipp_toolkit.mapping import interesting_gain
 from ipp_toolkit.planners import AgentView
 from ipp_toolkit.sensor import Camera
 
-from .information_gain import CellGain, InformationGainPlanner
+from .information_gain import InformationGainPlanner
 
 __all__ = ["SpatialGainPlanner"]
 

@@ -46,8 +46,8 @@ from .mapping import BeliefMaps, belief_columns, expected_gain, interesting_gain
 from .sensor import Camera
 from .value_table import DerivedMemo
 
-__all__ = ["BoxLayout", "FootprintGainCache", "OBJECTIVES", "cell_objective", "footprint_sums",
-           "recomputed_footprint_sums"]
+__all__ = ["BoxLayout", "CellGain", "FootprintGainCache", "OBJECTIVES", "cell_objective",
+           "footprint_sums", "gains_by_altitude", "recomputed_footprint_sums"]
 
 Rect = tuple[int, int, int, int]
 #: (logodds, prob, entropy, accuracy, delta_logodds) -> per-cell gain, all (..., h, w) float32.
@@ -68,6 +68,30 @@ def cell_objective(objective: str, weights: tuple[float, float]) -> CellGain:
     if objective == "interesting":
         return interesting_gain
     raise ValueError(f"unknown gain objective {objective!r}; expected one of {OBJECTIVES}")
+
+
+def gains_by_altitude(logodds: np.ndarray, accuracy: np.ndarray, delta_logodds: np.ndarray,
+                      cell_gain: CellGain, prob: np.ndarray | None = None,
+                      entropy: np.ndarray | None = None) -> list[np.ndarray]:
+    """Per-cell gain of a reading at every altitude, for (n,) float32 log-odds values.
+
+    Args:
+        logodds: (n,) float32 values.
+        accuracy: (Z,) sensor accuracy per altitude (``Camera.accuracy``).
+        delta_logodds: (Z, 2) log-odds increments per altitude (``Camera.delta_logodds``).
+        cell_gain: the per-cell objective (:func:`cell_objective`).
+        prob, entropy: the values' probability and entropy; by default
+            :func:`~ipp_toolkit.mapping.belief_columns` of them, the function the maps' value
+            table holds, so a gain looked up by log-odds is bit for bit the one computed
+            from the maps' caches.
+
+    Returns:
+        Z arrays (n,) float32, one per altitude.
+    """
+    if prob is None or entropy is None:
+        prob, entropy = belief_columns(logodds)[:2]
+    return [cell_gain(logodds, prob, entropy, accuracy[z], delta_logodds[z])
+            for z in range(len(accuracy))]
 
 
 def footprint_sums(cells: np.ndarray, rects: np.ndarray) -> np.ndarray:
@@ -427,16 +451,11 @@ def _gain_memo(objective: str, weights: tuple[float, ...], camera: Camera) -> De
     key = (objective, weights, _camera_key(camera))
     memo = _GAIN_MEMOS.get(key)
     if memo is None:
-        gain_of = cell_objective(objective, weights)
-        accuracy, delta = camera.accuracy.copy(), camera.delta_logodds.copy()
-
-        def derive(logodds: np.ndarray) -> list[np.ndarray]:
-            # A value's probability and entropy as the maps' table derives them.
-            prob, entropy = belief_columns(logodds)[:2]
-            return [gain_of(logodds, prob, entropy, accuracy[iz], delta[iz])
-                    for iz in range(len(accuracy))]
-
-        memo = _GAIN_MEMOS[key] = DerivedMemo(derive, len(accuracy))
+        # Copies of the camera's arrays, not the camera: the memo outlives the missions.
+        derive = partial(gains_by_altitude, accuracy=camera.accuracy.copy(),
+                         delta_logodds=camera.delta_logodds.copy(),
+                         cell_gain=cell_objective(objective, weights))
+        memo = _GAIN_MEMOS[key] = DerivedMemo(derive, len(camera.accuracy))
     return memo
 
 
@@ -459,14 +478,6 @@ class _GainTable:
         self.values = np.empty((len(camera.accuracy), 0), dtype=np.float32)
         self.memo = memo if memo is not None and memo.exact() else None
 
-    def _derive(self, logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray
-                ) -> np.ndarray:
-        """(Z, n) float32 per-altitude gain of n values (their probability and entropy)."""
-        camera = self.camera
-        return np.stack([self.gain_of(logodds, prob, entropy, camera.accuracy[iz],
-                                      camera.delta_logodds[iz])
-                         for iz in range(len(camera.accuracy))])
-
     def up_to_date(self) -> np.ndarray:
         """(Z, V) float32 gain of every value of the maps' table, new ones computed now."""
         table, known = self.maps.table, self.values.shape[1]
@@ -474,9 +485,11 @@ class _GainTable:
             size = len(table)
             if self.memo is not None:
                 new = self.memo.columns(table.values[known:])
-            else:
-                new = self._derive(table.values[known:], table.column("prob")[known:size],
-                                   table.column("entropy")[known:size])
+            else:  # the table's own probabilities and entropies
+                camera = self.camera
+                new = np.stack(gains_by_altitude(
+                    table.values[known:], camera.accuracy, camera.delta_logodds, self.gain_of,
+                    table.column("prob")[known:size], table.column("entropy")[known:size]))
             self.values = np.concatenate([self.values, new], axis=1)
         return self.values
 
