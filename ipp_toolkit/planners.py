@@ -23,7 +23,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -44,6 +44,7 @@ __all__ = [
     "register_planner",
     "make_planner",
     "available_planners",
+    "planner_modules",
     "planner_factory",
     "check_policy_transfer",
     "resolve_shipped",
@@ -211,6 +212,13 @@ def register_planner(name: str) -> Callable[[PlannerFactory], PlannerFactory]:
 
 def _entry_points() -> dict[str, metadata.EntryPoint]:
     return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def planner_modules(names: Sequence[str]) -> list[str]:
+    """The modules of the entry-point planners among ``names``, each once (a worker process
+    imports them ahead of its tasks: :class:`ipp_toolkit.process_pool.WorkerPool`)."""
+    entries = _entry_points()
+    return list(dict.fromkeys(entries[name].module for name in names if name in entries))
 
 
 def available_planners() -> list[str]:

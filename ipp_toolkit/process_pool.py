@@ -33,9 +33,8 @@ from typing import Any, Protocol
 from .planner_specs import PlannerSpec
 from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
 
-__all__ = ["TaskRunner", "WorkerPool", "children_ignore_sigint", "planner_modules",
-           "stop_workers", "guard_worker", "limit_blas_threads", "limit_torch_threads",
-           "retain_freed_memory",
+__all__ = ["TaskRunner", "WorkerPool", "children_ignore_sigint", "stop_workers", "guard_worker",
+           "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
            "single_thread_environment", "single_thread_process", "single_thread_variables",
            "temporary_environment", "transferable_factory", "run_parallel"]
 
@@ -169,20 +168,13 @@ def _worker_task(runner: bytes, label: str, mission: int) -> TaskResult:
     return _WORKER.run(label, mission)
 
 
-def planner_modules(names: Sequence[str]) -> list[str]:
-    """The modules of the registered planners among ``names`` (for :class:`WorkerPool`)."""
-    wanted = set(names)
-    return list(dict.fromkeys(entry.module for entry in
-                              metadata.entry_points(group=ENTRY_POINT_GROUP)
-                              if entry.name in wanted))
-
-
 class WorkerPool:
     """Spawned, single-threaded worker processes, started now for tasks to come.
 
     The workers start at once (one pending no-op task each) and import ``modules`` (e.g.
-    :func:`planner_modules`), so a caller can start the pool, do its own start-up, then hand
-    the pool to :func:`run_parallel` (through ``evaluate(pool=...)``), which shuts it down.
+    :func:`ipp_toolkit.planners.planner_modules`), so a caller can start the pool, do its own
+    start-up, then hand the pool to :func:`run_parallel` (through ``evaluate(pool=...)``),
+    which shuts it down.
     :meth:`close` stops the workers of a pool that was not used (call it in a ``finally``).
     """
 

@@ -27,8 +27,14 @@ from typing import TYPE_CHECKING, Any
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import write_json
-from ipp_toolkit.planners import Planner, available_planners, make_planner, planner_factory
-from ipp_toolkit.process_pool import WorkerPool, planner_modules
+from ipp_toolkit.planners import (
+    Planner,
+    available_planners,
+    make_planner,
+    planner_factory,
+    planner_modules,
+)
+from ipp_toolkit.process_pool import WorkerPool
 from ipp_toolkit.ray_backend import check_backend
 from ipp_toolkit.settings import build_env_config, format_comm, safe_name
 

@@ -26,8 +26,8 @@ from ipp_toolkit.evaluation import (
 )
 from ipp_toolkit.mission import reset_mission
 from ipp_toolkit.planner_specs import PlannerSpec
-from ipp_toolkit.planners import Planner, available_planners, register_planner
-from ipp_toolkit.process_pool import WorkerPool, planner_modules
+from ipp_toolkit.planners import Planner, available_planners, planner_modules, register_planner
+from ipp_toolkit.process_pool import WorkerPool
 from ipp_toolkit.seeding import planner_seed
 
 BUDGET = 4
