@@ -7,7 +7,7 @@ baselines at the paper configuration (run by hand).
 Per planner, over the same test missions (``reset_mission(config, seed=0, mission=k,
 namespace="test")``), all on one core:
   act          joint steps/s of ``planner.act(views)`` alone;
-  act+step     joint steps/s of the whole decision loop: ``agent_views`` + ``act`` +
+  act+step     joint steps/s of the whole decision loop: ``planner_views`` + ``act`` +
                ``step_mission`` (move, measure, exchange, fuse, reward, metrics);
   entropy, F1  mean final entropy over interesting cells and F1 of the global map.
 Mission resets are not timed.
@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from ipp_toolkit.config import EnvConfig  # noqa: E402
 from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
-from ipp_toolkit.planners import Planner, agent_views, make_planner  # noqa: E402
+from ipp_toolkit.planners import Planner, make_planner, planner_views  # noqa: E402
 
 
 def run(planner: Planner, config: EnvConfig, geometry: MissionGeometry,
@@ -40,7 +40,7 @@ def run(planner: Planner, config: EnvConfig, geometry: MissionGeometry,
         planner.reset(config, seed=mission)
         while not state.done:
             start = time.perf_counter()
-            views = agent_views(state, with_observations=planner.needs_observations)
+            views = planner_views(state, planner)
             before_act = time.perf_counter()
             actions = planner.act(views)
             after_act = time.perf_counter()

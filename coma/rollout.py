@@ -35,7 +35,7 @@ from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.driver import fly_missions, start_missions
 from ipp_toolkit.features import actor_observations
 from ipp_toolkit.mission import MissionGeometry, MissionState
-from ipp_toolkit.planners import Planner, agent_views
+from ipp_toolkit.planners import Planner, planner_views
 from ipp_toolkit.seeding import planner_seed
 from ipp_toolkit.team import N_ACTIONS
 
@@ -205,9 +205,8 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
             behaviour = per_mission.gather(-1, chosen).squeeze(-1).numpy()
             actions = chosen.squeeze(-1).numpy()
         else:
-            actions = np.stack([np.asarray(planner.act(agent_views(
-                s, planner.needs_observations, planner.observation_features,
-                getattr(planner, "needs_local_maps", True))), dtype=np.int64)
+            actions = np.stack([np.asarray(planner.act(planner_views(s, planner)),
+                                           dtype=np.int64)
                                 for planner, s in zip(demonstrators, states, strict=True)])
             behaviour = np.ones(actions.shape, dtype=np.float32)
         critic_frames.append(np.stack([critic_input(s, features, variant, actions[e], obs[e])

@@ -44,7 +44,7 @@ from .driver import fly_missions, start_missions
 from .io import write_json
 from .mission import MissionGeometry, MissionState
 from .planner_specs import PlannerSpec, as_specs
-from .planners import Planner, PlannerFactory, agent_views, make_planner, planner_factory
+from .planners import Planner, PlannerFactory, make_planner, planner_factory, planner_views
 from .process_pool import (
     WorkerPool,
     limit_blas_threads,
@@ -142,11 +142,9 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
     times = [math.nan]
     positions: list[np.ndarray] = []
     footprints: list[np.ndarray] = []
-    features = getattr(planner, "observation_features", None)
 
     def act(states: Sequence[MissionState]) -> list[Sequence[int]]:
-        views = agent_views(states[0], planner.needs_observations, features,
-                            getattr(planner, "needs_local_maps", True))
+        views = planner_views(states[0], planner)
         start = time.perf_counter()
         actions = planner.act(views)
         times.append((time.perf_counter() - start) * 1000.0)

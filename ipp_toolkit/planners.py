@@ -41,6 +41,7 @@ __all__ = [
     "Planner",
     "PlannerFactory",
     "agent_views",
+    "planner_views",
     "register_planner",
     "make_planner",
     "available_planners",
@@ -155,6 +156,15 @@ def agent_views(state: MissionState, with_observations: bool = True,
             observation=_read_only(planes[k]),
         ))
     return views
+
+
+def planner_views(state: MissionState, planner: Planner) -> list[AgentView]:
+    """:func:`agent_views` with what ``planner`` reads: its observation planes
+    (``needs_observations``, ``observation_features``) and its local maps
+    (``needs_local_maps``); attributes a duck-typed planner lacks take the defaults."""
+    return agent_views(state, planner.needs_observations,
+                       getattr(planner, "observation_features", None),
+                       getattr(planner, "needs_local_maps", True))
 
 
 class Planner(abc.ABC):

@@ -1,3 +1,5 @@
+import types
+
 import numpy as np
 import pytest
 from helpers import small_config
@@ -8,6 +10,7 @@ from ipp_toolkit.planners import (
     agent_views,
     available_planners,
     make_planner,
+    planner_views,
     register_planner,
 )
 
@@ -73,6 +76,12 @@ def test_planners_without_local_maps_get_empty_ones_and_the_maps_stay_unbuilt():
     assert all(seen) or not kernels.AVAILABLE  # nobody built the per-cell arrays
     for name in ("random", "coverage"):
         assert not make_planner(name).needs_local_maps
+    # planner_views reads what a planner needs; a duck-typed one gets the maps by default.
+    state = reset_mission(small_config(), seed=0)
+    assert planner_views(state, Watching())[0].local_prob.shape == (0, 0)
+    duck = planner_views(state, types.SimpleNamespace(needs_observations=False))
+    assert duck[0].local_prob.shape == state.maps.prob.shape[1:]
+    assert duck[0].observation.shape[0] == 0
     assert make_planner("ig").needs_local_maps
 
 
