@@ -90,19 +90,26 @@ def block_means(prob: np.ndarray, block: int) -> np.ndarray:
     The whole-array additions below keep that order; they are checked against NumPy's mean
     on a random probe once per shape (a NumPy that adds otherwise gets its own mean back).
     """
-    n = prob.shape[-1] // block
-    if prob.dtype != np.float32 or not prob.flags.c_contiguous or n < 2 or block >= 8:
-        return _numpy_block_means(prob, block)
-    key = (prob.shape, block)
-    if key not in _ORDER_CHECKED:
-        rng = np.random.default_rng(0)
-        probe = (rng.standard_normal(prob.shape)
-                 * 10.0 ** rng.uniform(-3, 3, prob.shape)).astype(np.float32)
-        _ORDER_CHECKED[key] = np.array_equal(_ordered_block_means(probe, block),
-                                             _numpy_block_means(probe, block))
-    if not _ORDER_CHECKED[key]:
+    if (prob.dtype != np.float32 or not prob.flags.c_contiguous
+            or not _ordered_matches_numpy(prob.shape, block)):
         return _numpy_block_means(prob, block)
     return _ordered_block_means(prob, block)
+
+
+def _ordered_matches_numpy(shape: tuple[int, ...], block: int) -> bool:
+    """Whether :func:`_ordered_block_means` gives NumPy's mean for float32 maps of ``shape``
+    (False where NumPy sums otherwise: ``block >= 8`` or one block per side; else checked on
+    a random probe, once per shape)."""
+    if shape[-1] // block < 2 or block >= 8:
+        return False
+    key = (tuple(shape), block)
+    if key not in _ORDER_CHECKED:
+        rng = np.random.default_rng(0)
+        probe = (rng.standard_normal(shape)
+                 * 10.0 ** rng.uniform(-3, 3, shape)).astype(np.float32)
+        _ORDER_CHECKED[key] = np.array_equal(_ordered_block_means(probe, block),
+                                             _numpy_block_means(probe, block))
+    return _ORDER_CHECKED[key]
 
 
 class InterestSmoother:
@@ -179,9 +186,7 @@ class BlockMeanCache:
     def __init__(self, maps: BeliefMaps, n_maps: int, block: int) -> None:
         self.maps, self.n_maps, self.block = maps, n_maps, block
         size = maps.value_index.shape[-1]
-        shape = (n_maps, size, size)
-        block_means(np.zeros(shape, dtype=np.float32), block)  # checks the order, once
-        self.incremental = _ORDER_CHECKED.get((shape, block), False)
+        self.incremental = _ordered_matches_numpy((n_maps, size, size), block)
         prior = np.full((1, block, block), maps.prior_prob, dtype=np.float32)
         self._means = np.broadcast_to(_ordered_block_means(prior, block),
                                       (n_maps, size // block, size // block)).copy()
