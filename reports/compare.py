@@ -208,22 +208,35 @@ def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,
     return [spec for spec, _ in _built_planners(planners, note)]
 
 
+def _planner_keyword(planners: str | Sequence[str | PlannerSpec] | None) -> str | None:
+    """``"default"`` or ``"all"`` where ``planners`` names a set of planners, else None."""
+    if planners is None:
+        return "default"
+    if isinstance(planners, str) and planners.strip() in ("all", "default"):
+        return planners.strip()
+    return None
+
+
+def _listed_items(planners: str | Sequence[str | PlannerSpec]) -> list[str | PlannerSpec]:
+    """The items of a comma-separated list (empty ones dropped) or of a sequence, stripped."""
+    if isinstance(planners, str):
+        return [item.strip() for item in planners.split(",") if item.strip()]
+    return [item.strip() if isinstance(item, str) else item for item in planners]
+
+
 def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
                     note: Callable[[str], None] | None) -> list[tuple[PlannerSpec, Planner]]:
     from ipp_toolkit.planner_specs import PlannerSpec
 
-    if planners is None or (isinstance(planners, str) and planners.strip() in ("all",
-                                                                                "default")):
-        every = isinstance(planners, str) and planners.strip() == "all"
+    keyword = _planner_keyword(planners)
+    if keyword is not None:
         items: list[str | PlannerSpec] = list(default_planners(
-            note, _current_planners() if every else DEFAULT_PLANNERS))
+            note, _current_planners() if keyword == "all" else DEFAULT_PLANNERS))
         if not items:
             raise ValueError("no planner is available: registered planners: "
                              f"{', '.join(available_planners()) or 'none'}")
-    elif isinstance(planners, str):
-        items = [item.strip() for item in planners.split(",") if item.strip()]
     else:
-        items = [item.strip() if isinstance(item, str) else item for item in planners]
+        items = _listed_items(planners)
     if not items:
         raise ValueError("no planner given")
     built: list[tuple[PlannerSpec, Planner]] = []
@@ -403,15 +416,15 @@ def _requested_names(planners: str | Sequence[str | PlannerSpec] | None) -> list
     """The planner names ``planners`` asks for, as far as they parse (to warm the workers)."""
     from ipp_toolkit.planner_specs import PlannerSpec
 
-    if planners is None or (isinstance(planners, str) and planners.strip() == "default"):
+    keyword = _planner_keyword(planners)
+    if keyword == "default":
         return list(DEFAULT_PLANNERS)
-    if isinstance(planners, str) and planners.strip() == "all":
+    if keyword == "all":
         return available_planners()
-    items = planners.split(",") if isinstance(planners, str) else planners
     names = []
-    for item in items:
+    for item in _listed_items(planners):
         try:
-            spec = item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item.strip())
+            spec = item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item)
         except ValueError:
             continue  # refused with its message when the planners are built
         names.append(spec.name)
