@@ -200,6 +200,12 @@ def test_a_pool_started_ahead_flies_the_same_missions_and_is_shut_down():
     assert children_gone()
 
 
+def test_a_pool_of_no_workers_is_refused_naming_the_count():
+    with pytest.raises(ValueError, match="n_workers must be >= 1, got 0"):
+        WorkerPool(0)
+    assert children_gone()
+
+
 def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path,
                                                                         monkeypatch):
     from reports.compare import compare

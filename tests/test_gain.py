@@ -261,6 +261,13 @@ def test_box_layout_on_a_hand_sized_map():
     assert layout.reference_sums(cells, weight, 1).tolist() == expected
 
 
+def test_box_layout_refuses_bounds_outside_the_map_or_reversed():
+    for bounds in ([[0, 6]], [[-1, 2]], [[3, 2]]):
+        with pytest.raises(ValueError, match=r"footprint bounds must be ordered and lie within "
+                                             r"\[0, 5\]"):
+            BoxLayout(np.array(bounds), np.array([[0, 1]]), 5)
+
+
 @pytest.mark.parametrize("block", [1, 5])
 def test_weighted_sums_are_exact_products_summed_in_float64_in_a_fixed_order(block):
     config = EnvConfig().replace(features={"gain": True, "gain_smoothing": 5.0})
