@@ -184,61 +184,70 @@ def gain_changes(values, value_index, cells, r0, r1, c0, c1, delta):
 
 
 @_jit
-def weighted_box_sums(cells, weight, block, row_edges, row_covered, col_edges, col_covered,
-                      col_runs, row_segments, col_segments, out):
-    """See :func:`ipp_toolkit.kernels.weighted_box_sums`."""
-    width = cells.shape[1]
-    n_row_segments = row_edges.shape[0] - 1
-    n_col_segments = col_edges.shape[0] - 1
-    segment_sums = np.zeros((n_row_segments, n_col_segments))
-    column_sums = np.empty(width)
-    row_weight = np.empty(width)
-    weight_row = -1
-    for s in range(n_row_segments):
-        if not row_covered[s]:
-            continue
+def gain_lookup(values, value_index, cells, r0, r1, c0, c1):
+    """See :func:`ipp_toolkit.kernels.gain_lookup`."""
+    for i in range(r1 - r0):
+        indices = value_index[r0 + i, c0:c1]
+        for z in range(values.shape[0]):
+            column = values[z]
+            row = cells[z, r0 + i, c0:c1]
+            for j in range(c1 - c0):
+                row[j] = column[indices[j]]
+
+
+@_jit
+def segment_sums(cells, row_edges, col_edges, s0, s1, t0, t1, out):
+    """See :func:`ipp_toolkit.kernels.segment_sums`."""
+    c0, c1 = col_edges[t0], col_edges[t1]
+    column_sums = np.empty(c1 - c0)
+    for s in range(s0, s1):
         column_sums[:] = 0.0
         for i in range(row_edges[s], row_edges[s + 1]):
-            if i // block != weight_row:
-                # The row's weights as float64, one per cell (each repeated block times).
-                weight_row = i // block
-                source = weight[weight_row]
-                for b in range(source.shape[0]):
-                    value = np.float64(source[b])
-                    square = row_weight[b * block:(b + 1) * block]
-                    for j in range(block):
-                        square[j] = value
-            row = cells[i]
-            for run in range(col_runs.shape[0]):
-                # One loop over each run of covered columns (short loops per segment would
-                # cost more in set-up than in adding), over views indexed from 0 (Numba then
-                # drops its negative-index handling and the loop vectorises). Exact
-                # products (two float32 factors fit a float64), added row by row.
-                c0, c1 = col_runs[run, 0], col_runs[run, 1]
-                sums, values, weights = column_sums[c0:c1], row[c0:c1], row_weight[c0:c1]
-                for j in range(c1 - c0):
-                    sums[j] += np.float64(values[j]) * weights[j]
-        for t in range(n_col_segments):
-            if col_covered[t]:
-                c0, c1 = col_edges[t], col_edges[t + 1]
-                sums = column_sums[c0:c1]
-                total = 0.0
-                for j in range(c1 - c0):
-                    total += sums[j]
-                segment_sums[s, t] = total
-    # Per row segment and footprint column, its column segments; then per footprint row,
-    # its row segments (NumPy's reduceat along axis 0 adds in this order too).
-    by_columns = np.zeros((n_row_segments, col_segments.shape[0]))
-    for s in range(n_row_segments):
-        if row_covered[s]:
-            for x in range(col_segments.shape[0]):
-                total = 0.0
-                for t in range(col_segments[x, 0], col_segments[x, 1]):
-                    total += segment_sums[s, t]
-                by_columns[s, x] = total
-    for y in range(row_segments.shape[0]):
-        for x in range(col_segments.shape[0]):
+            # Views indexed from 0: Numba drops its negative-index handling and the loop
+            # vectorises. The rows of a segment are added one after another.
+            values = cells[i, c0:c1]
+            for j in range(c1 - c0):
+                column_sums[j] += np.float64(values[j])
+        sums = out[s]
+        for t in range(t0, t1):
+            part = column_sums[col_edges[t] - c0:col_edges[t + 1] - c0]
             total = 0.0
-            for s in range(row_segments[y, 0], row_segments[y, 1]):
-                total += by_columns[s, x]
-            out[y, x] = total
+            for j in range(part.shape[0]):
+                total += part[j]
+            sums[t] = total
+
+
+@_jit
+def weighted_segment_sums(sums, weight, row_block, col_block, row_segments, col_segments,
+                          out):
+    """See :func:`ipp_toolkit.kernels.weighted_segment_sums`.
+
+    Every loop that adds runs along the row segments (or footprint columns), one independent
+    sum per element, so the additions vectorise; each element's sum still takes its terms one
+    after another, in the order of the NumPy reference.
+    """
+    n_rows, n_cols = sums.shape
+    # products[t, s]: row segment s's weighted sum over column segment t.
+    products = np.empty((n_cols, n_rows))
+    for s in range(n_rows):
+        weights = weight[row_block[s]]
+        row = sums[s]
+        for t in range(n_cols):
+            products[t, s] = row[t] * np.float64(weights[col_block[t]])
+    # Per footprint column and row segment, the footprint column's segments in order.
+    by_columns = np.zeros((col_segments.shape[0], n_rows))
+    for x in range(col_segments.shape[0]):
+        column = by_columns[x]
+        for t in range(col_segments[x, 0], col_segments[x, 1]):
+            part = products[t]
+            for s in range(n_rows):
+                column[s] += part[s]
+    by_rows = np.ascontiguousarray(by_columns.T)  # (R, G_x)
+    # Per footprint row, its row segments in order.
+    for y in range(row_segments.shape[0]):
+        line = out[y]
+        line[:] = 0.0
+        for s in range(row_segments[y, 0], row_segments[y, 1]):
+            part = by_rows[s]
+            for x in range(line.shape[0]):
+                line[x] += part[x]

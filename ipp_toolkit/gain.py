@@ -25,12 +25,15 @@ Two per-cell objectives are kept this way (``objective``): ``"ig"``, the ``ig`` 
 :func:`~ipp_toolkit.mapping.expected_gain`, and ``"interesting"``,
 :func:`~ipp_toolkit.mapping.interesting_gain` (the entropy a reading removes from a cell
 that is interesting). The second is meant to be weighted by how likely each cell is to be
-interesting (:mod:`ipp_toolkit.interest`); that weight moves everywhere at every step, so
-:meth:`FootprintGainCache.weighted_sums` multiplies and sums whole maps, while the per-cell
-gains under it are still kept incrementally. It adds each product once per segment of the
-cuts the footprints make in the rows and columns (:class:`BoxLayout`; one compiled pass per
-map and altitude), with exact products and float64 sums in a fixed order: the same numbers
-on every CPU, unlike float32 matrix products, whose rounding depends on the BLAS kernel.
+interesting (:mod:`ipp_toolkit.interest`); that weight moves everywhere at every step, but it
+is constant over squares of cells (blocks of ~0.5 m). The footprints' bounds and the squares'
+edges cut every map into segments (:class:`BoxLayout`), and each segment's sum of the
+per-cell gain is kept per map and summed again only where the map changed;
+:meth:`FootprintGainCache.weighted_sums` then multiplies each segment's sum by its square's
+weight and adds the products per footprint: some 15,000 segments per map and altitude at
+r_M = 0.1 m instead of 250,000 cells. Every sum is float64 and added in a fixed order, so a
+segment summed again equals one summed from scratch and the result is the same on every CPU
+(unlike float32 matrix products, whose rounding depends on the BLAS kernel).
 """
 
 from __future__ import annotations
@@ -198,8 +201,13 @@ class FootprintGainCache:
 
     Attributes:
         cells: (n_maps, Z, H, W) float32 per-cell expected gain.
-        totals: (n_maps, Z, G, G) float64 footprint sums of ``cells``.
+        totals: (n_maps, Z, G, G) float64 footprint sums of ``cells``, current while
+            ``keeps_totals`` (from the start for the ``"ig"`` objective, else from the first
+            :meth:`sums` on).
         owner: (n_maps,) int, the map whose arrays map k shares (k itself when not shared).
+        segments: per block side of a :meth:`weighted_sums` weight, the altitudes'
+            :class:`BoxLayout` and Z arrays (n_maps, R, C) float64 of every map's segment
+            sums of ``cells``.
     """
 
     def __init__(self, maps: BeliefMaps, n_maps: int, camera: Camera,
@@ -230,21 +238,32 @@ class FootprintGainCache:
         self._overlap_cache = _overlap_cache(camera)
         self.table = _GainTable(maps, camera, gain_of,
                                 _gain_memo(objective, tuple(weights), camera))
-        self.layouts = [BoxLayout(rows, cols, size)
-                        for rows, cols in zip(self.row_bounds, self.col_bounds, strict=True)]
+        # Per block side of a weight: the altitudes' layouts and every map's segment sums
+        # (Z arrays (n_maps, R, C)), kept from the first weighted_sums with that block on.
+        self.segments: dict[int, tuple[list[BoxLayout], list[np.ndarray]]] = {}
+        # The ``ig`` objective's readers take sums() at every step; the other objective's
+        # take weighted_sums(), so its totals are summed only if sums() is ever asked for.
+        self.keeps_totals = objective == "ig"
         self.seen = 0
         self.update()
 
     def sums(self) -> np.ndarray:
         """(n_maps, Z, G, G) float64 footprint sums of the current beliefs."""
         self.update()
+        if not self.keeps_totals:  # first call: summed from the cells, then kept
+            owners = np.flatnonzero(self.owner == np.arange(len(self.owner)))
+            for iz in range(self.n_altitudes):
+                self.totals[owners, iz] = footprint_sums(self.cells[owners, iz],
+                                                         self.camera.rects[iz])
+            self.keeps_totals = True
         return self.totals[self.owner]
 
     def weighted_sums(self, cell_weight: np.ndarray, block: int = 1) -> np.ndarray:
         """(n_maps, Z, G, G) float64 footprint sums of a per-cell weight times the per-cell gain.
 
-        Each product is exact and the sums are float64, added in a fixed order
-        (:class:`BoxLayout`): the same numbers on every CPU and with or without Numba.
+        The gain's sums over the segments of :class:`BoxLayout` are kept per map and summed
+        again only where a map changed; each segment's weight times its sum is added in a
+        fixed order: the same numbers on every CPU and with or without Numba.
 
         Args:
             cell_weight: (n_maps, H / block, W / block) float32 weight of every map's cells,
@@ -259,14 +278,30 @@ class FootprintGainCache:
             raise ValueError(f"cell_weight must have shape {(n_maps,) + (size // block,) * 2} "
                              f"for blocks of {block} cells, got {cell_weight.shape}")
         cell_weight = np.ascontiguousarray(cell_weight, dtype=np.float32)
+        layouts, segment_sums = self._segment_sums(block)
         # Maps that share one belief (every map at D = inf) share one sum: their cells and so
         # their weights are identical.
         owners, inverse = np.unique(self.owner, return_inverse=True)
         sums = np.empty((len(owners),) + self.totals.shape[1:], dtype=np.float64)
         for row, owner in enumerate(owners.tolist()):
-            for iz, layout in enumerate(self.layouts):
-                sums[row, iz] = layout.sums(self.cells[owner, iz], cell_weight[owner], block)
+            for iz, layout in enumerate(layouts):
+                sums[row, iz] = layout.weighted(segment_sums[iz][owner], cell_weight[owner])
         return sums[inverse]
+
+    def _segment_sums(self, block: int) -> tuple[list[BoxLayout], list[np.ndarray]]:
+        """The layouts and segment sums for weights on ``block`` x ``block`` squares, summed
+        over the whole maps the first time a block side is asked for."""
+        found = self.segments.get(block)
+        if found is None:
+            size = self.cells.shape[-1]
+            layouts = [BoxLayout(rows, cols, size, block)
+                       for rows, cols in zip(self.row_bounds, self.col_bounds, strict=True)]
+            sums = [np.zeros((len(self.owner),) + layout.shape) for layout in layouts]
+            for k in np.flatnonzero(self.owner == np.arange(len(self.owner))).tolist():
+                for iz, layout in enumerate(layouts):
+                    layout.segment_sums(self.cells[k, iz], out=sums[iz][k])
+            found = self.segments[block] = (layouts, sums)
+        return found
 
     def update(self) -> None:
         """Fold the maps' changes since the last call into the cache."""
@@ -313,10 +348,20 @@ class FootprintGainCache:
                     if k != group_owner:
                         self.cells[k] = self.cells[group_owner]
                         self.totals[k] = self.totals[group_owner]
+                        for _, segment_sums in self.segments.values():
+                            for by_map in segment_sums:
+                                by_map[k] = by_map[group_owner]
 
     def _refresh(self, k: int, region: Rect) -> None:
         r0, r1, c0, c1 = region
-        if kernels.AVAILABLE:
+        if not self.keeps_totals:  # the per-cell gains only
+            if kernels.AVAILABLE:
+                kernels.gain_lookup(self.table.up_to_date(),
+                                    self.maps.value_index[k].view(np.uint32), self.cells[k],
+                                    r0, r1, c0, c1)
+            else:
+                self.cells[k, :, r0:r1, c0:c1] = self.table.lookup(k, region)
+        elif kernels.AVAILABLE:
             delta = np.empty((self.n_altitudes, r1 - r0, c1 - c0))
             kernels.gain_changes(self.table.up_to_date(), self.maps.value_index[k].view(np.uint32),
                                  self.cells[k], r0, r1, c0, c1, delta)
@@ -326,11 +371,15 @@ class FootprintGainCache:
             delta = new.astype(np.float64)
             delta -= old
             old[...] = new
-        # The part of footprint (y, x) inside the region is rows(y) x cols(x), so all G x G
-        # sums of the change are one matrix product: rows @ delta @ cols.T.
-        for iz in range(self.n_altitudes):
-            rows, cols = self._overlaps(iz, region)
-            self.totals[k, iz] += rows @ delta[iz] @ cols.T
+        if self.keeps_totals:
+            # The part of footprint (y, x) inside the region is rows(y) x cols(x), so all
+            # G x G sums of the change are one matrix product: rows @ delta @ cols.T.
+            for iz in range(self.n_altitudes):
+                rows, cols = self._overlaps(iz, region)
+                self.totals[k, iz] += rows @ delta[iz] @ cols.T
+        for layouts, segment_sums in self.segments.values():
+            for iz, layout in enumerate(layouts):
+                layout.segment_sums(self.cells[k, iz], out=segment_sums[iz][k], region=region)
 
     def _overlaps(self, iz: int, region: Rect) -> tuple[np.ndarray, np.ndarray]:
         """(G, rows) and (G, cols) float64 memberships of ``region``'s rows and columns in the
@@ -356,58 +405,109 @@ class FootprintGainCache:
 class BoxLayout:
     """How the footprints of one altitude cut a map into segments, for weighted box sums.
 
-    The footprints' row bounds cut the rows [0, H) into segments, their column bounds the
-    columns; footprint (y, x) covers whole row segments ``row_segments[y]`` and whole column
-    segments ``col_segments[x]`` (half-open index ranges). :meth:`sums` adds every product
-    once per segment pair, then each footprint's segment pairs: about one addition per cell
-    instead of one per cell and footprint covering it, in one fixed order.
+    The footprints' row bounds and the edges of the weight's ``block`` x ``block`` squares
+    cut the rows [0, H) into segments, the same bounds and edges the columns; footprint
+    (y, x) covers whole row segments ``row_segments[y]`` and whole column segments
+    ``col_segments[x]`` (half-open index ranges), and every segment pair lies inside one
+    square of the weight. So a footprint's weighted sum is the sum over its segment pairs of
+    the pair's weight times the pair's cell sum: the cell sums (:meth:`segment_sums`) change
+    only where a map changed and are kept per map, and :meth:`weighted` multiplies and adds
+    the few thousand segment pairs instead of every cell, each in one fixed order.
 
     Attributes:
+        block: side in cells of the weight's squares (``block = 1``: a weight per cell).
         row_edges: (R + 1,) int64 cuts from 0 to H; row_covered (R,) bool, whether any
-            footprint covers the segment; row_segments (G, 2) int64.
-        col_edges, col_covered, col_segments: the same for the columns.
-        col_runs: (K, 2) int64 [start, end) of the maximal runs of covered columns.
+            footprint covers the segment; row_segments (G, 2) int64; row_block (R,) int64
+            the square row of each segment.
+        col_edges, col_covered, col_segments, col_block: the same for the columns.
     """
 
-    def __init__(self, row_bounds: np.ndarray, col_bounds: np.ndarray, size: int) -> None:
-        self.row_edges, self.row_covered, self.row_segments = _segments(row_bounds, size)
-        self.col_edges, self.col_covered, self.col_segments = _segments(col_bounds, size)
-        # Maximal runs of covered columns: where a covered segment starts after an uncovered
-        # one (or at 0) and ends before one (or at W).
-        padded = np.concatenate([[False], self.col_covered, [False]])
-        change = np.flatnonzero(padded[1:] != padded[:-1])  # alternately run starts and ends
-        self.col_runs = self.col_edges[change].reshape(-1, 2)
+    def __init__(self, row_bounds: np.ndarray, col_bounds: np.ndarray, size: int,
+                 block: int = 1) -> None:
+        if block < 1 or size % block:
+            raise ValueError(f"block = {block!r} must be a positive divisor of the map's "
+                             f"{size} cells")
+        self.block = block
+        self.row_edges, self.row_covered, self.row_segments = _segments(row_bounds, size, block)
+        self.col_edges, self.col_covered, self.col_segments = _segments(col_bounds, size, block)
+        self.row_block = self.row_edges[:-1] // block
+        self.col_block = self.col_edges[:-1] // block
+        self.shape = (len(self.row_edges) - 1, len(self.col_edges) - 1)
+        # The segment of every row and column, as lists: a region's segments are looked up
+        # once per map, altitude and step, where NumPy's searchsorted costs more than a sum.
+        self._row_segment_of = _segment_of(self.row_edges).tolist()
+        self._col_segment_of = _segment_of(self.col_edges).tolist()
 
-    def sums(self, cells: np.ndarray, weight: np.ndarray, block: int) -> np.ndarray:
-        """(G, G) float64 sums over every footprint of ``cells`` times the blockwise ``weight``.
+    def segment_sums(self, cells: np.ndarray, out: np.ndarray | None = None,
+                     region: Rect | None = None) -> np.ndarray:
+        """(R, C) float64 sums of ``cells`` over every segment pair, in a fixed order.
 
         Args:
             cells: (H, W) float32 per-cell values.
-            weight: (H / block, W / block) float32 weight of each block x block square.
-            block: side of the squares in cells.
+            out: (R, C) float64 to write into (a new array by default).
+            region: (r0, r1, c0, c1): sum again only the segments that overlap it (the
+                others in ``out`` are left as they are).
         """
-        if not kernels.AVAILABLE:
-            return self.reference_sums(cells, weight, block)
-        out = np.empty((len(self.row_segments), len(self.col_segments)), dtype=np.float64)
-        kernels.weighted_box_sums(cells, weight, block, self.row_edges, self.row_covered,
-                                  self.col_edges, self.col_covered, self.col_runs,
-                                  self.row_segments, self.col_segments, out)
+        if out is None:
+            out = np.empty(self.shape, dtype=np.float64)
+        if region is None:
+            s0, s1, t0, t1 = 0, self.shape[0], 0, self.shape[1]
+        else:
+            r0, r1, c0, c1 = region
+            s0, s1 = self._row_segment_of[r0], self._row_segment_of[r1 - 1] + 1
+            t0, t1 = self._col_segment_of[c0], self._col_segment_of[c1 - 1] + 1
+        if kernels.AVAILABLE:
+            kernels.segment_sums(cells, self.row_edges, self.col_edges, s0, s1, t0, t1, out)
+        else:
+            out[s0:s1, t0:t1] = self.reference_segment_sums(cells, s0, s1, t0, t1)
         return out
 
-    def reference_sums(self, cells: np.ndarray, weight: np.ndarray, block: int) -> np.ndarray:
-        """:meth:`sums` in NumPy, in the kernel's order (every sum is ``np.add.reduce`` along
-        axis 0 of a C-contiguous array, which NumPy adds one row after another; its
-        ``reduceat`` would not: it sums each column pairwise)."""
-        weights = np.repeat(np.repeat(weight, block, axis=0), block, axis=1)
-        products = cells.astype(np.float64) * weights  # exact: two float32 factors
+    def weighted(self, segment_sums: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        """(G, G) float64 sums over every footprint of the cells times the blockwise weight.
+
+        Args:
+            segment_sums: (R, C) float64 :meth:`segment_sums` of the cells.
+            weight: (H / block, W / block) float32 weight of each square.
+        """
+        if not kernels.AVAILABLE:
+            return self.reference_weighted(segment_sums, weight)
+        out = np.empty((len(self.row_segments), len(self.col_segments)), dtype=np.float64)
+        kernels.weighted_segment_sums(segment_sums, weight, self.row_block, self.col_block,
+                                      self.row_segments, self.col_segments, out)
+        return out
+
+    def sums(self, cells: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        """(G, G) float64 footprint sums of ``cells`` (H, W) times ``weight`` (blockwise)."""
+        return self.weighted(self.segment_sums(cells), weight)
+
+    def reference_segment_sums(self, cells: np.ndarray, s0: int, s1: int, t0: int,
+                               t1: int) -> np.ndarray:
+        """(s1 - s0, t1 - t0) :meth:`segment_sums` in NumPy, in the kernel's order (every
+        sum is ``np.add.reduce`` along axis 0 of a C-contiguous array, which NumPy adds one
+        row after another; its ``reduceat`` would not: it sums each column pairwise)."""
+        r0, r1 = self.row_edges[s0], self.row_edges[s1]
+        c0, c1 = self.col_edges[t0], self.col_edges[t1]
+        values = cells[r0:r1, c0:c1].astype(np.float64)
         # Per row segment, per column: the rows added one after another.
-        by_rows = _sums_along_rows(products, _pairs(self.row_edges))
+        by_rows = _sums_along_rows(values, _pairs(self.row_edges[s0:s1 + 1] - r0))
         # Per (row segment, column segment): the columns added one after another.
-        segment_sums = _sums_along_rows(np.ascontiguousarray(by_rows.T),
-                                        _pairs(self.col_edges))
-        # Per footprint column its column segments, then per footprint row its row segments.
-        by_columns = _sums_along_rows(segment_sums, self.col_segments)  # (G_x, R)
+        return _sums_along_rows(np.ascontiguousarray(by_rows.T),
+                                _pairs(self.col_edges[t0:t1 + 1] - c0)).T
+
+    def reference_weighted(self, segment_sums: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        """:meth:`weighted` in NumPy, in the kernel's order."""
+        products = segment_sums * weight[np.ix_(self.row_block, self.col_block)].astype(
+            np.float64)
+        # Per row segment and footprint column its column segments, then per footprint row
+        # its row segments.
+        by_columns = _sums_along_rows(np.ascontiguousarray(products.T),
+                                      self.col_segments)  # (G_x, R)
         return _sums_along_rows(np.ascontiguousarray(by_columns.T), self.row_segments)
+
+
+def _segment_of(edges: np.ndarray) -> np.ndarray:
+    """(edges[-1],) int64 the segment between consecutive ``edges`` that holds each index."""
+    return np.repeat(np.arange(len(edges) - 1), np.diff(edges))
 
 
 def _pairs(edges: np.ndarray) -> np.ndarray:
@@ -420,12 +520,14 @@ def _sums_along_rows(values: np.ndarray, ranges: Iterable[Sequence[int]]) -> np.
     return np.stack([np.add.reduce(values[start:end], axis=0) for start, end in ranges])
 
 
-def _segments(bounds: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cut [0, size) at every bound: (edges, covered, ranges) as :class:`BoxLayout` keeps."""
+def _segments(bounds: np.ndarray, size: int,
+              block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut [0, size) at every bound and every multiple of ``block``: (edges, covered, ranges)
+    as :class:`BoxLayout` keeps."""
     bounds = np.asarray(bounds, dtype=np.int64)
     if bounds.min() < 0 or bounds.max() > size or np.any(bounds[:, 0] > bounds[:, 1]):
         raise ValueError(f"footprint bounds must be ordered and lie within [0, {size}]")
-    edges = np.unique(np.concatenate([[0, size], bounds.ravel()]))
+    edges = np.unique(np.concatenate([np.arange(0, size + 1, block), bounds.ravel()]))
     ranges = np.searchsorted(edges, bounds)  # (G, 2) first and past-the-last segment
     starts = np.zeros(len(edges), dtype=np.int64)
     np.add.at(starts, ranges[:, 0], 1)

@@ -43,7 +43,8 @@ import numpy as np
 
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
            "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "gain_changes",
-           "weighted_box_sums", "sensor_noise", "REGION_STATS", "N_STATS"]
+           "gain_lookup", "segment_sums", "weighted_segment_sums", "sensor_noise",
+           "REGION_STATS", "N_STATS"]
 
 REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
                 "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
@@ -225,36 +226,57 @@ def gain_changes(values: np.ndarray, value_index: np.ndarray, cells: np.ndarray,
     _compiled().gain_changes(values, value_index, cells, r0, r1, c0, c1, delta)
 
 
-def weighted_box_sums(cells: np.ndarray, weight: np.ndarray, block: int,
-                      row_edges: np.ndarray, row_covered: np.ndarray, col_edges: np.ndarray,
-                      col_covered: np.ndarray, col_runs: np.ndarray, row_segments: np.ndarray,
-                      col_segments: np.ndarray, out: np.ndarray) -> None:
-    """Sums of ``cells`` times a blockwise weight over every footprint box of one altitude.
+def gain_lookup(values: np.ndarray, value_index: np.ndarray, cells: np.ndarray, r0: int,
+                r1: int, c0: int, c1: int) -> None:
+    """:func:`gain_changes` without the changes: ``cells[z] = values[z, value_index]`` over
+    the region rows r0..r1, columns c0..c1 (same arguments)."""
+    _compiled().gain_lookup(values, value_index, cells, r0, r1, c0, c1)
 
-    The footprints' row bounds cut the rows into segments (``row_edges``), their column
-    bounds the columns; footprint (y, x) is the row segments ``row_segments[y]`` times the
-    column segments ``col_segments[x]``. Each product ``float64(cell) * float64(weight)`` is
-    exact; the products of a row segment are added row by row into one float64 sum per
-    column, those column by column into one sum per (row segment, column segment); per row
-    segment, a footprint column's segments are added in order, and per footprint row its
-    row segments: a fixed order, on any CPU
-    (:class:`ipp_toolkit.gain.BoxLayout` holds the NumPy reference, in the same order).
+
+def segment_sums(cells: np.ndarray, row_edges: np.ndarray, col_edges: np.ndarray, s0: int,
+                 s1: int, t0: int, t1: int, out: np.ndarray) -> None:
+    """Sums of ``cells`` over the segments [s0, s1) x [t0, t1) of a cut map, in a fixed order.
+
+    ``row_edges`` cut the rows into segments (segment s: rows ``row_edges[s]`` to
+    ``row_edges[s + 1]``), ``col_edges`` the columns. Per segment s, its rows are added one
+    after another into one float64 sum per column; per column segment t, those column sums
+    are added one after another into ``out[s, t]``
+    (:meth:`ipp_toolkit.gain.BoxLayout.reference_segment_sums` adds in the same order).
 
     Args:
         cells: (H, W) float32 per-cell values (one map, one altitude).
-        weight: (H / block, W / block) float32, one weight per block x block square.
-        block: side of the squares in cells.
         row_edges: (R + 1,) int64 increasing cuts of the rows, from 0 to H.
-        row_covered: (R,) bool, whether any footprint covers row segment r (others are
-            skipped).
-        col_edges, col_covered: the same for the columns.
-        col_runs: (K, 2) int64 [start, end) of the maximal runs of covered columns.
+        col_edges: (C + 1,) int64 the same for the columns.
+        s0, s1, t0, t1: the row and column segments to sum.
+        out: (R, C) float64, written in [s0, s1) x [t0, t1) only.
+    """
+    _compiled().segment_sums(cells, row_edges, col_edges, s0, s1, t0, t1, out)
+
+
+def weighted_segment_sums(sums: np.ndarray, weight: np.ndarray, row_block: np.ndarray,
+                          col_block: np.ndarray, row_segments: np.ndarray,
+                          col_segments: np.ndarray, out: np.ndarray) -> None:
+    """Footprint sums of a blockwise weight times per-cell values, from the segment sums.
+
+    Every segment lies inside one block of the weight, so its cells' weighted sum is
+    ``sums[s, t] * float64(weight[row_block[s], col_block[t]])``. Footprint (y, x) is the row
+    segments ``row_segments[y]`` times the column segments ``col_segments[x]``: per row
+    segment, a footprint column's weighted segments are added in order, then per footprint
+    row its row segments: a fixed order, on any CPU (:class:`ipp_toolkit.gain.BoxLayout`
+    holds the NumPy reference, in the same order).
+
+    Args:
+        sums: (R, C) float64 segment sums (:func:`segment_sums`; finite everywhere, also
+            where no footprint reaches).
+        weight: (H / block, W / block) float32, one weight per block x block square.
+        row_block: (R,) int64 the block row of every row segment; col_block the same for
+            the columns.
         row_segments: (G, 2) int64 first and past-the-last row segment of each footprint row.
         col_segments: (G, 2) int64 the same for each footprint column.
         out: (G, G) float64 output.
     """
-    _compiled().weighted_box_sums(cells, weight, block, row_edges, row_covered, col_edges,
-                                  col_covered, col_runs, row_segments, col_segments, out)
+    _compiled().weighted_segment_sums(sums, weight, row_block, col_block, row_segments,
+                                      col_segments, out)
 
 
 def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:

@@ -121,6 +121,22 @@ def test_shared_maps_split_when_their_beliefs_part():
     assert saw_shared and saw_split
 
 
+def test_totals_of_the_interesting_objective_are_summed_when_first_asked_for_then_kept():
+    config = EnvConfig().replace(world={"resolution": 0.5})
+    state = reset_mission(config, seed=4, mission=0)
+    camera = state.geometry.camera
+    cache = FootprintGainCache(state.maps, state.n_agents, camera, (1.0, 0.0), "interesting")
+    assert not cache.keeps_totals  # its readers take weighted_sums
+    rng = np.random.default_rng(6)
+    for step in range(4):
+        if step >= 2:
+            full = recomputed_footprint_sums(state.maps, state.n_agents, camera, (1.0, 0.0),
+                                             objective="interesting")
+            np.testing.assert_allclose(cache.sums(), full, rtol=1e-12, atol=1e-9)
+            assert cache.keeps_totals
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+
+
 def test_gain_planes_centre_shows_the_footprint_gain_of_the_own_waypoint():
     state = reset_mission(EnvConfig().replace(world={"resolution": 0.5}), seed=0)
     planes = gain_planes(state)
@@ -244,21 +260,48 @@ def test_block_means_take_the_ordered_sums_on_the_default_maps():
 
 
 def test_box_layout_on_a_hand_sized_map():
-    # Footprint rows [0, 2) and [1, 4); columns [0, 1) and [3, 4) of a 5 x 5 map: column 1-2
-    # and row 4 lie under no footprint.
-    layout = BoxLayout(np.array([[0, 2], [1, 4]]), np.array([[0, 1], [3, 4]]), 5)
-    assert layout.row_edges.tolist() == [0, 1, 2, 4, 5]
-    assert layout.row_covered.tolist() == [True, True, True, False]
-    assert layout.row_segments.tolist() == [[0, 2], [1, 3]]
-    assert layout.col_edges.tolist() == [0, 1, 3, 4, 5]
-    assert layout.col_covered.tolist() == [True, False, True, False]
-    assert layout.col_runs.tolist() == [[0, 1], [3, 4]]
-    cells = np.arange(25, dtype=np.float32).reshape(5, 5)
-    weight = np.full((5, 5), 0.5, dtype=np.float32)
-    weight[1, 3] = 2.0
-    expected = [[(0 + 5) / 2, (3 / 2 + 8 * 2)], [(5 + 10 + 15) / 2, (8 * 2 + 13 / 2 + 18 / 2)]]
-    assert layout.sums(cells, weight, 1).tolist() == expected
-    assert layout.reference_sums(cells, weight, 1).tolist() == expected
+    # A 6 x 6 map, weights on 2 x 2 squares. Footprint rows [0, 3) and [1, 4); columns [0, 1)
+    # and [4, 6): rows 4-5 and columns 1-3 lie under no footprint.
+    layout = BoxLayout(np.array([[0, 3], [1, 4]]), np.array([[0, 1], [4, 6]]), 6, block=2)
+    assert layout.row_edges.tolist() == [0, 1, 2, 3, 4, 6]  # the bounds and the squares' edges
+    assert layout.row_covered.tolist() == [True, True, True, True, False]
+    assert layout.row_segments.tolist() == [[0, 3], [1, 4]]
+    assert layout.row_block.tolist() == [0, 0, 1, 1, 2]
+    assert layout.col_edges.tolist() == [0, 1, 2, 4, 6]
+    assert layout.col_covered.tolist() == [True, False, False, True]
+    assert layout.col_segments.tolist() == [[0, 1], [3, 4]]
+    assert layout.col_block.tolist() == [0, 0, 1, 2]
+    cells = np.arange(36, dtype=np.float32).reshape(6, 6)
+    segment_sums = layout.segment_sums(cells)
+    assert segment_sums[2].tolist() == [12, 13, 14 + 15, 16 + 17]
+    assert segment_sums[4, 3] == 28 + 29 + 34 + 35
+    weight = np.full((3, 3), 0.5, dtype=np.float32)
+    weight[1, 2] = 2.0  # rows 2-3, columns 4-5
+    expected = [[(0 + 6 + 12) / 2, (4 + 5 + 10 + 11) / 2 + (16 + 17) * 2],
+                [(6 + 12 + 18) / 2, (10 + 11) / 2 + (16 + 17 + 22 + 23) * 2]]
+    assert layout.sums(cells, weight).tolist() == expected
+    assert layout.reference_weighted(layout.reference_segment_sums(cells, 0, 5, 0, 4),
+                                     weight).tolist() == expected
+
+
+def test_box_layout_sums_again_only_the_segments_a_region_overlaps():
+    layout = BoxLayout(np.array([[0, 3], [1, 4]]), np.array([[0, 1], [4, 6]]), 6, block=2)
+    cells = np.arange(36, dtype=np.float32).reshape(6, 6)
+    kept = layout.segment_sums(cells)
+    cells[3, 1] = 100.0  # inside row segment 3 ([3, 4)) and column segment 1 ([1, 2))
+    stale = kept.copy()
+    layout.segment_sums(cells, out=kept, region=(3, 4, 1, 2))
+    assert np.array_equal(kept, layout.segment_sums(cells))
+    assert np.flatnonzero((kept != stale).ravel()).tolist() == [3 * 4 + 1]
+    # A region across segment edges reaches every segment it overlaps, whole.
+    cells[1:5, 0:3] += 1.0
+    layout.segment_sums(cells, out=kept, region=(1, 5, 0, 3))
+    assert np.array_equal(kept, layout.segment_sums(cells))
+
+
+def test_box_layout_refuses_a_block_that_does_not_divide_the_map():
+    with pytest.raises(ValueError, match="block = 4 must be a positive divisor"):
+        BoxLayout(np.array([[0, 1]]), np.array([[0, 1]]), 6, block=4)
 
 
 def test_box_layout_refuses_bounds_outside_the_map_or_reversed():
@@ -269,7 +312,7 @@ def test_box_layout_refuses_bounds_outside_the_map_or_reversed():
 
 
 @pytest.mark.parametrize("block", [1, 5])
-def test_weighted_sums_are_exact_products_summed_in_float64_in_a_fixed_order(block):
+def test_weighted_sums_equal_float64_sums_in_a_fixed_order(block):
     config = EnvConfig().replace(features={"gain": True, "gain_smoothing": 5.0})
     state = reset_mission(config, seed=1, mission=0)
     rng = np.random.default_rng(2)
@@ -285,12 +328,39 @@ def test_weighted_sums_are_exact_products_summed_in_float64_in_a_fixed_order(blo
     cols = np.stack([_overlap_matrix(b, 0, size).T for b in cache.col_bounds])
     expected = rows @ (cache.cells.astype(np.float64) * cells[:, None]) @ cols
     np.testing.assert_allclose(got, expected, rtol=1e-12)
-    # The compiled kernel and its NumPy reference add in the same order: the same bits.
+    # The compiled kernels and their NumPy references add in the same order: the same bits.
+    layouts, _ = cache.segments[block]
     for k in range(n):
-        for iz, layout in enumerate(cache.layouts):
+        for iz, layout in enumerate(layouts):
+            rows, columns = layout.shape
+            segment_sums = layout.reference_segment_sums(cache.cells[cache.owner[k], iz], 0,
+                                                         rows, 0, columns)
             np.testing.assert_array_equal(
-                got[k, iz], layout.reference_sums(cache.cells[cache.owner[k], iz], weight[k],
-                                                  block))
+                got[k, iz], layout.reference_weighted(segment_sums, weight[k]))
+
+
+@pytest.mark.parametrize("agents, comm", [(4, 25.0), (4, math.inf), (2, 0.0)])
+def test_kept_segment_sums_equal_sums_from_scratch_at_every_step(agents, comm):
+    """A segment is summed again, whole and in the same order, whenever a step changed the
+    map under it: the kept sums are the whole maps' sums to the bit, whatever the path."""
+    config = EnvConfig().replace(world={"resolution": 0.25},
+                                 team={"n_agents": agents, "comm_range": comm},
+                                 features={"gain": True, "gain_smoothing": 4.0})
+    state = reset_mission(config, seed=3, mission=2)
+    cache = FootprintGainCache(state.maps, agents, state.geometry.camera, (1.0, 0.0),
+                               "interesting")
+    size = state.maps.value_index.shape[-1]
+    weight = np.ones((agents, size // 2, size // 2), dtype=np.float32)
+    rng = np.random.default_rng(5)
+    while True:
+        cache.weighted_sums(weight, 2)
+        layouts, kept = cache.segments[2]
+        for k in np.unique(cache.owner).tolist():
+            for iz, layout in enumerate(layouts):
+                assert np.array_equal(kept[iz][k], layout.segment_sums(cache.cells[k, iz]))
+        if state.done:
+            break
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
 
 
 @pytest.mark.parametrize("agents, comm, resolution", [(4, 25.0, 0.1), (8, math.inf, 0.25),
