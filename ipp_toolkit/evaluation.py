@@ -44,7 +44,13 @@ from .driver import fly_missions, start_missions
 from .io import write_json
 from .mission import MissionGeometry, MissionState
 from .planner_specs import PlannerSpec, as_specs
-from .planners import Planner, PlannerFactory, make_planner, planner_factory, planner_views
+from .planners import (
+    Planner,
+    PlannerFactory,
+    check_planner_name,
+    make_planner,
+    planner_views,
+)
 from .process_pool import (
     WorkerPool,
     limit_blas_threads,
@@ -424,7 +430,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     record = frozenset(k for k in record if k < missions)
     specs = as_specs(planners)
     for spec in specs:
-        planner_factory(spec.name)  # raises for an unknown name, listing the registered ones
+        check_planner_name(spec.name)  # an unknown name: refused, listing the registered ones
     labels = [spec.effective_label for spec in specs]
     stems: dict[str, str] = {}
     for label in labels:

@@ -42,6 +42,9 @@ __all__ = [
     "PlannerFactory",
     "agent_views",
     "planner_views",
+    "planners_in_process",
+    "entry_point_planners",
+    "check_planner_name",
     "register_planner",
     "make_planner",
     "available_planners",
@@ -229,6 +232,25 @@ def planner_modules(names: Sequence[str]) -> list[str]:
     imports them ahead of its tasks: :class:`ipp_toolkit.process_pool.WorkerPool`)."""
     entries = _entry_points()
     return list(dict.fromkeys(entries[name].module for name in names if name in entries))
+
+
+def entry_point_planners() -> list[str]:
+    """Names of the planners registered by entry point (installed packages), sorted."""
+    return sorted(_entry_points())
+
+
+def check_planner_name(name: str) -> None:
+    """Raise :func:`planner_factory`'s ValueError for an unknown or removed ``name``, without
+    loading an entry point (which imports the planner's module: torch, for a learned one)."""
+    if name not in _REGISTRY and name not in _entry_points():
+        planner_factory(name)
+
+
+def planners_in_process() -> list[str]:
+    """Names whose factory this process holds already (registered by decorator, or an entry
+    point loaded here), sorted. A spawned worker knows only the entry points until it loads
+    them: a name registered here by decorator alone is unknown there."""
+    return sorted(_REGISTRY)
 
 
 def available_planners() -> list[str]:

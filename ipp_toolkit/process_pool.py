@@ -27,11 +27,15 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from importlib import metadata
 from typing import Any, Protocol
 
 from .planner_specs import PlannerSpec
-from .planners import ENTRY_POINT_GROUP, PlannerFactory, planner_factory
+from .planners import (
+    PlannerFactory,
+    entry_point_planners,
+    planner_factory,
+    planners_in_process,
+)
 
 __all__ = ["TaskRunner", "WorkerPool", "children_ignore_sigint", "stop_workers", "guard_worker",
            "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
@@ -191,6 +195,12 @@ class WorkerPool:
             for _ in range(n_workers):
                 self.executor.submit(_worker_ready)
 
+    def call(self, function: Callable[..., Any], *args: Any) -> Any:
+        """``function(*args)`` in one of the workers (once it has started); its result, or its
+        exception raised here. ``function`` and ``args`` travel pickled (a function by
+        reference: it must be importable by the worker)."""
+        return self.executor.submit(function, *args).result()
+
     def close(self) -> None:
         """Stop the workers now (nothing if :func:`run_parallel` already shut the pool)."""
         stop_workers(self.executor)
@@ -234,12 +244,16 @@ def single_thread_environment() -> contextlib.AbstractContextManager[None]:
 def transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
     """The factory of ``spec`` to send to worker processes (pickled by reference).
 
-    None when a worker finds the planner by itself (an entry point).
+    None when a worker finds the planner by itself (an entry point this process has not
+    loaded, or one whose factory cannot travel); an entry point is not loaded here for this.
 
     Raises:
         ValueError: the factory lives where a spawned worker cannot import it (a local
             scope, or ``__main__`` of an interactive session or notebook).
     """
+    entry_points = entry_point_planners()
+    if spec.name in entry_points and spec.name not in planners_in_process():
+        return None
     factory = planner_factory(spec.name)
     main = sys.modules.get("__main__")
     importable = not (getattr(factory, "__module__", None) == "__main__"
@@ -251,7 +265,7 @@ def transferable_factory(spec: PlannerSpec) -> PlannerFactory | None:
             importable = False
     if importable:
         return factory
-    if spec.name in {ep.name for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}:
+    if spec.name in entry_points:
         return None
     raise ValueError(f"planner {spec.name!r} is registered by "
                      f"{getattr(factory, '__qualname__', factory)!r}, which worker processes "

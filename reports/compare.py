@@ -33,6 +33,7 @@ from ipp_toolkit.planners import (
     make_planner,
     planner_factory,
     planner_modules,
+    planners_in_process,
 )
 from ipp_toolkit.process_pool import WorkerPool
 from ipp_toolkit.ray_backend import check_backend
@@ -256,6 +257,34 @@ def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
     return built
 
 
+def _print_note(text: str) -> None:
+    print(text, file=sys.stderr)
+
+
+def _checked_planners(planners: str | Sequence[str | PlannerSpec] | None, env_config: EnvConfig,
+                      note: Callable[[str], None] | None = None,
+                      ) -> tuple[list[PlannerSpec], dict[str, dict[str, str]], list[str]]:
+    """Build the planners of a comparison and check that each can fly ``env_config``.
+
+    Returns:
+        the planners' specs, their checkpoint records (:func:`planner_checkpoints`) and, when
+        ``note`` is None, the notes about skipped default planners (else ``note`` gets them).
+
+    Raises:
+        ValueError: see :func:`resolve_planners`; also a policy made for another grid or
+            team, refused here, before anything is written, not when its first mission flies.
+    """
+    notes: list[str] = []
+    built = _built_planners(planners, note or notes.append)
+    for spec, planner in built:
+        try:
+            planner.reset(env_config, seed=0)
+        except ValueError as err:
+            raise ValueError(f"planner {spec.effective_label!r} cannot fly this "
+                             f"configuration: {err}") from err
+    return [spec for spec, _ in built], planner_checkpoints(built), notes
+
+
 def planner_checkpoints(built: Sequence[tuple[PlannerSpec, Planner]]) -> dict[str, dict[str, str]]:
     """``{label: {"checkpoint": file name, "sha256": hex}}`` of every planner with weights
     (a ``checkpoint`` attribute naming a file)."""
@@ -362,17 +391,17 @@ def compare(agents: int | None = None, comm: float | None = None,
             pool = WorkerPool(min(int(workers), int(trials) * max(len(names), 1)),
                               planner_modules(names))
             stack.callback(pool.close)  # stops them if the run ends before the evaluation
-        built = _built_planners(planners, note)
-        for spec, planner in built:
-            # A policy made for another grid or team is refused here, before anything is
-            # written, not when its first mission flies.
-            try:
-                planner.reset(env_config, seed=0)
-            except ValueError as err:
-                raise ValueError(f"planner {spec.effective_label!r} cannot fly this "
-                                 f"configuration: {err}") from err
-        specs = [spec for spec, _ in built]
-        checkpoints = planner_checkpoints(built)
+        if pool is not None and not set(_requested_names(planners)) & set(
+                planners_in_process()):
+            # A worker builds and checks the planners (the workers import torch and SB3
+            # anyway): this process never imports them, which on two cores is worth about
+            # a second of the start-up. Not for a planner registered in this process only.
+            specs, checkpoints, notes = pool.call(_checked_planners, planners, env_config)
+            for text in notes:
+                (note or _print_note)(text)
+        else:
+            specs, checkpoints, _ = _checked_planners(planners, env_config,
+                                                      note or _print_note)
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
         from ipp_toolkit.evaluation import evaluate

@@ -228,6 +228,51 @@ def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path
     assert children_gone()
 
 
+_WORKER_CHECK_SCRIPT = """
+import sys
+from pathlib import Path
+from ipp_toolkit.planners import check_planner_name
+from reports.compare import compare
+
+out = Path(sys.argv[1])
+check_planner_name("coma")  # an entry point: known, and not loaded for that
+for name, message in (("no-such-planner", "registered planners"), ("coma_mixed", "removed")):
+    try:
+        check_planner_name(name)
+    except ValueError as err:
+        assert message in str(err), err
+    else:
+        raise AssertionError(name)
+setting = dict(agents=2, comm=25.0, resolution=0.5, budget=3, trials=1, progress=False)
+try:
+    compare(planners="random,coma=" + str(out / "missing.pt"), workers=2, out=out / "refused",
+            **setting)
+except ValueError as err:
+    assert "planner 'coma' cannot be built" in str(err), err
+else:
+    raise AssertionError("a missing checkpoint was accepted")
+assert not (out / "refused").exists()
+parallel = compare(planners="random,coma", workers=2, out=out / "parallel", **setting)
+assert "coma.planner" not in sys.modules and "torch" not in sys.modules
+serial = compare(planners="random,coma", workers=1, **setting)
+strip = lambda rows: repr([{k: v for k, v in r.items() if k != "plan_ms"} for r in rows])
+assert strip(parallel.result.rows) == strip(serial.result.rows)  # repr: nan == nan
+print("checked")
+"""
+
+
+def test_compare_with_workers_checks_the_planners_in_a_worker(tmp_path):
+    """The workers import torch and SB3 anyway; with them the main process of ``compare``
+    neither builds a planner nor loads a planner's module, and refuses a bad one all the
+    same, before anything is written. A fresh interpreter: this one has loaded them."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-c", _WORKER_CHECK_SCRIPT, str(tmp_path)],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().endswith("checked")
+
+
 def test_interrupted_run_resumes_without_redoing_missions(tmp_path):
     config = tiny_config()
     reference = evaluate(config, PLANNERS, missions=3, progress=False,
