@@ -2,6 +2,7 @@
 
     python benchmarks/gain_planes.py                  # 4 UAVs, D = 25 m, r_M = 0.1 m
     python benchmarks/gain_planes.py --agents 8 --comm inf
+    python benchmarks/gain_planes.py --smoothing 5      # the planes of coma / ppo
 
 Flies random valid missions and times, on one core, the ``gain`` planes of every agent after
 each step (start measurement included): once through the mission's incremental
@@ -23,11 +24,14 @@ import numpy as np  # noqa: E402
 from ipp_toolkit.config import EnvConfig  # noqa: E402
 from ipp_toolkit.features import gain_planes  # noqa: E402
 from ipp_toolkit.gain import recomputed_footprint_sums  # noqa: E402
+from ipp_toolkit.interest import interest_smoother  # noqa: E402
 from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
 
 
-def measure(config: EnvConfig, missions: int, incremental: bool) -> float:
-    """Mean milliseconds per step of the gain planes of all agents."""
+def measure(config: EnvConfig, missions: int, incremental: bool, smoothing: float = 0.0) -> float:
+    """Mean milliseconds per step of the gain planes of all agents (``smoothing`` > 0: the
+    ``ig_spatial`` objective, weighted by the smoothed interest, as the shipped ``coma`` and
+    ``ppo`` policies see it)."""
     geometry = MissionGeometry(config)
     rng = np.random.default_rng(0)
     reward = config.reward
@@ -38,7 +42,13 @@ def measure(config: EnvConfig, missions: int, incremental: bool) -> float:
         while True:
             start = time.perf_counter()
             if incremental:
-                gain_planes(state)
+                gain_planes(state, smoothing)
+            elif smoothing > 0:
+                world = config.world
+                smoother = interest_smoother(world.map_cells, world.resolution, smoothing)
+                recomputed_footprint_sums(state.maps, state.n_agents, geometry.camera,
+                                          (1.0, 0.0), objective="interesting",
+                                          cell_weight=smoother(state.maps.prob[:state.n_agents]))
             else:
                 recomputed_footprint_sums(state.maps, state.n_agents, geometry.camera,
                                           (reward.weight_interesting,
@@ -58,14 +68,17 @@ def main() -> None:
     parser.add_argument("--comm", type=float, default=25.0, help="communication range (m)")
     parser.add_argument("--resolution", type=float, default=0.1)
     parser.add_argument("--missions", type=int, default=5)
+    parser.add_argument("--smoothing", type=float, default=0.0,
+                        help="gain smoothing in metres (0: the ig objective)")
     args = parser.parse_args()
     config = EnvConfig().replace(world={"resolution": args.resolution},
                                  team={"n_agents": args.agents, "comm_range": args.comm},
                                  features={"gain": True})
     print(f"{args.agents} UAVs, D = {args.comm:g} m, r_M = {args.resolution:g} m, "
-          f"{args.missions} missions, one core")
-    print(f"  incremental cache: {measure(config, args.missions, True):8.1f} ms/step")
-    print(f"  recomputed:        {measure(config, args.missions, False):8.1f} ms/step")
+          f"{args.missions} missions, smoothing {args.smoothing:g} m, one core")
+    for name, incremental in (("incremental cache", True), ("recomputed", False)):
+        print(f"  {name + ':':18s} "
+              f"{measure(config, args.missions, incremental, args.smoothing):8.1f} ms/step")
 
 
 if __name__ == "__main__":
