@@ -46,19 +46,29 @@ def save_figure(figure: Figure, stem: str | os.PathLike[str],
                 formats: Sequence[str] = FORMATS, dpi: int = 150) -> list[Path]:
     """Save ``figure`` as ``stem.<format>`` for every format, each file atomically.
 
+    A figure with a layout engine (constrained layout) is laid out once, at ``dpi``, and
+    saved without its engine, which it does not get back: with an engine, ``savefig`` draws
+    a figure twice per format (once to lay it out) and lays it out again each time. The
+    PNG is the same, byte for byte.
+
     Returns:
         the written paths, in the order of ``formats``.
     """
+    engine = figure.get_layout_engine()
+    if engine is not None:
+        own_dpi = figure.dpi
+        figure.dpi = dpi  # the text is measured at the resolution it is drawn at
+        try:
+            engine.execute(figure)
+        finally:
+            figure.dpi = own_dpi
+        figure.set_layout_engine(None)
     paths = []
     for fmt in formats:
         target = Path(f"{os.fspath(stem)}.{fmt}")
         atomic_write(target, lambda handle, fmt=fmt: figure.savefig(
             handle, format=fmt, dpi=dpi))
         paths.append(target)
-        # The layout, computed for the first format, serves the others: with a layout
-        # engine, savefig draws the figure twice (once to lay it out), and constrained
-        # layout measures every text again (a fifth of a trajectory figure's time).
-        figure.set_layout_engine(None)
     return paths
 
 
