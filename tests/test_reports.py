@@ -344,3 +344,32 @@ def test_compare_animate_writes_one_gif_per_planner(tmp_path):
     for label in ("random", "coverage"):
         gif = Image.open(tmp_path / "animations" / f"{label}.gif")
         assert gif.n_frames == 16  # s = 0..15
+
+
+def test_save_figure_lays_out_once_and_writes_what_savefig_writes(tmp_path):
+    """The PNG of a constrained-layout figure saved by save_figure (laid out once, then
+    drawn without its layout engine) is matplotlib's own, byte for byte."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from reports.plots import save_figure
+
+    def figure():
+        fig = Figure(figsize=(6.0, 3.0), layout="constrained")
+        FigureCanvasAgg(fig)
+        left, right = fig.subplots(1, 2)
+        left.plot([0, 1, 2], [3, 1, 2], label="a line")
+        image = right.imshow(np.arange(12.0).reshape(3, 4), origin="lower")
+        fig.colorbar(image, ax=right, label="value")
+        fig.legend(loc="outside right center")
+        fig.suptitle("a title")
+        return fig
+
+    expected = io.BytesIO()
+    figure().savefig(expected, format="png", dpi=150)
+    saved = figure()
+    paths = save_figure(saved, tmp_path / "f")
+    assert [p.name for p in paths] == ["f.png", "f.pdf"]
+    assert (tmp_path / "f.png").read_bytes() == expected.getvalue()
+    assert (tmp_path / "f.pdf").read_bytes().startswith(b"%PDF")
+    assert saved.get_layout_engine() is None  # laid out once; kept as it was saved
