@@ -241,7 +241,7 @@ def segment_sums(cells: np.ndarray, row_edges: np.ndarray, col_edges: np.ndarray
     ``row_edges[s + 1]``), ``col_edges`` the columns. Per segment s, its rows are added one
     after another into one float64 sum per column; per column segment t, those column sums
     are added one after another into ``out[s, t]``
-    (:meth:`ipp_toolkit.gain.BoxLayout.reference_segment_sums` adds in the same order).
+    (:meth:`ipp_toolkit.box_sums.BoxLayout.reference_segment_sums` adds in the same order).
 
     Args:
         cells: (H, W) float32 per-cell values (one map, one altitude).
@@ -262,7 +262,7 @@ def weighted_segment_sums(sums: np.ndarray, weight: np.ndarray, row_block: np.nd
     ``sums[s, t] * float64(weight[row_block[s], col_block[t]])``. Footprint (y, x) is the row
     segments ``row_segments[y]`` times the column segments ``col_segments[x]``: per row
     segment, a footprint column's weighted segments are added in order, then per footprint
-    row its row segments: a fixed order, on any CPU (:class:`ipp_toolkit.gain.BoxLayout`
+    row its row segments: a fixed order, on any CPU (:class:`ipp_toolkit.box_sums.BoxLayout`
     holds the NumPy reference, in the same order).
 
     Args:

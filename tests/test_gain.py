@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from ipp_toolkit import kernels
+from ipp_toolkit.box_sums import BoxLayout
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.features import footprint_gain, gain_planes
 from ipp_toolkit.gain import (
-    BoxLayout,
     FootprintGainCache,
     _overlap_matrix,
     footprint_sums,
