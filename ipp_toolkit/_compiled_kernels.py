@@ -218,8 +218,8 @@ def segment_sums(cells, row_edges, col_edges, s0, s1, t0, t1, out):
 
 
 @_jit
-def weighted_segment_sums(sums, weight, row_block, col_block, row_groups, col_groups,
-                          row_footprints, col_footprints, out):
+def weighted_segment_sums(sums, weight, row_block, col_block, row_segments, col_segments,
+                          out):
     """See :func:`ipp_toolkit.kernels.weighted_segment_sums`.
 
     Every loop that adds runs along the row segments (or footprint columns), one independent
@@ -234,21 +234,20 @@ def weighted_segment_sums(sums, weight, row_block, col_block, row_groups, col_gr
         row = sums[s]
         for t in range(n_cols):
             products[t, s] = row[t] * np.float64(weights[col_block[t]])
-    by_group = _summed_ranges(products, col_groups)  # (U, R)
-    by_columns = _summed_ranges(by_group, col_footprints)  # (G_x, R)
-    by_row_group = _summed_ranges(np.ascontiguousarray(by_columns.T), row_groups)  # (V, G_x)
-    out[:, :] = _summed_ranges(by_row_group, row_footprints)
-
-
-@_jit
-def _summed_ranges(values, ranges):
-    """(len(ranges), values.shape[1]): per range, the rows ``values[start:end]`` added one
-    after another (element by element: the additions vectorise along the row)."""
-    result = np.zeros((ranges.shape[0], values.shape[1]))
-    for r in range(ranges.shape[0]):
-        total = result[r]
-        for i in range(ranges[r, 0], ranges[r, 1]):
-            part = values[i]
-            for j in range(total.shape[0]):
-                total[j] += part[j]
-    return result
+    # Per footprint column and row segment, the footprint column's segments in order.
+    by_columns = np.zeros((col_segments.shape[0], n_rows))
+    for x in range(col_segments.shape[0]):
+        column = by_columns[x]
+        for t in range(col_segments[x, 0], col_segments[x, 1]):
+            part = products[t]
+            for s in range(n_rows):
+                column[s] += part[s]
+    by_rows = np.ascontiguousarray(by_columns.T)  # (R, G_x)
+    # Per footprint row, its row segments in order.
+    for y in range(row_segments.shape[0]):
+        line = out[y]
+        line[:] = 0.0
+        for s in range(row_segments[y, 0], row_segments[y, 1]):
+            part = by_rows[s]
+            for x in range(line.shape[0]):
+                line[x] += part[x]

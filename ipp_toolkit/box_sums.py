@@ -29,23 +29,20 @@ class BoxLayout:
     """How the footprints of one altitude cut a map into segments, for weighted box sums.
 
     The footprints' row bounds and the edges of the weight's ``block`` x ``block`` squares
-    cut the rows [0, H) into segments, the same bounds and edges the columns, and every
-    segment pair lies inside one square of the weight. The bounds alone cut the rows into
-    groups of consecutive segments (``row_groups``), and footprint row y covers whole groups
-    ``row_footprints[y]`` (half-open index ranges); the same for the columns. So a
-    footprint's weighted sum is the sum over its segment pairs of the pair's weight times the
-    pair's cell sum: the cell sums (:meth:`segment_sums`) change only where a map changed and
-    are kept per map, and :meth:`weighted` multiplies the few thousand segment pairs (instead
-    of every cell) and adds each product once into its groups, each group once into its
-    footprints, in one fixed order.
+    cut the rows [0, H) into segments, the same bounds and edges the columns; footprint
+    (y, x) covers whole row segments ``row_segments[y]`` and whole column segments
+    ``col_segments[x]`` (half-open index ranges), and every segment pair lies inside one
+    square of the weight. So a footprint's weighted sum is the sum over its segment pairs of
+    the pair's weight times the pair's cell sum: the cell sums (:meth:`segment_sums`) change
+    only where a map changed and are kept per map, and :meth:`weighted` multiplies and adds
+    the few thousand segment pairs instead of every cell, each in one fixed order.
 
     Attributes:
         block: side in cells of the weight's squares (``block = 1``: a weight per cell).
-        row_edges: (R + 1,) int64 cuts from 0 to H; row_block (R,) int64 the square row of
-            each segment; row_groups (V, 2) int64 the segments of each group;
-            row_footprints (G, 2) int64 the groups of each footprint row.
-        col_edges, col_block, col_groups, col_footprints: the same for the columns.
-        shape: (R, C), the segment pairs.
+        row_edges: (R + 1,) int64 cuts from 0 to H; row_covered (R,) bool, whether any
+            footprint covers the segment; row_segments (G, 2) int64; row_block (R,) int64
+            the square row of each segment.
+        col_edges, col_covered, col_segments, col_block: the same for the columns.
     """
 
     def __init__(self, row_bounds: np.ndarray, col_bounds: np.ndarray, size: int,
@@ -54,8 +51,8 @@ class BoxLayout:
             raise ValueError(f"block = {block!r} must be a positive divisor of the map's "
                              f"{size} cells")
         self.block = block
-        self.row_edges, self.row_groups, self.row_footprints = _cuts(row_bounds, size, block)
-        self.col_edges, self.col_groups, self.col_footprints = _cuts(col_bounds, size, block)
+        self.row_edges, self.row_covered, self.row_segments = _segments(row_bounds, size, block)
+        self.col_edges, self.col_covered, self.col_segments = _segments(col_bounds, size, block)
         self.row_block = self.row_edges[:-1] // block
         self.col_block = self.col_edges[:-1] // block
         self.shape = (len(self.row_edges) - 1, len(self.col_edges) - 1)
@@ -97,10 +94,9 @@ class BoxLayout:
         """
         if not kernels.AVAILABLE:
             return self.reference_weighted(segment_sums, weight)
-        out = np.empty((len(self.row_footprints), len(self.col_footprints)), dtype=np.float64)
+        out = np.empty((len(self.row_segments), len(self.col_segments)), dtype=np.float64)
         kernels.weighted_segment_sums(segment_sums, weight, self.row_block, self.col_block,
-                                      self.row_groups, self.col_groups, self.row_footprints,
-                                      self.col_footprints, out)
+                                      self.row_segments, self.col_segments, out)
         return out
 
     def sums(self, cells: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -125,13 +121,11 @@ class BoxLayout:
         """:meth:`weighted` in NumPy, in the kernel's order."""
         products = segment_sums * weight[np.ix_(self.row_block, self.col_block)].astype(
             np.float64)
-        # Per row segment: the products of each column group, then the column groups of
-        # each footprint column; per footprint column: the row segments of each row group,
-        # then the row groups of each footprint row.
-        by_group = _sums_along_rows(np.ascontiguousarray(products.T), self.col_groups)
-        by_columns = _sums_along_rows(by_group, self.col_footprints)  # (G_x, R)
-        by_row_group = _sums_along_rows(np.ascontiguousarray(by_columns.T), self.row_groups)
-        return _sums_along_rows(by_row_group, self.row_footprints)
+        # Per row segment and footprint column its column segments, then per footprint row
+        # its row segments.
+        by_columns = _sums_along_rows(np.ascontiguousarray(products.T),
+                                      self.col_segments)  # (G_x, R)
+        return _sums_along_rows(np.ascontiguousarray(by_columns.T), self.row_segments)
 
 
 def _segment_of(edges: np.ndarray) -> np.ndarray:
@@ -149,14 +143,17 @@ def _sums_along_rows(values: np.ndarray, ranges: Iterable[Sequence[int]]) -> np.
     return np.stack([np.add.reduce(values[start:end], axis=0) for start, end in ranges])
 
 
-def _cuts(bounds: np.ndarray, size: int,
-          block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cut [0, size) at every bound and every multiple of ``block``: (edges, groups,
-    footprints) as :class:`BoxLayout` keeps them."""
+def _segments(bounds: np.ndarray, size: int,
+              block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut [0, size) at every bound and every multiple of ``block``: (edges, covered, ranges)
+    as :class:`BoxLayout` keeps."""
     bounds = np.asarray(bounds, dtype=np.int64)
     if bounds.min() < 0 or bounds.max() > size or np.any(bounds[:, 0] > bounds[:, 1]):
         raise ValueError(f"footprint bounds must be ordered and lie within [0, {size}]")
-    group_edges = np.unique(np.concatenate([[0, size], bounds.ravel()]))
-    edges = np.unique(np.concatenate([np.arange(0, size + 1, block), group_edges]))
-    groups = _pairs(np.searchsorted(edges, group_edges))
-    return edges, groups, np.searchsorted(group_edges, bounds)
+    edges = np.unique(np.concatenate([np.arange(0, size + 1, block), bounds.ravel()]))
+    ranges = np.searchsorted(edges, bounds)  # (G, 2) first and past-the-last segment
+    starts = np.zeros(len(edges), dtype=np.int64)
+    np.add.at(starts, ranges[:, 0], 1)
+    np.add.at(starts, ranges[:, 1], -1)
+    covered = np.cumsum(starts)[:-1] > 0
+    return edges, covered, ranges

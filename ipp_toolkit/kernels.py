@@ -254,18 +254,16 @@ def segment_sums(cells: np.ndarray, row_edges: np.ndarray, col_edges: np.ndarray
 
 
 def weighted_segment_sums(sums: np.ndarray, weight: np.ndarray, row_block: np.ndarray,
-                          col_block: np.ndarray, row_groups: np.ndarray, col_groups: np.ndarray,
-                          row_footprints: np.ndarray, col_footprints: np.ndarray,
-                          out: np.ndarray) -> None:
+                          col_block: np.ndarray, row_segments: np.ndarray,
+                          col_segments: np.ndarray, out: np.ndarray) -> None:
     """Footprint sums of a blockwise weight times per-cell values, from the segment sums.
 
     Every segment lies inside one block of the weight, so its cells' weighted sum is
-    ``sums[s, t] * float64(weight[row_block[s], col_block[t]])``. Per row segment, these
-    products are added in order into each column group (``col_groups``: consecutive column
-    segments), the groups in order into each footprint column (``col_footprints``); then per
-    footprint column the row segments into each row group, the row groups into each footprint
-    row: a fixed order, on any CPU (:class:`ipp_toolkit.box_sums.BoxLayout` holds the NumPy
-    reference, in the same order).
+    ``sums[s, t] * float64(weight[row_block[s], col_block[t]])``. Footprint (y, x) is the row
+    segments ``row_segments[y]`` times the column segments ``col_segments[x]``: per row
+    segment, a footprint column's weighted segments are added in order, then per footprint
+    row its row segments: a fixed order, on any CPU (:class:`ipp_toolkit.box_sums.BoxLayout`
+    holds the NumPy reference, in the same order).
 
     Args:
         sums: (R, C) float64 segment sums (:func:`segment_sums`; finite everywhere, also
@@ -273,14 +271,12 @@ def weighted_segment_sums(sums: np.ndarray, weight: np.ndarray, row_block: np.nd
         weight: (H / block, W / block) float32, one weight per block x block square.
         row_block: (R,) int64 the block row of every row segment; col_block the same for
             the columns.
-        row_groups: (V, 2) int64 first and past-the-last row segment of each row group;
-            col_groups the same for the columns.
-        row_footprints: (G, 2) int64 first and past-the-last row group of each footprint
-            row; col_footprints the same for each footprint column.
+        row_segments: (G, 2) int64 first and past-the-last row segment of each footprint row.
+        col_segments: (G, 2) int64 the same for each footprint column.
         out: (G, G) float64 output.
     """
-    _compiled().weighted_segment_sums(sums, weight, row_block, col_block, row_groups,
-                                      col_groups, row_footprints, col_footprints, out)
+    _compiled().weighted_segment_sums(sums, weight, row_block, col_block, row_segments,
+                                      col_segments, out)
 
 
 def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:
