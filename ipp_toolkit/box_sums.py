@@ -89,7 +89,9 @@ class BoxLayout:
         """(G, G) float64 sums over every footprint of the cells times the blockwise weight.
 
         Args:
-            segment_sums: (R, C) float64 :meth:`segment_sums` of the cells.
+            segment_sums: (R, C) float64 :meth:`segment_sums` of the cells; with ``block = 1``
+                also the (H, W) float32 cells themselves (each segment is a cell, and its
+                float64 sum is its value).
             weight: (H / block, W / block) float32 weight of each square.
         """
         if not kernels.AVAILABLE:

@@ -208,7 +208,7 @@ class FootprintGainCache:
         owner: (n_maps,) int, the map whose arrays map k shares (k itself when not shared).
         segments: per block side of a :meth:`weighted_sums` weight, the altitudes'
             :class:`BoxLayout` and Z arrays (n_maps, R, C) float64 of every map's segment
-            sums of ``cells``.
+            sums of ``cells`` (for single cells, ``block = 1``: views of ``cells``).
     """
 
     def __init__(self, maps: BeliefMaps, n_maps: int, camera: Camera,
@@ -297,12 +297,21 @@ class FootprintGainCache:
             size = self.cells.shape[-1]
             layouts = [BoxLayout(rows, cols, size, block)
                        for rows, cols in zip(self.row_bounds, self.col_bounds, strict=True)]
-            sums = [np.zeros((len(self.owner),) + layout.shape) for layout in layouts]
-            for k in np.flatnonzero(self.owner == np.arange(len(self.owner))).tolist():
-                for iz, layout in enumerate(layouts):
-                    layout.segment_sums(self.cells[k, iz], out=sums[iz][k])
+            if block == 1:
+                # Every segment is one cell, whose float64 sum is its float32 gain, exactly:
+                # the cells serve as the segment sums (views, current as they are).
+                sums = [self.cells[:, iz] for iz in range(self.n_altitudes)]
+            else:
+                sums = [np.zeros((len(self.owner),) + layout.shape) for layout in layouts]
+                for k in np.flatnonzero(self.owner == np.arange(len(self.owner))).tolist():
+                    for iz, layout in enumerate(layouts):
+                        layout.segment_sums(self.cells[k, iz], out=sums[iz][k])
             found = self.segments[block] = (layouts, sums)
         return found
+
+    def _kept_segment_sums(self) -> list[tuple[list[BoxLayout], list[np.ndarray]]]:
+        """The segment sums kept apart from the cells (every block side but 1)."""
+        return [found for block, found in self.segments.items() if block != 1]
 
     def update(self) -> None:
         """Fold the maps' changes since the last call into the cache."""
@@ -349,7 +358,7 @@ class FootprintGainCache:
                     if k != group_owner:
                         self.cells[k] = self.cells[group_owner]
                         self.totals[k] = self.totals[group_owner]
-                        for _, segment_sums in self.segments.values():
+                        for _, segment_sums in self._kept_segment_sums():
                             for by_map in segment_sums:
                                 by_map[k] = by_map[group_owner]
 
@@ -378,7 +387,7 @@ class FootprintGainCache:
             for iz in range(self.n_altitudes):
                 rows, cols = self._overlaps(iz, region)
                 self.totals[k, iz] += rows @ delta[iz] @ cols.T
-        for layouts, segment_sums in self.segments.values():
+        for layouts, segment_sums in self._kept_segment_sums():
             for iz, layout in enumerate(layouts):
                 layout.segment_sums(self.cells[k, iz], out=segment_sums[iz][k], region=region)
 

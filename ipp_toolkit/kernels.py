@@ -267,7 +267,7 @@ def weighted_segment_sums(sums: np.ndarray, weight: np.ndarray, row_block: np.nd
 
     Args:
         sums: (R, C) float64 segment sums (:func:`segment_sums`; finite everywhere, also
-            where no footprint reaches).
+            where no footprint reaches), or float32 values of single-cell segments.
         weight: (H / block, W / block) float32, one weight per block x block square.
         row_block: (R,) int64 the block row of every row segment; col_block the same for
             the columns.
