@@ -37,6 +37,7 @@ from ipp_toolkit.planners import (
 )
 from ipp_toolkit.process_pool import WorkerPool
 from ipp_toolkit.ray_backend import check_backend
+from ipp_toolkit.result_store import shard_path, trajectory_path
 from ipp_toolkit.settings import build_env_config, format_comm, safe_name
 
 from .tables import Summary, summarise, to_markdown, write_tables
@@ -384,7 +385,7 @@ def compare(agents: int | None = None, comm: float | None = None,
                                   area_size=area_size, grid_spacing=grid_spacing)
     with contextlib.ExitStack() as stack:
         pool = None
-        if backend == "local" and workers > 1:
+        if backend == "local" and workers > 1 and not _all_stored(out, planners, trials):
             # The workers start and import the planners' modules while this process builds
             # and checks the planners; the evaluation hands them their tasks.
             names = _requested_names(planners)
@@ -441,20 +442,40 @@ def compare(agents: int | None = None, comm: float | None = None,
         return comparison
 
 
-def _requested_names(planners: str | Sequence[str | PlannerSpec] | None) -> list[str]:
-    """The planner names ``planners`` asks for, as far as they parse (to warm the workers)."""
+def _requested_specs(planners: str | Sequence[str | PlannerSpec] | None) -> list[PlannerSpec]:
+    """The planners ``planners`` asks for, as far as they parse, unbuilt (to warm the workers
+    and to see what is stored already; a keyword's planners as if all were available)."""
     from ipp_toolkit.planner_specs import PlannerSpec
 
     keyword = _planner_keyword(planners)
-    if keyword == "default":
-        return list(DEFAULT_PLANNERS)
-    if keyword == "all":
-        return available_planners()
-    names = []
+    if keyword is not None:
+        names = list(DEFAULT_PLANNERS) if keyword == "default" else available_planners()
+        return [PlannerSpec(name) for name in names]
+    specs = []
     for item in _listed_items(planners):
         try:
-            spec = item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item)
+            specs.append(item if isinstance(item, PlannerSpec) else PlannerSpec.parse(item))
         except ValueError:
             continue  # refused with its message when the planners are built
-        names.append(spec.name)
-    return names
+    return specs
+
+
+def _requested_names(planners: str | Sequence[str | PlannerSpec] | None) -> list[str]:
+    """The planner names ``planners`` asks for, as far as they parse (to warm the workers)."""
+    return [spec.name for spec in _requested_specs(planners)]
+
+
+def _all_stored(out: str | os.PathLike[str] | None,
+                planners: str | Sequence[str | PlannerSpec] | None, trials: int) -> bool:
+    """Whether ``out`` holds every mission of every requested planner already, and mission
+    0's trajectory: then there is nothing to fly and no worker to start. Only a guess from
+    the files' names, for speed: the evaluation checks the folder and the shards (a corrupt
+    one is flown again), with or without workers, to the same results."""
+    if out is None:
+        return False
+    folder = Path(out)
+    labels = [spec.effective_label for spec in _requested_specs(planners)]
+    return bool(labels) and all(
+        trajectory_path(folder, label, 0).exists()
+        and all(shard_path(folder, label, mission).exists() for mission in range(int(trials)))
+        for label in labels)

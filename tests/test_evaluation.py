@@ -228,6 +228,32 @@ def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path
     assert children_gone()
 
 
+def test_compare_starts_no_workers_when_every_mission_is_stored(tmp_path, monkeypatch):
+    from reports.compare import compare
+
+    started: list[WorkerPool] = []
+
+    class Recorded(WorkerPool):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            started.append(self)
+
+    monkeypatch.setattr(sys.modules["reports.compare"], "WorkerPool", Recorded)
+    out = tmp_path / "out"
+    run = dict(planners="random,coverage", workers=2, out=out, progress=False,
+               config=tiny_config())
+    first = compare(trials=2, **run)
+    assert len(started) == 1
+    again = compare(trials=2, **run)  # nothing left to fly: reported from the shards
+    assert len(started) == 1
+    assert stripped(again.result.rows) == stripped(first.result.rows)
+    (out / "shards" / "coverage" / "mission_00001.json").unlink()
+    compare(trials=2, **run)  # one mission to fly again: workers
+    assert len(started) == 2
+    assert stripped(load_results(out).rows) == stripped(first.result.rows)
+    assert children_gone()
+
+
 _WORKER_CHECK_SCRIPT = """
 import sys
 from pathlib import Path
