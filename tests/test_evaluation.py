@@ -206,9 +206,10 @@ def test_a_pool_of_no_workers_is_refused_naming_the_count():
     assert children_gone()
 
 
-def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path,
-                                                                        monkeypatch):
-    from reports.compare import compare
+@pytest.fixture
+def started_pools(monkeypatch) -> list[WorkerPool]:
+    """Every WorkerPool that reports.compare starts from now on, in order."""
+    import reports.compare  # noqa: F401 - the module, loaded
 
     started: list[WorkerPool] = []
 
@@ -219,6 +220,14 @@ def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path
 
     # The module, not the function the package exports under the same name.
     monkeypatch.setattr(sys.modules["reports.compare"], "WorkerPool", Recorded)
+    return started
+
+
+def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path,
+                                                                        started_pools):
+    from reports.compare import compare
+
+    started = started_pools
     out = tmp_path / "out"
     with pytest.raises(ValueError, match="cannot be built"):
         compare(planners=f"random,coma={tmp_path / 'missing.pt'}", trials=2, workers=2,
@@ -228,17 +237,10 @@ def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path
     assert children_gone()
 
 
-def test_compare_starts_no_workers_when_every_mission_is_stored(tmp_path, monkeypatch):
+def test_compare_starts_no_workers_when_every_mission_is_stored(tmp_path, started_pools):
     from reports.compare import compare
 
-    started: list[WorkerPool] = []
-
-    class Recorded(WorkerPool):
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            started.append(self)
-
-    monkeypatch.setattr(sys.modules["reports.compare"], "WorkerPool", Recorded)
+    started = started_pools
     out = tmp_path / "out"
     run = dict(planners="random,coverage", workers=2, out=out, progress=False,
                config=tiny_config())
