@@ -203,8 +203,9 @@ class FootprintGainCache:
     Attributes:
         cells: (n_maps, Z, H, W) float32 per-cell expected gain.
         totals: (n_maps, Z, G, G) float64 footprint sums of ``cells``, current while
-            ``keeps_totals`` (from the start for the ``"ig"`` objective, else from the first
-            :meth:`sums` on).
+            ``keeps_totals``.
+        keeps_totals: whether ``totals`` is kept current: from the start for the ``"ig"``
+            objective, else from the first :meth:`sums` on.
         owner: (n_maps,) int, the map whose arrays map k shares (k itself when not shared).
         segments: per block side of a :meth:`weighted_sums` weight, the altitudes'
             :class:`BoxLayout` and Z arrays (n_maps, R, C) float64 of every map's segment

@@ -386,8 +386,9 @@ def compare(agents: int | None = None, comm: float | None = None,
     with contextlib.ExitStack() as stack:
         pool = None
         if backend == "local" and workers > 1 and not _all_stored(out, planners, trials):
-            # The workers start and import the planners' modules while this process builds
-            # and checks the planners; the evaluation hands them their tasks.
+            # The workers start and import the planners' modules at once; one of them builds
+            # and checks the planners, then the evaluation hands them their tasks. A run
+            # whose every mission is stored already has nothing to fly: no workers.
             names = _requested_names(planners)
             pool = WorkerPool(min(int(workers), int(trials) * max(len(names), 1)),
                               planner_modules(names))
