@@ -48,7 +48,7 @@ from . import kernels
 from .box_sums import BoxLayout
 from .mapping import BeliefMaps, belief_columns, expected_gain, interesting_gain
 from .sensor import Camera
-from .value_table import DerivedMemo
+from .value_table import DerivedMemo, exact_memo
 
 __all__ = ["CellGain", "FootprintGainCache", "OBJECTIVES", "cell_objective",
            "footprint_sums", "gains_by_altitude", "recomputed_footprint_sums"]
@@ -316,17 +316,14 @@ class FootprintGainCache:
 
     def update(self) -> None:
         """Fold the maps' changes since the last call into the cache."""
-        changes = self.maps.changes
-        if len(changes) == self.seen:
+        if len(self.maps.changes) == self.seen:
             return
-        if len(changes) < self.seen:
-            raise RuntimeError("the maps' change log was cut: build a new FootprintGainCache")
         n_maps = len(self.owner)
         regions: list[list[Rect]] = [[] for _ in range(n_maps)]
-        for index, rect in changes[self.seen:]:
-            if index < n_maps and rect not in regions[index]:
+        for index, rect in self.maps.changes_since(self.seen, "FootprintGainCache"):
+            if index < n_maps:
                 regions[index].append(rect)
-        self.seen = len(changes)
+        self.seen = len(self.maps.changes)
         self._regroup(regions)
         for k in np.flatnonzero(self.owner == np.arange(n_maps)):
             for region in _coalesce(regions[k]):
@@ -455,7 +452,7 @@ class _GainTable:
         self.camera = camera
         self.gain_of = gain_of
         self.values = np.empty((len(camera.accuracy), 0), dtype=np.float32)
-        self.memo = memo if memo is not None and memo.exact() else None
+        self.memo = exact_memo(memo)
 
     def up_to_date(self) -> np.ndarray:
         """(Z, V) float32 gain of every value of the maps' table, new ones computed now."""

@@ -197,16 +197,13 @@ class BlockMeanCache:
         maps, b = self.maps, self.block
         if not self.incremental:
             return block_means(maps.prob[:self.n_maps], b)
-        changes = maps.changes
-        if len(changes) < self._seen:
-            raise RuntimeError("the maps' change log was cut: build a new BlockMeanCache")
         prob = maps.table.column("prob")
-        for m, (r0, r1, c0, c1) in dict.fromkeys(changes[self._seen:]):
+        for m, (r0, r1, c0, c1) in maps.changes_since(self._seen, "BlockMeanCache"):
             if m >= self.n_maps:
                 continue
             r0, c0 = r0 // b * b, c0 // b * b  # the blocks the rectangle touches
             r1, c1 = -(-r1 // b) * b, -(-c1 // b) * b
             cells = prob[self.maps.value_index[m, r0:r1, c0:c1]]
             self._means[m, r0 // b:r1 // b, c0 // b:c1 // b] = _ordered_block_means(cells, b)
-        self._seen = len(changes)
+        self._seen = len(maps.changes)
         return self._means

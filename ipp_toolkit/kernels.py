@@ -173,7 +173,10 @@ def fuse_evidence(*arrays: Any) -> tuple[int, bool]:
     (2 P,) uint32 output, the (old, new) index of every cell visited, in order, and on the
     last target (the global map) also (current, current) of the cells of each footprint an
     earlier one refreshed (P = the sum of the targets' footprint areas is always enough);
-    row_values (W,) float32 scratch.
+    values (capacity,) float32, the table's patterns as values (``table_bits`` viewed as
+    float32); transitions (capacity, 2 D) int32, the index of value k plus the increments of
+    delta slot s and reading r at column 2 s + r, -1 until first met (filled in here);
+    delta_slots (F,) int64, the delta slot of each footprint's (d0, d1).
 
     Returns:
         (size, done): the table's new size, and whether the pass finished; if not, the next

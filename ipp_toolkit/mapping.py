@@ -308,6 +308,19 @@ class BeliefMaps:
         """(M, H, W) float32 weighted entropy W(p) H(p) in bits."""
         return self._synced_arrays()[3]
 
+    def changes_since(self, seen: int, reader: str) -> list[tuple[int, Rect]]:
+        """The distinct (map index, rect) of :attr:`changes` after its first ``seen``, in
+        order of first appearance: what a cache that has folded ``changes[:seen]`` in still
+        has to fold in.
+
+        Raises:
+            RuntimeError: the log holds fewer than ``seen`` changes (it was cut); ``reader``
+                names the cache to build anew.
+        """
+        if len(self.changes) < seen:
+            raise RuntimeError(f"the maps' change log was cut: build a new {reader}")
+        return list(dict.fromkeys(self.changes[seen:]))
+
     def _synced_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The per-cell arrays, built at the prior on first use, with every change since
         the last call looked up from :attr:`value_index` (a lookup writes the values the
@@ -318,7 +331,7 @@ class BeliefMaps:
                 self.prior_logodds, self.prior_prob, self.prior_entropy, self.prior_wentropy))
             self._synced = 0
         if self._synced < len(self.changes):
-            pending = list(dict.fromkeys(self.changes[self._synced:]))
+            pending = self.changes_since(self._synced, "BeliefMaps")
             self._synced = len(self.changes)
             prob, entropy, _, wentropy = (self.table.column(name) for name in BELIEF_COLUMNS)
             values = self.table.values

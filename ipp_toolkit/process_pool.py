@@ -9,9 +9,10 @@ which stores results as they arrive and, on a failed task, keeps the finished on
 the first error. The runner itself (what one task does) belongs to the evaluation module; any
 object with ``single_thread`` and ``run(label, mission)`` serves.
 
-A pool can be started ahead of its tasks (``ipp-compare`` starts it before it builds and
-checks its planners): its workers spawn and import the planners' modules (torch, SB3) on the
-second core while the main process does its own start-up.
+A pool can be started ahead of its tasks (``ipp-compare`` starts it first): its workers
+spawn and import the planners' modules (torch, SB3) at once, and one of them can build and
+check the planners (:meth:`WorkerPool.call`) before the tasks come, so the main process never
+imports those modules.
 """
 
 from __future__ import annotations

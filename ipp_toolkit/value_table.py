@@ -19,7 +19,7 @@ import numpy as np
 
 from . import kernels
 
-__all__ = ["ValueTable", "DerivedMemo"]
+__all__ = ["ValueTable", "DerivedMemo", "exact_memo"]
 
 _MULTIPLIER = np.uint32(2654435761)
 _MIN_SLOT_BITS = 12
@@ -75,6 +75,12 @@ class DerivedMemo:
         return self._columns[:, [self._row[pattern] for pattern in patterns]]
 
 
+def exact_memo(memo: DerivedMemo | None) -> DerivedMemo | None:
+    """``memo`` where it may serve a table (:meth:`DerivedMemo.exact`), else None: the table
+    then derives its own values."""
+    return memo if memo is not None and memo.exact() else None
+
+
 class ValueTable:
     """Every distinct float32 value seen, with derived columns.
 
@@ -92,7 +98,7 @@ class ValueTable:
     def __init__(self, derive: Derive, names: Sequence[str], first: np.ndarray | None = None,
                  memo: DerivedMemo | None = None):
         self.derive = derive
-        self.memo = memo if memo is not None and memo.exact() else None
+        self.memo = exact_memo(memo)
         self.names = tuple(names)
         self.size = 0
         self._capacity = 0
