@@ -385,16 +385,16 @@ def compare(agents: int | None = None, comm: float | None = None,
                                   area_size=area_size, grid_spacing=grid_spacing)
     with contextlib.ExitStack() as stack:
         pool = None
-        if backend == "local" and workers > 1 and not _all_stored(out, planners, trials):
+        requested = _requested_specs(planners)
+        names = [spec.name for spec in requested]
+        if backend == "local" and workers > 1 and not _all_stored(out, requested, trials):
             # The workers start and import the planners' modules at once; one of them builds
             # and checks the planners, then the evaluation hands them their tasks. A run
             # whose every mission is stored already has nothing to fly: no workers.
-            names = _requested_names(planners)
             pool = WorkerPool(min(int(workers), int(trials) * max(len(names), 1)),
                               planner_modules(names))
             stack.callback(pool.close)  # stops them if the run ends before the evaluation
-        if pool is not None and not set(_requested_names(planners)) & set(
-                planners_in_process()):
+        if pool is not None and not set(names) & set(planners_in_process()):
             # A worker builds and checks the planners (the workers import torch and SB3
             # anyway): this process never imports them, which on two cores is worth about
             # a second of the start-up. Not for a planner registered in this process only.
@@ -461,21 +461,17 @@ def _requested_specs(planners: str | Sequence[str | PlannerSpec] | None) -> list
     return specs
 
 
-def _requested_names(planners: str | Sequence[str | PlannerSpec] | None) -> list[str]:
-    """The planner names ``planners`` asks for, as far as they parse (to warm the workers)."""
-    return [spec.name for spec in _requested_specs(planners)]
-
-
-def _all_stored(out: str | os.PathLike[str] | None,
-                planners: str | Sequence[str | PlannerSpec] | None, trials: int) -> bool:
-    """Whether ``out`` holds every mission of every requested planner already, and mission
-    0's trajectory: then there is nothing to fly and no worker to start. Only a guess from
-    the files' names, for speed: the evaluation checks the folder and the shards (a corrupt
-    one is flown again), with or without workers, to the same results."""
+def _all_stored(out: str | os.PathLike[str] | None, requested: Sequence[PlannerSpec],
+                trials: int) -> bool:
+    """Whether ``out`` holds every mission of every ``requested`` planner
+    (:func:`_requested_specs`) already, and mission 0's trajectory: then there is nothing to
+    fly and no worker to start. Only a guess from the files' names, for speed: the
+    evaluation checks the folder and the shards (a corrupt one is flown again), with or
+    without workers, to the same results."""
     if out is None:
         return False
     folder = Path(out)
-    labels = [spec.effective_label for spec in _requested_specs(planners)]
+    labels = [spec.effective_label for spec in requested]
     return bool(labels) and all(
         trajectory_path(folder, label, 0).exists()
         and all(shard_path(folder, label, mission).exists() for mission in range(int(trials)))
