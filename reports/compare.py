@@ -30,6 +30,7 @@ from ipp_toolkit.io import write_json
 from ipp_toolkit.planners import (
     Planner,
     available_planners,
+    check_planner_name,
     make_planner,
     planner_factory,
     planner_modules,
@@ -387,6 +388,10 @@ def compare(agents: int | None = None, comm: float | None = None,
         pool = None
         requested = _requested_specs(planners)
         names = [spec.name for spec in requested]
+        for name in names:
+            # Here, before any worker starts: an unknown name's message lists the planners
+            # registered in this process too, which a spawned worker does not know.
+            check_planner_name(name)
         if backend == "local" and workers > 1 and not _all_stored(out, requested, trials):
             # The workers start and import the planners' modules at once; one of them builds
             # and checks the planners, then the evaluation hands them their tasks. A run

@@ -127,6 +127,25 @@ def test_unknown_planner_exits_2_and_lists_registered(capsys, tmp_path):
 
 
 @needs_evaluation
+def test_an_unknown_planner_is_refused_before_workers_start_listing_this_process_planners(
+        capsys, tmp_path, monkeypatch):
+    import ipp_toolkit.planners as planners_module
+    from ipp_toolkit import process_pool
+
+    def no_pool(*args, **kwargs):
+        raise AssertionError("a worker pool was started for a run that is refused")
+
+    # Registered by decorator in this process only: a spawned worker would not list it.
+    monkeypatch.setitem(planners_module._REGISTRY, "only-in-this-process", object)
+    monkeypatch.setattr(process_pool.WorkerPool, "__init__", no_pool)
+    out = tmp_path / "out"
+    err = _fails(capsys, ["--planners", "random,astar", "--workers", "2", "--out", str(out)],
+                 "unknown planner 'astar'; registered planners: ")
+    assert "only-in-this-process" in err
+    assert not out.exists()
+
+
+@needs_evaluation
 @needs_baselines
 def test_end_to_end_writes_everything_and_refuses_another_config(capsys, tmp_path,
                                                                  monkeypatch):
