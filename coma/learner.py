@@ -44,7 +44,7 @@ from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from .config import COMAConfig, mission_settings
-from .networks import GainPriorActor, bounded_softmax, epsilon_at
+from .networks import GainPriorActor, bounded_softmax, epsilon_at, in_input_layout
 from .parallel import (
     RunSpec,
     Workers,
@@ -110,9 +110,14 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
     device = next(networks.critic.parameters()).device
     rollout = rollout.to(device)
     e, n, t = rollout.actions.shape
+    actor_obs = in_input_layout(networks.actor, rollout.actor_obs.flatten(0, 2))
+    critic_obs = in_input_layout(networks.critic, rollout.critic_obs.flatten(0, 2))
+    value_obs = None
+    if rollout.value_obs is not None and networks.value is not None:
+        value_obs = in_input_layout(networks.value, rollout.value_obs.flatten(0, 2))
     # TD(lambda) targets per agent and episode from the target critic.
     with torch.no_grad():
-        q_target = target_critic(rollout.critic_obs.flatten(0, 2)).view(e, n, t, N_ACTIONS)
+        q_target = target_critic(critic_obs).view(e, n, t, N_ACTIONS)
         q_target_taken = q_target.gather(-1, rollout.actions.unsqueeze(-1)).squeeze(-1)
         next_values = torch.roll(q_target_taken, shifts=-1, dims=-1)  # Q'(s_{t+1}, u_{t+1})
         terminal = torch.zeros(e, n, t, dtype=torch.bool, device=device)
@@ -120,9 +125,6 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
         rewards = rollout.rewards.unsqueeze(1).expand(e, n, t)
         targets = td_lambda_targets(rewards, next_values, terminal, cfg.gamma, cfg.td_lambda)
 
-    actor_obs = rollout.actor_obs.flatten(0, 2)
-    critic_obs = rollout.critic_obs.flatten(0, 2)
-    value_obs = rollout.value_obs.flatten(0, 2) if rollout.value_obs is not None else None
     masks = rollout.masks.flatten(0, 2)
     actions = rollout.actions.flatten()
     behaviour = rollout.behaviour_probs.flatten()

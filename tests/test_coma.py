@@ -16,7 +16,7 @@ from helpers import small_config
 from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from coma.config import VARIANTS, COMAConfig, mission_settings, preset
 from coma.learner import TrainingDiverged, setting_of_update, train
-from coma.networks import bounded_softmax, epsilon_at
+from coma.networks import ConvNet, bounded_softmax, epsilon_at
 from coma.persistence import check_transfer, load_policy
 from coma.planner import COMAPlanner
 from coma.rollout import collect_rollout
@@ -125,6 +125,28 @@ def test_bounded_softmax_floor_mask_and_normalisation():
     assert probs[0, 1].item() == pytest.approx((0.5 / 6) / (1 - 0.5 / 6))
     greedy = bounded_softmax(logits, mask, 0.0)
     assert greedy[0, 0].item() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("grid", [11, 13])
+def test_channels_last_training_layout_computes_the_default_layouts_outputs_and_gradients(grid):
+    # On the 11 x 11 grid the last convolution covers its whole input and the trainer's
+    # layout computes it as a matrix product; on 13 x 13 (a 3 x 3 output) it stays a
+    # convolution. Either way: the same function of the same weights.
+    torch.manual_seed(0)
+    default = ConvNet(5, grid, 6, width=8, hidden=16)
+    trained = ConvNet(5, grid, 6, width=8, hidden=16)
+    trained.load_state_dict(default.state_dict())
+    trained.use_channels_last()
+    planes = torch.randn(7, 5, grid, grid)
+    weights = torch.randn(7, 6)
+    out_default, out_trained = default(planes), trained(planes)
+    assert out_trained.shape == (7, 6)
+    assert torch.allclose(out_trained, out_default, rtol=1e-5, atol=1e-6)
+    (out_default * weights).sum().backward()
+    (out_trained * weights).sum().backward()
+    for (name, a), b in zip(default.named_parameters(), trained.parameters(), strict=True):
+        assert torch.allclose(b.grad, a.grad, rtol=1e-4, atol=1e-5), name
+    assert trained.state_dict().keys() == default.state_dict().keys()
 
 
 def test_epsilon_schedule_paper_values():
