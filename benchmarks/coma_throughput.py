@@ -2,11 +2,14 @@
 
     python benchmarks/coma_throughput.py                    # cpu preset, r_M = 0.5 m
     python benchmarks/coma_throughput.py --preset paper --resolution 0.1
+    python benchmarks/coma_throughput.py --preset paper --resolution 0.1 --device cuda
 
 Prints, per preset: rollout only (simulator + features + actor sampling), one update only
 (TD(lambda) targets, critic and actor mini-batch steps) and the whole training step, each in
 agent-transitions per second, plus seconds per update (the authors' code: about 42 s per
-300-transition update on a 2-core VM, i.e. ~7 transitions/s).
+300-transition update on a 2-core VM, i.e. ~7 transitions/s). With ``--device cuda`` the
+networks learn on the GPU and the rollouts fly on a CPU copy of the actor, refreshed after
+every update, as ``ipp-train coma --device cuda`` does.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import torch  # noqa: E402
 
 from coma.config import preset  # noqa: E402
 from coma.learner import make_optimisers, to_channels_last, update  # noqa: E402
+from coma.parallel import cpu_actor_state, resolve_device  # noqa: E402
 from coma.persistence import build_networks  # noqa: E402
 from coma.rollout import collect_rollout  # noqa: E402
 from ipp_toolkit.config import EnvConfig  # noqa: E402
@@ -37,7 +41,12 @@ def main() -> None:
     parser.add_argument("--gain", type=float, default=None, metavar="SMOOTHING",
                         help="with the gain planes: 0 = ig's objective, > 0 = the smoothed "
                              "objective of the spatial-mixture policy (metres)")
+    parser.add_argument("--device", default="cpu", help="where the networks learn: cpu or cuda")
     args = parser.parse_args()
+    try:
+        device = resolve_device(args.device)
+    except ValueError as error:
+        parser.error(str(error))
     torch.set_num_threads(1)
     limit_blas_threads()
     torch.manual_seed(0)
@@ -47,6 +56,12 @@ def main() -> None:
         env = env.replace(features={"gain": True, "gain_smoothing": args.gain})
     networks = build_networks(config, env)
     to_channels_last(networks)  # as the trainer does
+    flying = networks  # on the CPU the rollouts fly the learning networks themselves
+    if device.type != "cpu":
+        flying = copy.deepcopy(networks)
+        for module in (networks.actor, networks.critic, networks.value):
+            if module is not None:
+                module.to(device)
     optimisers = make_optimisers(networks)
     target = copy.deepcopy(networks.critic)
     geometry = MissionGeometry(env)
@@ -55,15 +70,20 @@ def main() -> None:
     transitions = 0
     for k in range(args.updates):
         start = time.perf_counter()
-        rollout = collect_rollout(networks, env, geometry, 0, k * config.missions_per_update,
+        if flying is not networks:
+            flying.actor.load_state_dict(cpu_actor_state(networks))
+        rollout = collect_rollout(flying, env, geometry, 0, k * config.missions_per_update,
                                   config.missions_per_update, 0.3)
         middle = time.perf_counter()
         update(networks, target, optimisers, rollout, 0.3, generator)
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)  # the update's kernels have run, not just queued
         rollout_s += middle - start
         update_s += time.perf_counter() - middle
         transitions += rollout.transitions
     gain = "" if args.gain is None else f", gain planes (smoothing {args.gain:g} m)"
     print(f"preset={args.preset} width={config.width} r_M={args.resolution} m{gain}, "
+          f"networks on {device}, "
           f"{config.missions_per_update} missions ({transitions // args.updates} "
           f"agent-transitions) per update, {config.epochs} epochs, one thread")
     print(f"  rollout only     {transitions / rollout_s:8.0f} agent-transitions/s")
