@@ -39,10 +39,10 @@ class BoxLayout:
 
     Attributes:
         block: side in cells of the weight's squares (``block = 1``: a weight per cell).
-        row_edges: (R + 1,) int64 cuts from 0 to H; row_covered (R,) bool, whether any
-            footprint covers the segment; row_segments (G, 2) int64; row_block (R,) int64
-            the square row of each segment.
-        col_edges, col_covered, col_segments, col_block: the same for the columns.
+        row_edges: (R + 1,) int64 cuts from 0 to H; row_segments (G, 2) int64 the first and
+            past-the-last segment of each footprint row; row_block (R,) int64 the square row
+            of each segment.
+        col_edges, col_segments, col_block: the same for the columns.
     """
 
     def __init__(self, row_bounds: np.ndarray, col_bounds: np.ndarray, size: int,
@@ -51,8 +51,8 @@ class BoxLayout:
             raise ValueError(f"block = {block!r} must be a positive divisor of the map's "
                              f"{size} cells")
         self.block = block
-        self.row_edges, self.row_covered, self.row_segments = _segments(row_bounds, size, block)
-        self.col_edges, self.col_covered, self.col_segments = _segments(col_bounds, size, block)
+        self.row_edges, self.row_segments = _segments(row_bounds, size, block)
+        self.col_edges, self.col_segments = _segments(col_bounds, size, block)
         self.row_block = self.row_edges[:-1] // block
         self.col_block = self.col_edges[:-1] // block
         self.shape = (len(self.row_edges) - 1, len(self.col_edges) - 1)
@@ -145,17 +145,12 @@ def _sums_along_rows(values: np.ndarray, ranges: Iterable[Sequence[int]]) -> np.
     return np.stack([np.add.reduce(values[start:end], axis=0) for start, end in ranges])
 
 
-def _segments(bounds: np.ndarray, size: int,
-              block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cut [0, size) at every bound and every multiple of ``block``: (edges, covered, ranges)
-    as :class:`BoxLayout` keeps."""
+def _segments(bounds: np.ndarray, size: int, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cut [0, size) at every bound and every multiple of ``block``: (edges, ranges) as
+    :class:`BoxLayout` keeps."""
     bounds = np.asarray(bounds, dtype=np.int64)
     if bounds.min() < 0 or bounds.max() > size or np.any(bounds[:, 0] > bounds[:, 1]):
         raise ValueError(f"footprint bounds must be ordered and lie within [0, {size}]")
     edges = np.unique(np.concatenate([np.arange(0, size + 1, block), bounds.ravel()]))
     ranges = np.searchsorted(edges, bounds)  # (G, 2) first and past-the-last segment
-    starts = np.zeros(len(edges), dtype=np.int64)
-    np.add.at(starts, ranges[:, 0], 1)
-    np.add.at(starts, ranges[:, 1], -1)
-    covered = np.cumsum(starts)[:-1] > 0
-    return edges, covered, ranges
+    return edges, ranges

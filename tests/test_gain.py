@@ -264,11 +264,9 @@ def test_box_layout_on_a_hand_sized_map():
     # and [4, 6): rows 4-5 and columns 1-3 lie under no footprint.
     layout = BoxLayout(np.array([[0, 3], [1, 4]]), np.array([[0, 1], [4, 6]]), 6, block=2)
     assert layout.row_edges.tolist() == [0, 1, 2, 3, 4, 6]  # the bounds and the squares' edges
-    assert layout.row_covered.tolist() == [True, True, True, True, False]
     assert layout.row_segments.tolist() == [[0, 3], [1, 4]]
     assert layout.row_block.tolist() == [0, 0, 1, 1, 2]
     assert layout.col_edges.tolist() == [0, 1, 2, 4, 6]
-    assert layout.col_covered.tolist() == [True, False, False, True]
     assert layout.col_segments.tolist() == [[0, 1], [3, 4]]
     assert layout.col_block.tolist() == [0, 0, 1, 2]
     cells = np.arange(36, dtype=np.float32).reshape(6, 6)
