@@ -19,10 +19,9 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from . import kernels
+from .block_grid import Rect
 
 __all__ = ["BoxLayout"]
-
-Rect = tuple[int, int, int, int]
 
 
 class BoxLayout:

@@ -45,6 +45,7 @@ from functools import partial
 import numpy as np
 
 from . import kernels
+from .block_grid import Rect
 from .box_sums import BoxLayout
 from .mapping import BeliefMaps, belief_columns, expected_gain, interesting_gain
 from .sensor import Camera
@@ -53,7 +54,6 @@ from .value_table import DerivedMemo, exact_memo
 __all__ = ["CellGain", "FootprintGainCache", "OBJECTIVES", "cell_objective",
            "footprint_sums", "gains_by_altitude", "recomputed_footprint_sums"]
 
-Rect = tuple[int, int, int, int]
 #: (logodds, prob, entropy, accuracy, delta_logodds) -> per-cell gain, all (..., h, w) float32.
 CellGain = Callable[..., np.ndarray]
 #: The per-cell objectives a :class:`FootprintGainCache` can keep.

@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 from . import kernels
+from .block_grid import BlockGrid, Rect
 from .config import EnvConfig, fixed_start_waypoints
-from .mapping import BeliefMaps, BlockGrid, Rect
+from .mapping import BeliefMaps
 from .seeding import MissionStreams, mission_streams
 from .sensor import Camera
 from .sensor_noise import entropy_prefix, fill_sensor_noise

@@ -11,8 +11,9 @@ import math
 
 import numpy as np
 
+from .block_grid import Rect
 from .config import SensorConfig, WorldConfig
-from .mapping import Rect, binary_entropy, logit
+from .mapping import binary_entropy, logit
 
 __all__ = ["Camera", "footprint_side"]
 

@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
+from ipp_toolkit.block_grid import BlockGrid
 from ipp_toolkit.mapping import (
     LOGODDS_CLIP,
     BeliefMaps,
-    BlockGrid,
     binary_entropy,
     class_weights,
     entropy_from_logodds,

@@ -6,8 +6,9 @@ import pytest
 from helpers import random_valid_actions
 
 from ipp_toolkit import kernels, mission, value_table
+from ipp_toolkit.block_grid import BlockGrid
 from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import BELIEF_COLUMNS, LOGODDS_CLIP, BlockGrid, belief_columns
+from ipp_toolkit.mapping import BELIEF_COLUMNS, LOGODDS_CLIP, belief_columns
 from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.seeding import mission_streams
 from ipp_toolkit.sensor_noise import assembled_entropy, compiled_noise_ok
