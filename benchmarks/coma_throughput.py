@@ -30,7 +30,7 @@ from coma.persistence import build_networks  # noqa: E402
 from coma.rollout import collect_rollout  # noqa: E402
 from ipp_toolkit.config import EnvConfig  # noqa: E402
 from ipp_toolkit.mission import MissionGeometry  # noqa: E402
-from ipp_toolkit.process_pool import limit_blas_threads  # noqa: E402
+from ipp_toolkit.process_pool import limit_blas_threads, retain_freed_memory  # noqa: E402
 
 
 def main() -> None:
@@ -47,8 +47,9 @@ def main() -> None:
         device = resolve_device(args.device)
     except ValueError as error:
         parser.error(str(error))
-    torch.set_num_threads(1)
+    torch.set_num_threads(1)  # the process set up as ipp-train coma sets up its own
     limit_blas_threads()
+    retain_freed_memory()
     torch.manual_seed(0)
     config = preset(args.preset)
     env = EnvConfig().replace(world={"resolution": args.resolution})

@@ -38,7 +38,7 @@ from ipp_toolkit.config_io import config_to_dict
 from ipp_toolkit.features import actor_plane_names
 from ipp_toolkit.io import CheckpointError, write_json
 from ipp_toolkit.mission import MissionGeometry
-from ipp_toolkit.process_pool import limit_blas_threads
+from ipp_toolkit.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.progress import progress_bar
 from ipp_toolkit.team import N_ACTIONS
 
@@ -333,6 +333,11 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         device: where the networks learn: ``cpu`` or ``cuda``; rollouts always fly on the
             CPU, with a CPU copy of the actor. The warm start imitates on the CPU.
 
+    The calling process is set up as a trainer for good: one torch and BLAS thread, and
+    (glibc) freed memory kept for reuse (:func:`~ipp_toolkit.process_pool.retain_freed_memory`:
+    an update's activations and a rollout's planes are tens of MB each, which glibc would
+    otherwise hand back and fault in afresh every time).
+
     With ``coma_config.team_sizes`` / ``comm_ranges``, each update trains on one setting of
     :func:`mission_settings` (:func:`setting_of_update`), and validation averages over all of
     them; ``progress.csv`` records each update's ``n_agents`` and ``comm_range``.
@@ -348,6 +353,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     """
     torch.set_num_threads(1)
     limit_blas_threads()
+    retain_freed_memory()
     learner_device = resolve_device(device)
     check_workers(workers, backend, address)
     out = Path(out_dir)

@@ -46,6 +46,7 @@ from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.process_pool import (
     children_ignore_sigint,
     guard_worker,
+    retain_freed_memory,
     single_thread_environment,
     single_thread_process,
     stop_workers,
@@ -262,10 +263,12 @@ _WORKER: RolloutWorker | None = None
 
 
 def _init_process(spec: RunSpec, parent: int) -> None:
-    """Pool initializer: exit with ``parent``, ignore Ctrl-C, one thread per library."""
+    """Pool initializer: exit with ``parent``, ignore Ctrl-C, one thread per library, freed
+    memory kept for the next rollout."""
     global _WORKER
     guard_worker(parent)
     single_thread_process()
+    retain_freed_memory()
     _WORKER = RolloutWorker(spec)
 
 
@@ -343,6 +346,7 @@ class RayRolloutWorker:
         if os.path.isdir(cwd):  # relative paths (terrain files) mean what they mean to the caller
             os.chdir(cwd)
         single_thread_process()
+        retain_freed_memory()
         self._worker = RolloutWorker(spec)
 
     def call(self, method: str, actor_state: dict[str, torch.Tensor], *args: Any) -> Any:
