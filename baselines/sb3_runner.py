@@ -35,7 +35,7 @@ from tqdm.auto import tqdm
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.config_io import config_from_dict
 from ipp_toolkit.io import load_torch, save_torch, write_json
-from ipp_toolkit.process_pool import limit_blas_threads
+from ipp_toolkit.process_pool import limit_blas_threads, retain_freed_memory
 
 __all__ = ["RunFormat", "run_sb3_training", "progress_callback", "time_limit_callback",
            "checkpoint_callback"]
@@ -153,6 +153,9 @@ def run_sb3_training(
 ) -> Path:
     """Train (fresh, or resumed from ``out_dir/checkpoint.pt``) and write ``out_dir/policy.pt``.
 
+    The calling process is set up as a trainer for good: one torch and BLAS thread, and
+    (glibc) freed memory kept for reuse (:func:`~ipp_toolkit.process_pool.retain_freed_memory`).
+
     Args:
         out_dir: the run folder (created).
         run_format: file tags and names of this trainer.
@@ -183,6 +186,7 @@ def run_sb3_training(
         raise ValueError(f"time_limit_s must be a positive number or None, got {time_limit_s!r}")
     torch.set_num_threads(1)  # two shared cores: more intra-op threads collapse throughput
     limit_blas_threads()
+    retain_freed_memory()  # rollout buffers and mini-batches are reused, not faulted in anew
     out_dir = Path(out_dir)
     ckpt_path = out_dir / "checkpoint.pt"
     extra_record = dict(extra_record or {})

@@ -15,6 +15,7 @@ import copy
 import csv
 import importlib.util
 import os
+import platform
 import signal
 import subprocess
 import sys
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from helpers import page_faults_of_reallocation
 
 from coma import parallel
 from coma.cli import build_parser, configs_from_args
@@ -406,39 +408,19 @@ def test_ipp_train_coma_on_a_local_ray_end_to_end(tmp_path):
         assert torch.equal(trained.actor.state_dict()[key], value), key
 
 
-@pytest.mark.skipif(__import__("platform").libc_ver()[0] != "glibc",
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc",
                     reason="retain_freed_memory sets glibc's allocator")
 def test_the_trainer_process_keeps_freed_memory_for_reuse(tmp_path):
-    # After train(), allocating again a rollout's critic planes (25 MB) and activations and
-    # gradients (7.5 MB, 2.5 MB) just freed costs no new pages; a plain process faults
-    # them in again.
-    code = """
-import resource, sys
-import numpy as np
-if sys.argv[1] == "trained":
-    from coma.config import COMAConfig
-    from coma.learner import train
-    from ipp_toolkit.config import EnvConfig
-    env = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 2, "budget": 3})
-    coma = COMAConfig(width=8, hidden=16, missions=2, missions_per_update=2, minibatch_size=40,
-                      epochs=1, eval_every=1, eval_missions=1, checkpoint_every=1,
-                      target_update_transitions=100, warm_start="")
-    train(coma, env, sys.argv[2], progress=False, tensorboard=False)
-def churn():
-    planes = np.ones((3000, 17, 11, 11), np.float32)
-    activation = np.ones((600, 64, 7, 7), np.float32)
-    gradient = np.ones((600, 64, 4, 4), np.float32)
-    del planes, activation, gradient
-churn()
-before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-for _ in range(10):
-    churn()
-print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+    # After train(), allocating again what was just freed costs no new pages.
+    setup = f"""
+from coma.config import COMAConfig
+from coma.learner import train
+from ipp_toolkit.config import EnvConfig
+env = EnvConfig().replace(world={{"resolution": 1.0}}, team={{"n_agents": 2, "budget": 3}})
+coma = COMAConfig(width=8, hidden=16, missions=2, missions_per_update=2, minibatch_size=40,
+                  epochs=1, eval_every=1, eval_missions=1, checkpoint_every=1,
+                  target_update_transitions=100, warm_start="")
+train(coma, env, {str(tmp_path / "run")!r}, progress=False, tensorboard=False)
 """
-    faults = {}
-    for kind in ("plain", "trained"):
-        done = subprocess.run([sys.executable, "-c", code, kind, str(tmp_path / "run")],
-                              capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr[-2000:]
-        faults[kind] = int(done.stdout.split()[-1])
-    assert faults["plain"] > 1000 and faults["trained"] < faults["plain"] / 10, faults
+    plain, trained = page_faults_of_reallocation(), page_faults_of_reallocation(setup)
+    assert plain > 1000 and trained < plain / 10, (plain, trained)

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+import platform
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from helpers import small_config
+from helpers import page_faults_of_reallocation, small_config
 from sb3_contrib import MaskablePPO
 from stable_baselines3.common.vec_env import VecMonitor
 
@@ -362,3 +363,18 @@ def test_a_loaded_policy_acts_without_an_optimiser_or_torch_dynamo():
     with pytest.raises(RuntimeError, match="not to train"):
         optimiser.zero_grad()
 
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc",
+                    reason="retain_freed_memory sets glibc's allocator")
+def test_the_trainer_process_keeps_freed_memory_for_reuse(tmp_path):
+    # After train_ppo(), allocating again what was just freed costs no new pages.
+    setup = f"""
+from baselines.ppo import PPOTrainConfig
+from baselines.ppo_training import train_ppo
+from ipp_toolkit.config import EnvConfig
+config = PPOTrainConfig(total_timesteps=128, **{TINY!r})
+train_ppo(config, EnvConfig(), {str(tmp_path / "run")!r}, progress=False)
+"""
+    plain, trained = page_faults_of_reallocation(), page_faults_of_reallocation(setup)
+    assert plain > 1000 and trained < plain / 10, (plain, trained)
