@@ -16,6 +16,7 @@ the tables and figures next to the raw results.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import os
@@ -24,6 +25,8 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import write_json
@@ -66,16 +69,55 @@ def draw_trajectory(out_dir: Path, config: EnvConfig, label: str, mission: int,
                     final: tuple[float, float] | None) -> list[Path]:
     """Draw one recorded mission to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``.
 
-    ``final`` is the mission's final (entropy, F1), shown in the title when given.
+    ``final`` is the mission's final (entropy, F1), shown in the title when given. A figure
+    drawn before from the same inputs (the recorded mission, the title and the plotting
+    code, whose digest ``<label>_mission<k>.figure.json`` keeps) is not drawn again: a
+    finished run reported again, or a folder grown by one planner, redraws only what changed.
+
+    Returns:
+        the figure's paths (PNG, PDF), drawn now or before.
     """
-    from .plots import plot_trajectories  # matplotlib only where figures are drawn
+    from . import plots  # matplotlib only where figures are drawn
 
     title = (f"{label}, mission {mission}: {config.team.n_agents} UAVs, "
              f"D = {format_comm(config.team.comm_range)}")
     if final is not None:
         title += f"; final entropy {final[0]:.3f}, F1 {final[1]:.3f}"
     stem = out_dir / "trajectories" / f"{safe_name(label)}_mission{mission}"
-    return plot_trajectories(trajectory, stem, title)
+    paths = [Path(f"{stem}.{fmt}") for fmt in plots.FORMATS]
+    stamp_path = Path(f"{stem}.figure.json")
+    stamp = {"format": _FIGURE_STAMP, "inputs": _figure_inputs_digest(trajectory, title)}
+    with contextlib.suppress(OSError, UnicodeDecodeError, ValueError):
+        if (all(path.is_file() for path in paths)
+                and json.loads(stamp_path.read_text(encoding="utf-8")) == stamp):
+            return paths
+    with contextlib.suppress(FileNotFoundError):
+        stamp_path.unlink()  # no stamp while the figure is half redrawn
+    paths = plots.plot_trajectories(trajectory, stem, title)
+    write_json(stamp_path, stamp)
+    return paths
+
+
+_FIGURE_STAMP = "ipp-toolkit trajectory figure inputs v1"
+
+
+def _figure_inputs_digest(trajectory: Mapping[str, Any], title: str) -> str:
+    """sha256 of what a trajectory figure shows: its title, the recorded mission's arrays
+    (names, dtypes, shapes, bytes) and the source of the module that draws it."""
+    digest = hashlib.sha256(title.encode())
+    digest.update(_plotting_code_digest())
+    for name in sorted(trajectory):
+        array = np.ascontiguousarray(trajectory[name])
+        digest.update(f"{name}|{array.dtype.str}|{array.shape}|".encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
+
+
+@functools.cache
+def _plotting_code_digest() -> bytes:
+    from . import plots
+
+    return hashlib.sha256(Path(plots.__file__).read_bytes()).digest()
 
 
 @dataclass
@@ -109,10 +151,11 @@ class Comparison:
 
         Trajectory figures go to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``; those
         of ``drawn`` (label, mission) pairs are already there (:func:`compare` draws them
-        while the other missions fly) and are not drawn again.
+        while the other missions fly), and so are those :func:`draw_trajectory` finds drawn
+        from the same inputs: neither is drawn again.
 
         Returns:
-            every written path.
+            every figure's paths.
         """
         from .plots import plot_curves
 

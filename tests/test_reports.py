@@ -7,6 +7,7 @@ import importlib.util
 import io
 import math
 import os
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -373,3 +374,56 @@ def test_save_figure_lays_out_once_and_writes_what_savefig_writes(tmp_path):
     assert (tmp_path / "f.png").read_bytes() == expected.getvalue()
     assert (tmp_path / "f.pdf").read_bytes().startswith(b"%PDF")
     assert saved.get_layout_engine() is None  # laid out once; kept as it was saved
+
+
+def test_a_trajectory_figure_is_drawn_again_only_when_its_inputs_change(tmp_path):
+    from reports.compare import draw_trajectory
+
+    config = EnvConfig().replace(world={"resolution": 1.0})
+    trajectory = synthetic_trajectory()
+    png, pdf = draw_trajectory(tmp_path, config, "ig", 0, trajectory, (0.5, 0.75))
+    stamp = tmp_path / "trajectories" / "ig_mission0.figure.json"
+    assert png.is_file() and pdf.is_file() and stamp.is_file()
+
+    def drawn_at() -> tuple[int, int]:
+        return png.stat().st_mtime_ns, pdf.stat().st_mtime_ns
+
+    first = drawn_at()
+    # The same mission and title: nothing is drawn (a finished run reported again).
+    assert draw_trajectory(tmp_path, config, "ig", 0, trajectory, (0.5, 0.75)) == [png, pdf]
+    assert drawn_at() == first
+    # Another title (final metrics), other data, then the same inputs with a missing file or
+    # a damaged stamp: drawn again each time.
+    halved = {**trajectory, "final_prob": trajectory["final_prob"] * 0.5}
+    changes = [
+        lambda: draw_trajectory(tmp_path, config, "ig", 0, trajectory, (0.5, 0.8)),
+        lambda: draw_trajectory(tmp_path, config, "ig", 0, halved, (0.5, 0.8)),
+        lambda: (pdf.unlink(), draw_trajectory(tmp_path, config, "ig", 0, halved, (0.5, 0.8))),
+        lambda: (stamp.write_text("{", encoding="utf-8"),
+                 draw_trajectory(tmp_path, config, "ig", 0, halved, (0.5, 0.8))),
+    ]
+    for change in changes:
+        before = png.stat().st_mtime_ns
+        time.sleep(0.01)  # a new mtime even on coarse clocks
+        change()
+        assert png.stat().st_mtime_ns != before and pdf.is_file()
+    # The figure of the last inputs stands: they are found current again.
+    now = drawn_at()
+    draw_trajectory(tmp_path, config, "ig", 0, halved, (0.5, 0.8))
+    assert drawn_at() == now
+
+
+def test_a_finished_run_reported_again_keeps_its_trajectory_figures(tmp_path):
+    from reports.compare import compare
+
+    arguments = dict(agents=2, comm=0.0, planners="random,coverage", trials=1, resolution=1.0,
+                     budget=2, out=tmp_path, progress=False)
+    compare(**arguments)
+    figures = sorted((tmp_path / "trajectories").glob("*.p[dn][gf]"))
+    assert len(figures) == 4
+    drawn = {path: path.stat().st_mtime_ns for path in figures}
+    curves = (tmp_path / "curves.png").stat().st_mtime_ns
+    time.sleep(0.01)
+    compare(**arguments)
+    assert {path: path.stat().st_mtime_ns for path in figures} == drawn
+    assert (tmp_path / "curves.png").stat().st_mtime_ns != curves  # the rest is written again
