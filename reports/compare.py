@@ -16,7 +16,6 @@ the tables and figures next to the raw results.
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import json
 import os
@@ -25,8 +24,6 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-
-import numpy as np
 
 from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.io import write_json
@@ -70,54 +67,21 @@ def draw_trajectory(out_dir: Path, config: EnvConfig, label: str, mission: int,
     """Draw one recorded mission to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``.
 
     ``final`` is the mission's final (entropy, F1), shown in the title when given. A figure
-    drawn before from the same inputs (the recorded mission, the title and the plotting
-    code, whose digest ``<label>_mission<k>.figure.json`` keeps) is not drawn again: a
-    finished run reported again, or a folder grown by one planner, redraws only what changed.
+    drawn before from the same mission and title is kept (``reuse`` of
+    :func:`~reports.plots.plot_trajectories`): a finished run reported again, or a folder
+    grown by one planner, redraws only what changed.
 
     Returns:
         the figure's paths (PNG, PDF), drawn now or before.
     """
-    from . import plots  # matplotlib only where figures are drawn
+    from .plots import plot_trajectories  # matplotlib only where figures are drawn
 
     title = (f"{label}, mission {mission}: {config.team.n_agents} UAVs, "
              f"D = {format_comm(config.team.comm_range)}")
     if final is not None:
         title += f"; final entropy {final[0]:.3f}, F1 {final[1]:.3f}"
     stem = out_dir / "trajectories" / f"{safe_name(label)}_mission{mission}"
-    paths = [Path(f"{stem}.{fmt}") for fmt in plots.FORMATS]
-    stamp_path = Path(f"{stem}.figure.json")
-    stamp = {"format": _FIGURE_STAMP, "inputs": _figure_inputs_digest(trajectory, title)}
-    with contextlib.suppress(OSError, UnicodeDecodeError, ValueError):
-        if (all(path.is_file() for path in paths)
-                and json.loads(stamp_path.read_text(encoding="utf-8")) == stamp):
-            return paths
-    with contextlib.suppress(FileNotFoundError):
-        stamp_path.unlink()  # no stamp while the figure is half redrawn
-    paths = plots.plot_trajectories(trajectory, stem, title)
-    write_json(stamp_path, stamp)
-    return paths
-
-
-_FIGURE_STAMP = "ipp-toolkit trajectory figure inputs v1"
-
-
-def _figure_inputs_digest(trajectory: Mapping[str, Any], title: str) -> str:
-    """sha256 of what a trajectory figure shows: its title, the recorded mission's arrays
-    (names, dtypes, shapes, bytes) and the source of the module that draws it."""
-    digest = hashlib.sha256(title.encode())
-    digest.update(_plotting_code_digest())
-    for name in sorted(trajectory):
-        array = np.ascontiguousarray(trajectory[name])
-        digest.update(f"{name}|{array.dtype.str}|{array.shape}|".encode())
-        digest.update(array.tobytes())
-    return digest.hexdigest()
-
-
-@functools.cache
-def _plotting_code_digest() -> bytes:
-    from . import plots
-
-    return hashlib.sha256(Path(plots.__file__).read_bytes()).digest()
+    return plot_trajectories(trajectory, stem, title, reuse=True)
 
 
 @dataclass
@@ -151,8 +115,8 @@ class Comparison:
 
         Trajectory figures go to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``; those
         of ``drawn`` (label, mission) pairs are already there (:func:`compare` draws them
-        while the other missions fly), and so are those :func:`draw_trajectory` finds drawn
-        from the same inputs: neither is drawn again.
+        while the other missions fly), and so are figures drawn before from the same data:
+        neither is drawn again.
 
         Returns:
             every figure's paths.
@@ -160,7 +124,7 @@ class Comparison:
         from .plots import plot_curves
 
         out = Path(out_dir)
-        paths = plot_curves(self.result.rows, out)
+        paths = plot_curves(self.result.rows, out, reuse=True)
         final = self._final_metrics()
         config = self.result.config
         for (label, mission), trajectory in sorted(self.result.trajectories.items(),

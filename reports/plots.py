@@ -3,7 +3,9 @@
 Everything is drawn on :class:`matplotlib.figure.Figure` objects with an Agg canvas, never
 through pyplot, so nothing leaks into pyplot's global state (no open figures, no backend
 switch). Every file is written atomically: saved under a temporary name in the target folder,
-then renamed.
+then renamed. With ``reuse=True`` a figure keeps a digest of what it shows beside it
+(``<stem>.figure.json``: its data, title and this module's source) and is not drawn again
+while they are the same and its files are there.
 
 Maps are indexed ``[y, x]`` with row 0 at y = 0 and drawn with ``origin="lower"`` and
 ``extent=[0, area, 0, area]``, so pixels and paths share metric axes with y pointing up.
@@ -11,9 +13,13 @@ Maps are indexed ``[y, x]`` with row 0 at y = 0 and drawn with ``origin="lower"`
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import hashlib
+import json
 import math
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +31,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from ipp_toolkit.io import atomic_write
+from ipp_toolkit.io import atomic_write, write_json
 
 from .tables import METRIC_NAMES
 
@@ -136,7 +142,7 @@ def _describe(rows: Sequence[Mapping[str, Any]]) -> str:
 
 def plot_curves(result_or_rows: Any, out_dir: str | os.PathLike[str],
                 metrics: Sequence[str] = ("entropy", "f1"),
-                stem: str = "curves") -> list[Path]:
+                stem: str = "curves", reuse: bool = False) -> list[Path]:
     """Plot each metric against the step, one line (mean) and band (± std) per planner.
 
     Args:
@@ -144,17 +150,30 @@ def plot_curves(result_or_rows: Any, out_dir: str | os.PathLike[str],
         out_dir: folder for ``curves.png`` and ``curves.pdf`` (created if needed).
         metrics: one panel per metric, side by side.
         stem: file name without extension.
+        reuse: keep the files drawn before from the same curves and title (module docstring).
 
     Returns:
-        the written paths.
+        the figure's paths, written now or before.
     """
     rows = _rows_of(result_or_rows)
     if not rows:
         raise ValueError("no rows to plot")
-    figure = _new_figure(5.0 * len(metrics), 4.0)
-    axes = figure.subplots(1, len(metrics), squeeze=False)[0]
-    for ax, metric in zip(axes, metrics, strict=True):
-        for index, (planner, curves) in enumerate(curves_from_rows(rows, metric).items()):
+    curves_by_metric = {metric: curves_from_rows(rows, metric) for metric in metrics}
+    title = f"Mean ± std per step: {_describe(rows)}"
+    inputs: dict[str, Any] = {"title": title, "metrics": "|".join(metrics)}
+    for metric, by_planner in curves_by_metric.items():
+        inputs[f"{metric} planners"] = "|".join(by_planner)  # their order sets the colours
+        inputs.update({f"{metric} {planner}": curves for planner, curves in by_planner.items()})
+    return _save_once(Path(out_dir) / stem, inputs if reuse else None,
+                      lambda: _draw_curves(curves_by_metric, title, Path(out_dir) / stem))
+
+
+def _draw_curves(curves_by_metric: Mapping[str, Mapping[str, np.ndarray]], title: str,
+                 stem: Path) -> list[Path]:
+    figure = _new_figure(5.0 * len(curves_by_metric), 4.0)
+    axes = figure.subplots(1, len(curves_by_metric), squeeze=False)[0]
+    for ax, (metric, by_planner) in zip(axes, curves_by_metric.items(), strict=True):
+        for index, (planner, curves) in enumerate(by_planner.items()):
             mean, std = _mean_std(curves)
             steps = np.arange(len(mean))
             colour = _colour(index)
@@ -168,8 +187,8 @@ def plot_curves(result_or_rows: Any, out_dir: str | os.PathLike[str],
         ax.grid(alpha=0.3)
         ax.xaxis.get_major_locator().set_params(integer=True)
     axes[0].legend(title="planner")
-    figure.suptitle(f"Mean ± std per step: {_describe(rows)}")
-    return save_figure(figure, Path(out_dir) / stem)
+    figure.suptitle(title)
+    return save_figure(figure, stem)
 
 
 def _paths(ax: Any, positions: np.ndarray, footprints: np.ndarray | None,
@@ -189,7 +208,7 @@ def _paths(ax: Any, positions: np.ndarray, footprints: np.ndarray | None,
 
 
 def plot_trajectories(trajectory: Mapping[str, Any], out_path_stem: str | os.PathLike[str],
-                      title: str = "") -> list[Path]:
+                      title: str = "", reuse: bool = False) -> list[Path]:
     """Plot one mission of one planner: terrain and final global map with every UAV's path.
 
     Args:
@@ -199,12 +218,21 @@ def plot_trajectories(trajectory: Mapping[str, Any], out_path_stem: str | os.Pat
             (row0, row1, col0, col1), ``area_size`` and ``resolution`` in metres.
         out_path_stem: output path without extension; ``.png`` and ``.pdf`` are written.
         title: figure title.
+        reuse: keep the files drawn before from the same mission and title (module
+            docstring).
 
     Returns:
         the written paths. Paths are lines in the UAV's colour with one marker per step
         (marker area grows with altitude); a star marks the start; the dashed rectangles on
         the right are the last footprints.
     """
+    inputs = {**trajectory, "title": title} if reuse else None
+    return _save_once(Path(out_path_stem), inputs,
+                      lambda: _draw_trajectories(trajectory, out_path_stem, title))
+
+
+def _draw_trajectories(trajectory: Mapping[str, Any], out_path_stem: str | os.PathLike[str],
+                       title: str) -> list[Path]:
     truth = np.asarray(trajectory["ground_truth"]).astype(bool)
     prob = np.asarray(trajectory["final_prob"], dtype=np.float32)
     positions = np.asarray(trajectory["positions"], dtype=np.float64)
@@ -249,3 +277,47 @@ def plot_trajectories(trajectory: Mapping[str, Any], out_path_stem: str | os.Pat
     if title:
         figure.suptitle(title)
     return save_figure(figure, out_path_stem)
+
+
+_STAMP_FORMAT = "ipp-toolkit figure inputs v1"
+
+
+def _save_once(stem: Path, inputs: Mapping[str, Any] | None,
+               draw: Callable[[], list[Path]]) -> list[Path]:
+    """``draw()`` the figure of ``stem``, unless ``inputs`` (None: always draw) are those it
+    was drawn from, as ``<stem>.figure.json`` records, and every file of it is there."""
+    if inputs is None:
+        return draw()
+    paths = [Path(f"{stem}.{fmt}") for fmt in FORMATS]
+    stamp_path = Path(f"{stem}.figure.json")
+    stamp = {"format": _STAMP_FORMAT, "inputs": _digest(inputs)}
+    with contextlib.suppress(OSError, UnicodeDecodeError, ValueError):
+        if (all(path.is_file() for path in paths)
+                and json.loads(stamp_path.read_text(encoding="utf-8")) == stamp):
+            return paths
+    with contextlib.suppress(FileNotFoundError):
+        stamp_path.unlink()  # no stamp while the figure is half redrawn
+    paths = draw()
+    write_json(stamp_path, stamp)
+    return paths
+
+
+def _digest(inputs: Mapping[str, Any]) -> str:
+    """sha256 of this module's source and of ``inputs`` (strings, or arrays by name, dtype,
+    shape and bytes), in the order of their names."""
+    digest = hashlib.sha256(_source_digest())
+    for name in sorted(inputs):
+        value = inputs[name]
+        if isinstance(value, str):
+            kind, data = "str", value.encode()
+        else:
+            array = np.ascontiguousarray(value)
+            kind, data = f"{array.dtype.str}{array.shape}", array.tobytes()
+        digest.update(f"{name}|{kind}|{len(data)}|".encode())
+        digest.update(data)
+    return digest.hexdigest()
+
+
+@functools.cache
+def _source_digest() -> bytes:
+    return hashlib.sha256(Path(__file__).read_bytes()).digest()

@@ -413,17 +413,25 @@ def test_a_trajectory_figure_is_drawn_again_only_when_its_inputs_change(tmp_path
     assert drawn_at() == now
 
 
-def test_a_finished_run_reported_again_keeps_its_trajectory_figures(tmp_path):
+def test_a_finished_run_reported_again_keeps_its_figures(tmp_path):
     from reports.compare import compare
 
     arguments = dict(agents=2, comm=0.0, planners="random,coverage", trials=1, resolution=1.0,
                      budget=2, out=tmp_path, progress=False)
     compare(**arguments)
-    figures = sorted((tmp_path / "trajectories").glob("*.p[dn][gf]"))
-    assert len(figures) == 4
-    drawn = {path: path.stat().st_mtime_ns for path in figures}
-    curves = (tmp_path / "curves.png").stat().st_mtime_ns
+    trajectories = sorted((tmp_path / "trajectories").glob("*.p[dn][gf]"))
+    curves = [tmp_path / "curves.png", tmp_path / "curves.pdf"]
+    assert len(trajectories) == 4
+
+    def drawn_at(paths: list) -> list[int]:
+        return [path.stat().st_mtime_ns for path in paths]
+
+    first, tables = drawn_at(trajectories + curves), drawn_at([tmp_path / "summary.md"])
     time.sleep(0.01)
     compare(**arguments)
-    assert {path: path.stat().st_mtime_ns for path in figures} == drawn
-    assert (tmp_path / "curves.png").stat().st_mtime_ns != curves  # the rest is written again
+    assert drawn_at(trajectories + curves) == first
+    assert drawn_at([tmp_path / "summary.md"]) != tables  # the rest is written again
+    # Grown by a planner: its figure is new and the curves change; the others stay.
+    compare(**{**arguments, "planners": "random,coverage,ig"})
+    assert drawn_at(trajectories) == first[:4] and drawn_at(curves) != first[4:]
+    assert (tmp_path / "trajectories" / "ig_mission0.png").is_file()
