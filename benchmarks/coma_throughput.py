@@ -7,7 +7,9 @@
 Prints, per preset: rollout only (simulator + features + actor sampling), one update only
 (TD(lambda) targets, critic and actor mini-batch steps) and the whole training step, each in
 agent-transitions per second, plus seconds per update (the authors' code: about 42 s per
-300-transition update on a 2-core VM, i.e. ~7 transitions/s). With ``--device cuda`` the
+300-transition update on a 2-core VM, i.e. ~7 transitions/s). The first update (``--warmup``)
+is not timed: it loads Numba's kernels and has oneDNN compile its convolutions, which a
+training run pays once. With ``--device cuda`` the
 networks learn on the GPU and the rollouts fly on a CPU copy of the actor, refreshed after
 every update, as ``ipp-train coma --device cuda`` does.
 """
@@ -41,6 +43,8 @@ def main() -> None:
     parser.add_argument("--gain", type=float, default=None, metavar="SMOOTHING",
                         help="with the gain planes: 0 = ig's objective, > 0 = the smoothed "
                              "objective of the spatial-mixture policy (metres)")
+    parser.add_argument("--warmup", type=int, default=1,
+                        help="untimed updates first (the first calls load and compile kernels)")
     parser.add_argument("--device", default="cpu", help="where the networks learn: cpu or cuda")
     args = parser.parse_args()
     try:
@@ -69,7 +73,10 @@ def main() -> None:
     generator = torch.Generator().manual_seed(0)
     rollout_s = update_s = 0.0
     transitions = 0
-    for k in range(args.updates):
+    for k in range(args.warmup + args.updates):
+        if k == args.warmup:  # first calls behind: the kernels are loaded and compiled
+            rollout_s = update_s = 0.0
+            transitions = 0
         start = time.perf_counter()
         if flying is not networks:
             flying.actor.load_state_dict(cpu_actor_state(networks))
@@ -86,7 +93,8 @@ def main() -> None:
     print(f"preset={args.preset} width={config.width} r_M={args.resolution} m{gain}, "
           f"networks on {device}, "
           f"{config.missions_per_update} missions ({transitions // args.updates} "
-          f"agent-transitions) per update, {config.epochs} epochs, one thread")
+          f"agent-transitions) per update, {config.epochs} epochs, one thread, "
+          f"{args.updates} updates timed after {args.warmup} untimed")
     print(f"  rollout only     {transitions / rollout_s:8.0f} agent-transitions/s")
     print(f"  update only      {transitions / update_s:8.0f} agent-transitions/s")
     print(f"  training         {transitions / (rollout_s + update_s):8.0f} agent-transitions/s "
