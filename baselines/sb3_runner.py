@@ -186,7 +186,7 @@ def run_sb3_training(
         raise ValueError(f"time_limit_s must be a positive number or None, got {time_limit_s!r}")
     torch.set_num_threads(1)  # two shared cores: more intra-op threads collapse throughput
     limit_blas_threads()
-    retain_freed_memory()  # rollout buffers and mini-batches are reused, not faulted in anew
+    retain_freed_memory()  # large freed buffers are reused, not faulted in anew
     out_dir = Path(out_dir)
     ckpt_path = out_dir / "checkpoint.pt"
     extra_record = dict(extra_record or {})

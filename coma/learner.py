@@ -336,7 +336,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     The calling process is set up as a trainer for good: one torch and BLAS thread, and
     (glibc) freed memory kept for reuse (:func:`~ipp_toolkit.process_pool.retain_freed_memory`:
     an update's activations and a rollout's planes are tens of MB each, which glibc would
-    otherwise hand back and fault in afresh every time).
+    otherwise hand back and fault in afresh, at least until its own threshold rises).
 
     With ``coma_config.team_sizes`` / ``comm_ranges``, each update trains on one setting of
     :func:`mission_settings` (:func:`setting_of_update`), and validation averages over all of

@@ -84,9 +84,9 @@ def retain_freed_memory() -> bool:
     about 13 ms of system time per mission on the 2-core VM (380,000 page faults in 93
     missions, 58,000 with this). Served from the heap instead, and the heap never trimmed, a
     worker reuses the same memory mission after mission and keeps its peak size until it
-    exits. A COMA trainer does the same with its updates' activations and its rollouts'
-    planes (tens of MB each): 5-16 % more agent-transitions/s on a Zen 5 VM
-    (docs/performance.md). Memory only: no number changes.
+    exits. The trainers call it too: it spares their first updates the page faults of their
+    activations and planes (tens of MB each), though their steady rate moved by only about
+    3 %, within the machine's drift (docs/performance.md). Memory only: no number changes.
 
     Returns:
         whether the allocator took the settings (False off glibc, e.g. macOS or musl).
