@@ -49,7 +49,6 @@ WEIGHT_TIE_TOLERANCE = 1e-3
 """Cells within this distance of 0.5 are 'unknown' and get weight 0.5."""
 
 
-
 def logit(p: np.ndarray | float) -> np.ndarray:
     """Log-odds of probabilities clipped to [PROB_CLIP, 1 - PROB_CLIP]; any shape."""
     p = np.clip(np.asarray(p, dtype=np.float64), PROB_CLIP, 1 - PROB_CLIP)

@@ -158,21 +158,25 @@ def plot_curves(result_or_rows: Any, out_dir: str | os.PathLike[str],
     rows = _rows_of(result_or_rows)
     if not rows:
         raise ValueError("no rows to plot")
-    curves_by_metric = {metric: curves_from_rows(rows, metric) for metric in metrics}
+    # One panel per requested metric, in order (a metric asked for twice gets two panels).
+    panels = [(metric, curves_from_rows(rows, metric)) for metric in metrics]
     title = f"Mean ± std per step: {_describe(rows)}"
-    inputs: dict[str, Any] = {"title": title, "metrics": "|".join(metrics)}
-    for metric, by_planner in curves_by_metric.items():
-        inputs[f"{metric} planners"] = "|".join(by_planner)  # their order sets the colours
-        inputs.update({f"{metric} {planner}": curves for planner, curves in by_planner.items()})
-    return _save_once(Path(out_dir) / stem, inputs if reuse else None,
-                      lambda: _draw_curves(curves_by_metric, title, Path(out_dir) / stem))
+    inputs: dict[str, Any] | None = None
+    if reuse:
+        inputs = {"title": title, "metrics": "|".join(metrics)}
+        for metric, by_planner in panels:
+            inputs[f"{metric} planners"] = "|".join(by_planner)  # their order sets the colours
+            inputs.update({f"{metric} {planner}": curves
+                           for planner, curves in by_planner.items()})
+    return _save_once(Path(out_dir) / stem, inputs,
+                      lambda: _draw_curves(panels, title, Path(out_dir) / stem))
 
 
-def _draw_curves(curves_by_metric: Mapping[str, Mapping[str, np.ndarray]], title: str,
+def _draw_curves(panels: Sequence[tuple[str, Mapping[str, np.ndarray]]], title: str,
                  stem: Path) -> list[Path]:
-    figure = _new_figure(5.0 * len(curves_by_metric), 4.0)
-    axes = figure.subplots(1, len(curves_by_metric), squeeze=False)[0]
-    for ax, (metric, by_planner) in zip(axes, curves_by_metric.items(), strict=True):
+    figure = _new_figure(5.0 * len(panels), 4.0)
+    axes = figure.subplots(1, len(panels), squeeze=False)[0]
+    for ax, (metric, by_planner) in zip(axes, panels, strict=True):
         for index, (planner, curves) in enumerate(by_planner.items()):
             mean, std = _mean_std(curves)
             steps = np.arange(len(mean))
