@@ -46,9 +46,8 @@ from ipp_toolkit.mission import MissionGeometry
 from ipp_toolkit.process_pool import (
     children_ignore_sigint,
     guard_worker,
-    retain_freed_memory,
+    prepare_worker_process,
     single_thread_environment,
-    single_thread_process,
     stop_workers,
 )
 from ipp_toolkit.ray_backend import check_backend
@@ -267,8 +266,7 @@ def _init_process(spec: RunSpec, parent: int) -> None:
     memory kept for the next rollout."""
     global _WORKER
     guard_worker(parent)
-    single_thread_process()
-    retain_freed_memory()
+    prepare_worker_process()
     _WORKER = RolloutWorker(spec)
 
 
@@ -345,8 +343,7 @@ class RayRolloutWorker:
     def __init__(self, spec: RunSpec, cwd: str):
         if os.path.isdir(cwd):  # relative paths (terrain files) mean what they mean to the caller
             os.chdir(cwd)
-        single_thread_process()
-        retain_freed_memory()
+        prepare_worker_process()
         self._worker = RolloutWorker(spec)
 
     def call(self, method: str, actor_state: dict[str, torch.Tensor], *args: Any) -> Any:

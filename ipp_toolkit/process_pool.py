@@ -40,7 +40,8 @@ from .planners import (
 
 __all__ = ["TaskRunner", "WorkerPool", "children_ignore_sigint", "stop_workers", "guard_worker",
            "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
-           "single_thread_environment", "single_thread_process", "single_thread_variables",
+           "prepare_worker_process", "single_thread_environment", "single_thread_process",
+           "single_thread_variables",
            "temporary_environment", "transferable_factory", "run_parallel"]
 
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -151,8 +152,7 @@ def _init_worker(parent: int, modules: tuple[str, ...]) -> None:
     and would wait for tasks forever (every worker holds the task queue's write end).
     """
     guard_worker(parent)
-    single_thread_process()
-    retain_freed_memory()
+    prepare_worker_process()
     for module in modules:
         # Ahead of the tasks only: a module that fails to import fails the task that needs
         # it, with the planner's own error.
@@ -233,10 +233,20 @@ def single_thread_variables() -> dict[str, str]:
 def single_thread_process() -> None:
     """Make this worker process single-threaded for good: the thread-count variables (for
     libraries it imports later), BLAS (threadpoolctl) and torch, if imported. Every kind of
-    worker (pool processes, Ray tasks and actors, COMA's rollout workers) starts with it."""
+    worker (pool processes, Ray tasks and actors, COMA's rollout workers) starts with it
+    (through :func:`prepare_worker_process`)."""
     os.environ.update(single_thread_variables())
     limit_blas_threads()
     limit_torch_threads()
+
+
+def prepare_worker_process() -> None:
+    """Set up a process that works for another one: single-threaded for good
+    (:func:`single_thread_process`) and keeping the memory it frees for its next task
+    (:func:`retain_freed_memory`). Every kind of worker starts with it: evaluation pool
+    processes and Ray mission tasks, COMA's rollout processes and Ray actors."""
+    single_thread_process()
+    retain_freed_memory()
 
 
 def single_thread_environment() -> contextlib.AbstractContextManager[None]:

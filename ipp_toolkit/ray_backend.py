@@ -50,7 +50,7 @@ from .process_pool import (
     TaskRunner,
     limit_blas_threads,
     limit_torch_threads,
-    single_thread_process,
+    prepare_worker_process,
     single_thread_variables,
     temporary_environment,
 )
@@ -348,8 +348,9 @@ _RUNNERS: dict[str, TaskRunner] = {}
 """In a Ray worker process: the runner of the evaluation being flown (one at a time)."""
 
 
-def _single_thread(runner: TaskRunner) -> TaskRunner:
-    single_thread_process()
+def _prepared(runner: TaskRunner) -> TaskRunner:
+    """``runner`` single-threaded, in a worker process set up as every worker is."""
+    prepare_worker_process()
     runner.single_thread = True
     return runner
 
@@ -369,7 +370,7 @@ def _fly(token: str, boxed_runner: list[Any], cwd: str, label: str,
 
         if os.path.isdir(cwd):
             os.chdir(cwd)
-        runner = _single_thread(ray.get(boxed_runner[0]))
+        runner = _prepared(ray.get(boxed_runner[0]))
         _RUNNERS.clear()  # a worker reused by a later evaluation drops the earlier runner
         _RUNNERS[token] = runner
     return runner.run(label, mission)

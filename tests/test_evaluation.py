@@ -14,7 +14,7 @@ from typing import ClassVar
 
 import numpy as np
 import pytest
-from helpers import small_config
+from helpers import page_faults_of_reallocation, small_config
 
 from ipp_toolkit.evaluation import (
     RESULT_COLUMNS,
@@ -576,4 +576,19 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
     plain, retained = int(_python(code, "plain")), int(_python(code, "retain"))
     # Each mission's maps were new pages (about 3,300 faults); kept, they are reused.
     assert plain > 3 * 1000 and retained < plain / 4
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc",
+                    reason="retain_freed_memory sets glibc's allocator")
+@pytest.mark.parametrize("setup", [
+    # an evaluation pool process, as its initializer leaves it
+    "import os\nfrom ipp_toolkit.process_pool import _init_worker\n"
+    "_init_worker(os.getppid(), ())",
+    # a Ray worker, as its first mission task of an evaluation leaves it (Ray not needed)
+    "import types\nfrom ipp_toolkit.ray_backend import _prepared\n"
+    "assert _prepared(types.SimpleNamespace()).single_thread",
+], ids=["pool", "ray"])
+def test_every_mission_worker_keeps_freed_memory_for_reuse(setup):
+    plain, prepared = page_faults_of_reallocation(), page_faults_of_reallocation(setup)
+    assert plain > 1000 and prepared < plain / 10, (plain, prepared)
 
