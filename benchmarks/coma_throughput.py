@@ -3,6 +3,7 @@
     python benchmarks/coma_throughput.py                    # cpu preset, r_M = 0.5 m
     python benchmarks/coma_throughput.py --preset paper --resolution 0.1
     python benchmarks/coma_throughput.py --preset paper --resolution 0.1 --device cuda
+    python benchmarks/coma_throughput.py --precision bfloat16   # mixed-precision learning
 
 Prints, per preset: rollout only (simulator + features + actor sampling), one update only
 (TD(lambda) targets, critic and actor mini-batch steps) and the whole training step, each in
@@ -25,7 +26,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import torch  # noqa: E402
 
-from coma.config import preset  # noqa: E402
+from coma.config import PRECISIONS, preset  # noqa: E402
 from coma.learner import make_optimisers, to_channels_last, update  # noqa: E402
 from coma.parallel import cpu_actor_state, resolve_device  # noqa: E402
 from coma.persistence import build_networks  # noqa: E402
@@ -46,6 +47,8 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=1,
                         help="untimed updates first (the first calls load and compile kernels)")
     parser.add_argument("--device", default="cpu", help="where the networks learn: cpu or cuda")
+    parser.add_argument("--precision", default="float32", choices=PRECISIONS,
+                        help="what the learning passes compute in (COMAConfig.precision)")
     args = parser.parse_args()
     try:
         device = resolve_device(args.device)
@@ -55,7 +58,7 @@ def main() -> None:
     limit_blas_threads()
     retain_freed_memory()
     torch.manual_seed(0)
-    config = preset(args.preset)
+    config = preset(args.preset, precision=args.precision)
     env = EnvConfig().replace(world={"resolution": args.resolution})
     if args.gain is not None:
         env = env.replace(features={"gain": True, "gain_smoothing": args.gain})
@@ -91,7 +94,7 @@ def main() -> None:
         transitions += rollout.transitions
     gain = "" if args.gain is None else f", gain planes (smoothing {args.gain:g} m)"
     print(f"preset={args.preset} width={config.width} r_M={args.resolution} m{gain}, "
-          f"networks on {device}, "
+          f"networks on {device} in {args.precision}, "
           f"{config.missions_per_update} missions ({transitions // args.updates} "
           f"agent-transitions) per update, {config.epochs} epochs, one thread, "
           f"{args.updates} updates timed after {args.warmup} untimed")

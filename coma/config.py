@@ -26,11 +26,14 @@ from typing import Any, NoReturn
 
 from ipp_toolkit.config import EnvConfig, start_for_team_size
 
-__all__ = ["VARIANTS", "PRESETS", "FLAT_NAMES", "WarmStartConfig", "COMAConfig", "from_dict",
-           "nested_fields", "preset", "mission_settings"]
+__all__ = ["VARIANTS", "PRECISIONS", "PRESETS", "FLAT_NAMES", "WarmStartConfig", "COMAConfig",
+           "from_dict", "nested_fields", "preset", "mission_settings"]
 
 #: The credit-assignment variants of the paper's study.
 VARIANTS = ("coma", "central_qv", "actor_independent", "decentralised")
+
+#: What the learning passes compute in (:attr:`COMAConfig.precision`).
+PRECISIONS = ("float32", "bfloat16")
 
 
 def _is_number(value: Any) -> bool:
@@ -169,6 +172,13 @@ class COMAConfig:
         init_policy: a COMA policy file (``best.pt``, ``last.pt`` or a shipped policy) whose
             actor and critic start this run instead of random networks or a warm start
             (fine-tuning, not in the paper); its variant, size and feature planes must match.
+        precision: what the learning passes (the warm start's fits and the updates) compute
+            their convolutions and matrix products in: ``float32``, or ``bfloat16`` (mixed
+            precision: torch's autocast; weights, gradients, optimiser state and losses stay
+            float32). bfloat16 is faster where the hardware has bfloat16 instructions (recent
+            CPUs with AVX512-BF16 or AMX, GPUs) and slower elsewhere; it trains other
+            weights than float32 from the same seed. Missions always fly, and policies are
+            validated and deployed, in float32.
     """
 
     variant: str = "coma"
@@ -203,6 +213,7 @@ class COMAConfig:
     residual_penalty: float = 0.0
     validation_terrains: tuple[str, ...] = ()
     selection: str = "mean"
+    precision: str = "float32"
 
     def __post_init__(self) -> None:
         if not isinstance(self.warm_start, WarmStartConfig):
@@ -216,6 +227,8 @@ class COMAConfig:
         object.__setattr__(self, "validation_terrains", tuple(self.validation_terrains))
         if self.selection not in ("mean", "worst_vs_ig"):
             _fail("selection", self.selection, "choose 'mean' or 'worst_vs_ig'")
+        if self.precision not in PRECISIONS:
+            _fail("precision", self.precision, f"choose from {list(PRECISIONS)}")
         for name in ("team_sizes", "comm_ranges"):
             value = getattr(self, name)
             if isinstance(value, list | tuple):

@@ -44,7 +44,14 @@ from ipp_toolkit.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from .config import COMAConfig, mission_settings
-from .networks import GainPriorActor, bounded_softmax, epsilon_at, in_input_layout
+from .networks import (
+    GainPriorActor,
+    bounded_softmax,
+    epsilon_at,
+    in_input_layout,
+    learning_forward,
+    mixed_precision,
+)
 from .parallel import (
     RunSpec,
     Workers,
@@ -101,12 +108,15 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
     ``train_actor=False`` fits only the critic(s) (a critic warm-up): the actor, its
     optimiser and its diagnostics are left alone. The update runs where the networks are: a
     CPU rollout is moved to their device (on the CPU it is used as it is); ``generator``
-    (shuffling) is a CPU generator either way.
+    (shuffling) is a CPU generator either way. The forward passes run in the config's
+    ``precision`` (:func:`~coma.networks.mixed_precision`); losses, advantages and targets
+    are float32.
 
     Raises:
         TrainingDiverged: a loss is not finite (the networks may be damaged: do not save).
     """
     cfg = networks.coma_config
+    precision = cfg.precision
     device = next(networks.critic.parameters()).device
     rollout = rollout.to(device)
     e, n, t = rollout.actions.shape
@@ -117,7 +127,7 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
         value_obs = in_input_layout(networks.value, rollout.value_obs.flatten(0, 2))
     # TD(lambda) targets per agent and episode from the target critic.
     with torch.no_grad():
-        q_target = target_critic(critic_obs).view(e, n, t, N_ACTIONS)
+        q_target = learning_forward(target_critic, critic_obs, precision).view(e, n, t, N_ACTIONS)
         q_target_taken = q_target.gather(-1, rollout.actions.unsqueeze(-1)).squeeze(-1)
         next_values = torch.roll(q_target_taken, shifts=-1, dims=-1)  # Q'(s_{t+1}, u_{t+1})
         terminal = torch.zeros(e, n, t, dtype=torch.bool, device=device)
@@ -137,7 +147,7 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
         order = torch.randperm(samples, generator=generator).to(device)
         for start in range(0, samples, cfg.minibatch_size):
             batch = order[start:start + cfg.minibatch_size]
-            q = networks.critic(critic_obs[batch])
+            q = learning_forward(networks.critic, critic_obs[batch], precision)
             q_taken = q.gather(-1, actions[batch].unsqueeze(-1)).squeeze(-1)
             critic_loss = torch.mean((q_taken - targets[batch]) ** 2)
             _check_finite("critic loss", critic_loss)
@@ -145,7 +155,7 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
                                                        critic_loss, cfg.max_grad_norm))
             logs["critic_loss"].append(critic_loss.item())
             if networks.value is not None:
-                v = networks.value(value_obs[batch]).squeeze(-1)
+                v = learning_forward(networks.value, value_obs[batch], precision).squeeze(-1)
                 value_loss = torch.mean((v - targets[batch]) ** 2)
                 _check_finite("value loss", value_loss)
                 _clip_step(optimisers["value"], networks.value, value_loss, cfg.max_grad_norm)
@@ -155,20 +165,23 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
 
             penalty = None
             if cfg.residual_penalty > 0 and isinstance(networks.actor, GainPriorActor):
-                residual, prior = networks.actor.parts(actor_obs[batch])
+                with mixed_precision(precision, device):
+                    residual, prior = networks.actor.parts(actor_obs[batch])
+                residual, prior = residual.float(), prior.float()
                 logits = residual + prior
                 valid = masks[batch].to(residual.dtype)
                 centred = residual - (residual * valid).sum(-1, keepdim=True) / valid.sum(
                     -1, keepdim=True)
                 penalty = (centred ** 2 * valid).sum() / valid.sum()
             else:
-                logits = networks.actor(actor_obs[batch])
+                logits = learning_forward(networks.actor, actor_obs[batch], precision)
             probs = bounded_softmax(logits, masks[batch], eps)
             # The critic's pre-step Q serves the actor: one forward pass fewer per mini-batch.
             q = q.detach()
             with torch.no_grad():
                 if cfg.variant == "central_qv":
-                    v = networks.value(value_obs[batch]).squeeze(-1)
+                    v = learning_forward(networks.value, value_obs[batch],
+                                         precision).squeeze(-1)
                     advantage = central_value_advantage(q, actions[batch], v)
                 else:
                     advantage = counterfactual_advantage(q, actions[batch], probs.detach(),

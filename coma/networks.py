@@ -8,8 +8,10 @@ weights serves every agent.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -19,7 +21,7 @@ from ipp_toolkit.features import option_gain_cells
 from ipp_toolkit.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bounded_softmax", "epsilon_at", "greedy_actions",
-           "in_input_layout"]
+           "in_input_layout", "learning_forward", "mixed_precision"]
 
 _KERNELS = (5, 4, 4)
 
@@ -99,6 +101,26 @@ def in_input_layout(network: nn.Module, planes: torch.Tensor) -> torch.Tensor:
            for module in network.modules()):
         return planes.contiguous(memory_format=torch.channels_last)
     return planes
+
+
+def mixed_precision(precision: str, device: torch.device) -> contextlib.AbstractContextManager[Any]:
+    """The context of a learning pass's forward passes (:attr:`coma.config.COMAConfig.precision`).
+
+    ``float32``: none. ``bfloat16``: torch's autocast on ``device``'s type, which runs the
+    convolutions and matrix products in bfloat16 and keeps the parameters (hence the
+    gradients and the optimiser's state) in float32. Outputs computed in it may be bfloat16;
+    the backward pass runs outside it (as torch advises).
+    """
+    if precision == "float32":
+        return contextlib.nullcontext()
+    return torch.autocast(device.type, dtype=torch.bfloat16)
+
+
+def learning_forward(module: nn.Module, planes: torch.Tensor, precision: str) -> torch.Tensor:
+    """``module(planes)`` in ``precision`` (:func:`mixed_precision`), returned in float32 (the
+    losses are computed in float32 whatever the precision of the passes)."""
+    with mixed_precision(precision, planes.device):
+        return module(planes).float()
 
 
 class GainPriorActor(nn.Module):

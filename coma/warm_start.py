@@ -33,6 +33,7 @@ from ipp_toolkit.progress import progress_bar
 
 from .advantages import td_lambda_targets
 from .config import WarmStartConfig
+from .networks import learning_forward
 from .persistence import COMANetworks
 from .rollout import collect_rollout
 
@@ -106,11 +107,13 @@ def warm_start(networks: COMANetworks, env_config: EnvConfig, config: WarmStartC
     fit = len(actions) - held
 
     def actor_loss(batch: torch.Tensor) -> torch.Tensor:
-        logits = networks.actor(actor_obs[batch]).masked_fill(~masks[batch], -1e9)
+        logits = learning_forward(networks.actor, actor_obs[batch], cfg.precision)
+        logits = logits.masked_fill(~masks[batch], -1e9)
         return nn.functional.cross_entropy(logits, actions[batch])
 
     def critic_loss(batch: torch.Tensor) -> torch.Tensor:
-        q = networks.critic(critic_obs[batch]).gather(-1, actions[batch, None]).squeeze(-1)
+        q = learning_forward(networks.critic, critic_obs[batch], cfg.precision)
+        q = q.gather(-1, actions[batch, None]).squeeze(-1)
         return torch.mean((q - targets[batch]) ** 2)
 
     result = {"demo_return": float(sum(float(b.returns.sum()) for b in batches)
@@ -123,8 +126,8 @@ def warm_start(networks: COMANetworks, env_config: EnvConfig, config: WarmStartC
         value_obs = cat("value_obs")
 
         def value_loss(batch: torch.Tensor) -> torch.Tensor:
-            return torch.mean((networks.value(value_obs[batch]).squeeze(-1)
-                               - targets[batch]) ** 2)
+            v = learning_forward(networks.value, value_obs[batch], cfg.precision)
+            return torch.mean((v.squeeze(-1) - targets[batch]) ** 2)
 
         result["value_loss"] = _fit(networks.value, value_loss, fit, config, generator,
                                     cfg.max_grad_norm)

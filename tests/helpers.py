@@ -1,6 +1,6 @@
 """Helpers the test modules import (``from helpers import small_config``): small, fast
-configurations of the simulator, random valid actions, and the page faults of a process set
-up by some code. Fixtures live in conftest.py."""
+configurations of the simulator and of COMA training, random valid actions, and the page
+faults of a process set up by some code. Fixtures live in conftest.py."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 
+from coma.config import COMAConfig
 from ipp_toolkit.config import EnvConfig, start_for_team_size
 
 
@@ -22,6 +23,20 @@ def small_config(n_agents: int = 4, comm_range: float = 25.0, resolution: float 
                                   "start": start_for_team_size("fixed", n_agents,
                                                                config.world)})
     return config.replace(**sections) if sections else config
+
+
+def tiny_coma(**changes) -> COMAConfig:
+    """COMA networks and a schedule small enough for a test: two updates of two missions."""
+    values = dict(width=8, hidden=16, missions=4, missions_per_update=2, minibatch_size=40,
+                  epochs=1, eval_every=1, eval_missions=2, checkpoint_every=1,
+                  target_update_transitions=100, warm_start="")
+    values.update(changes)
+    return COMAConfig(**values)
+
+
+def tiny_env(n_agents: int = 2) -> EnvConfig:
+    """A mission for :func:`tiny_coma`: 2 UAVs, 4 steps, 1 m cells."""
+    return small_config(n_agents=n_agents, resolution=1.0, team={"budget": 4})
 
 
 def random_valid_actions(masks: np.ndarray, rng: np.random.Generator) -> np.ndarray:

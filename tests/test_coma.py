@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 import yaml
-from helpers import small_config
+from helpers import small_config, tiny_coma, tiny_env
 
 from coma.config import VARIANTS, COMAConfig, mission_settings, preset
 from coma.learner import TrainingDiverged, setting_of_update, train
@@ -58,18 +58,6 @@ def test_config_validation_names_field_and_value():
 
 
 # ---------------------------------------------------------------------------- training
-
-
-def tiny_coma(**changes) -> COMAConfig:
-    values = dict(width=8, hidden=16, missions=4, missions_per_update=2, minibatch_size=40,
-                  epochs=1, eval_every=1, eval_missions=2, checkpoint_every=1,
-                  target_update_transitions=100, warm_start="")
-    values.update(changes)
-    return COMAConfig(**values)
-
-
-def tiny_env(n_agents: int = 2):
-    return small_config(n_agents=n_agents, resolution=1.0, team={"budget": 4})
 
 
 @pytest.mark.parametrize("variant", VARIANTS)

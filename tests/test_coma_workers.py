@@ -23,6 +23,7 @@ import threading
 import time
 from pathlib import Path
 
+import helpers
 import numpy as np
 import pytest
 import torch
@@ -50,11 +51,10 @@ def tiny_env() -> EnvConfig:
 
 
 def tiny_coma(**changes) -> COMAConfig:
-    values = dict(width=8, hidden=16, missions=30, missions_per_update=10, minibatch_size=80,
-                  epochs=1, eval_every=1, eval_missions=7, checkpoint_every=1,
-                  target_update_transitions=150, warm_start="")
-    values.update(changes)
-    return COMAConfig(**values)
+    """Three updates of ten missions (workers get whole groups of five), seven validated."""
+    return helpers.tiny_coma(**{"missions": 30, "missions_per_update": 10,
+                                "minibatch_size": 80, "eval_missions": 7,
+                                "target_update_transitions": 150, **changes})
 
 
 def tiny_networks(variant: str = "coma"):

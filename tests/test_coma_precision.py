@@ -1,0 +1,109 @@
+"""Mixed-precision learning (``COMAConfig.precision``): bfloat16 forward passes in the
+warm start and the updates, float32 weights, losses and deployed policies."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+import torch
+from helpers import tiny_coma, tiny_env
+
+from coma.cli import build_parser, configs_from_args
+from coma.config import COMAConfig, from_dict
+from coma.learner import make_optimisers, to_channels_last, train, update
+from coma.networks import ConvNet, learning_forward, mixed_precision
+from coma.persistence import build_networks, load_policy
+from coma.planner import COMAPlanner
+from coma.rollout import collect_rollout
+from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.mission import MissionGeometry
+from reports.cli import train_main
+
+
+def test_the_precision_is_checked_by_name_and_old_configs_read_float32():
+    with pytest.raises(ValueError, match=r"precision = 'float16'.*float32.*bfloat16"):
+        COMAConfig(precision="float16")
+    old = COMAConfig().to_dict()
+    del old["precision"]  # a config saved before the field existed
+    assert from_dict(old).precision == "float32"
+    assert from_dict(COMAConfig(precision="bfloat16").to_dict()).precision == "bfloat16"
+
+
+def test_the_flag_and_set_choose_the_precision(capsys):
+    parser = build_parser()
+    for argv in (["--precision", "bfloat16"], ["--set", "precision=bfloat16"]):
+        coma_config, _ = configs_from_args(parser.parse_args(["--out", "x", *argv]))
+        assert coma_config.precision == "bfloat16"
+    assert configs_from_args(parser.parse_args(["--out", "x"]))[0].precision == "float32"
+    with pytest.raises(SystemExit) as exit_info:
+        parser.parse_args(["--out", "x", "--precision", "half"])
+    assert exit_info.value.code == 2 and "'half'" in capsys.readouterr().err
+
+
+def test_bfloat16_runs_the_network_in_bfloat16_and_hands_back_float32():
+    torch.manual_seed(0)
+    network = ConvNet(3, 11, 6, width=8, hidden=16)
+    planes = torch.rand(5, 3, 11, 11)
+    with mixed_precision("bfloat16", planes.device):
+        assert network(planes).dtype == torch.bfloat16
+    out = learning_forward(network, planes, "bfloat16")
+    assert out.dtype == torch.float32
+    exact = learning_forward(network, planes, "float32")
+    assert torch.equal(exact, network(planes))  # float32: the plain forward pass, bit for bit
+    assert not torch.equal(out, exact)
+    assert torch.allclose(out, exact, atol=0.05, rtol=0.05)  # bfloat16 keeps ~3 digits
+
+
+def _one_update(precision: str) -> tuple[dict[str, float], dict[str, torch.Tensor],
+                                         dict[str, torch.Tensor]]:
+    env = tiny_env()
+    config = tiny_coma(precision=precision, minibatch_size=10, epochs=2)
+    torch.manual_seed(0)
+    networks = build_networks(config, env)
+    to_channels_last(networks)
+    rollout = collect_rollout(networks, env, MissionGeometry(env), 0, 0, 3, 0.3)
+    before = {k: v.clone() for k, v in networks.critic.state_dict().items()}
+    losses = update(networks, copy.deepcopy(networks.critic), make_optimisers(networks),
+                    rollout, 0.3, torch.Generator().manual_seed(3))
+    return losses, before, networks.critic.state_dict()
+
+
+def test_a_bfloat16_update_keeps_float32_weights_and_moves_them_as_float32_does():
+    losses, start, exact = _one_update("float32")
+    mixed_losses, mixed_start, mixed = _one_update("bfloat16")
+    assert all(torch.equal(start[k], mixed_start[k]) for k in start)  # the same start
+    assert set(mixed_losses) == set(losses)
+    for key, value in mixed_losses.items():
+        assert value == pytest.approx(losses[key], rel=0.1, abs=1e-3), key
+    steps = torch.cat([(exact[k] - start[k]).flatten() for k in start])
+    mixed_steps = torch.cat([(mixed[k] - start[k]).flatten() for k in start])
+    assert all(v.dtype == torch.float32 and torch.isfinite(v).all() for v in mixed.values())
+    assert not torch.equal(steps, mixed_steps)  # the passes did run in bfloat16
+    cosine = torch.nn.functional.cosine_similarity(steps, mixed_steps, dim=0)
+    assert cosine > 0.9, float(cosine)
+
+
+def test_a_bfloat16_run_is_reproducible_and_its_policy_flies_in_float32(tmp_path):
+    config = tiny_coma(precision="bfloat16", warm_start={"planner": "coverage", "missions": 2,
+                                                         "missions_per_batch": 2, "epochs": 1,
+                                                         "minibatch_size": 20})
+    results = [train(config, tiny_env(), tmp_path / name, progress=False, tensorboard=False)
+               for name in ("a", "b")]
+    (first, _), (second, _) = (load_policy(r.best_policy) for r in results)
+    assert first.coma_config.precision == "bfloat16"
+    for key, value in first.actor.state_dict().items():
+        assert value.dtype == torch.float32 and torch.equal(value, second.actor.state_dict()[key])
+    outcome = run_mission(tiny_env(), COMAPlanner(results[0].best_policy), seed=0, mission=0)
+    assert len(outcome["rows"]) == tiny_env().team.budget + 1
+
+
+def test_ipp_train_coma_takes_the_precision_flag(tmp_path):
+    out = tmp_path / "run"
+    assert train_main(["coma", "--out", str(out), "--missions", "2", "--agents", "2",
+                       "--resolution", "1.0", "--no-progress", "--precision", "bfloat16",
+                       "--set", "width=8", "--set", "hidden=16",
+                       "--set", "missions_per_update=2", "--set", "eval_missions=1",
+                       "--set", "minibatch_size=60", "--warm-start", "none"]) == 0
+    networks, _ = load_policy(out / "last.pt")
+    assert networks.coma_config.precision == "bfloat16"
