@@ -283,9 +283,14 @@ def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config
     """
     networks, data = load_policy(last_path)
     to_channels_last(networks)
-    if resume_fields(networks.coma_config) != resume_fields(coma_config):
+    stored, wanted = resume_fields(networks.coma_config), resume_fields(coma_config)
+    if stored != wanted:
+        changed = ", ".join(f"{name} = {stored.get(name)!r} in the run, {wanted.get(name)!r} now"
+                            for name in sorted(set(stored) | set(wanted))
+                            if stored.get(name) != wanted.get(name))
         raise CheckpointError(f"checkpoint {str(last_path)!r} belongs to a run with other "
-                              "COMA settings; start a new folder instead")
+                              f"COMA settings ({changed}); give the run's settings, or start "
+                              "a new folder instead")
     if config_to_dict(networks.env_config) != config_to_dict(env_config):
         raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
                               "mission config; start a new folder instead")

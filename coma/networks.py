@@ -75,10 +75,10 @@ class ConvNet(nn.Module):
 
     def forward(self, planes: torch.Tensor) -> torch.Tensor:
         if not self.channels_last:
-            return self.head(self.encoder(planes))
+            return self._head(self.encoder(planes))
         features = planes.contiguous(memory_format=torch.channels_last)
         if self.side != 1:
-            return self.head(self.encoder(features))
+            return self._head(self.encoder(features))
         *convolutions, last, last_relu, _flatten = self.encoder
         for layer in convolutions:
             features = layer(features)
@@ -87,7 +87,18 @@ class ConvNet(nn.Module):
         # row-major: both views are free, and the product sums the convolution's terms.
         weight = last.weight.permute(0, 2, 3, 1).reshape(last.out_channels, -1)
         flat = features.permute(0, 2, 3, 1).reshape(len(features), -1)
-        return self.head(last_relu(nn.functional.linear(flat, weight, last.bias)))
+        return self._head(last_relu(nn.functional.linear(flat, weight, last.bias)))
+
+    def _head(self, features: torch.Tensor) -> torch.Tensor:
+        """The fully connected head, in float32 even under mixed precision
+        (:func:`mixed_precision`): bfloat16's 8-bit mantissa would round a Q-value of 10 to
+        the nearest 0.06, coarser than the differences between actions that the
+        counterfactual advantage is made of. The head is a sliver of the work."""
+        device = features.device.type
+        if not torch.is_autocast_enabled(device):
+            return self.head(features)
+        with torch.autocast(device, enabled=False):
+            return self.head(features.float())
 
 
 def in_input_layout(network: nn.Module, planes: torch.Tensor) -> torch.Tensor:
@@ -107,9 +118,9 @@ def mixed_precision(precision: str, device: torch.device) -> contextlib.Abstract
     """The context of a learning pass's forward passes (:attr:`coma.config.COMAConfig.precision`).
 
     ``float32``: none. ``bfloat16``: torch's autocast on ``device``'s type, which runs the
-    convolutions and matrix products in bfloat16 and keeps the parameters (hence the
-    gradients and the optimiser's state) in float32. Outputs computed in it may be bfloat16;
-    the backward pass runs outside it (as torch advises).
+    convolutions in bfloat16 and keeps the parameters (hence the gradients and the
+    optimiser's state) in float32; :class:`ConvNet`'s fully connected head stays float32.
+    The backward pass runs outside it (as torch advises).
     """
     if precision == "float32":
         return contextlib.nullcontext()

@@ -17,6 +17,7 @@ from coma.persistence import build_networks, load_policy
 from coma.planner import COMAPlanner
 from coma.rollout import collect_rollout
 from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.mission import MissionGeometry
 from reports.cli import train_main
 
@@ -41,15 +42,20 @@ def test_the_flag_and_set_choose_the_precision(capsys):
     assert exit_info.value.code == 2 and "'half'" in capsys.readouterr().err
 
 
-def test_bfloat16_runs_the_network_in_bfloat16_and_hands_back_float32():
+def test_bfloat16_runs_the_convolutions_in_bfloat16_and_the_head_in_float32():
     torch.manual_seed(0)
     network = ConvNet(3, 11, 6, width=8, hidden=16)
     planes = torch.rand(5, 3, 11, 11)
+    dtypes = {}
+    for name in ("encoder", "head"):
+        getattr(network, name).register_forward_hook(
+            lambda module, inputs, output, name=name: dtypes.__setitem__(name, output.dtype))
     with mixed_precision("bfloat16", planes.device):
-        assert network(planes).dtype == torch.bfloat16
+        network(planes)
+    assert dtypes == {"encoder": torch.bfloat16, "head": torch.float32}
     out = learning_forward(network, planes, "bfloat16")
-    assert out.dtype == torch.float32
     exact = learning_forward(network, planes, "float32")
+    assert out.dtype == exact.dtype == torch.float32
     assert torch.equal(exact, network(planes))  # float32: the plain forward pass, bit for bit
     assert not torch.equal(out, exact)
     assert torch.allclose(out, exact, atol=0.05, rtol=0.05)  # bfloat16 keeps ~3 digits
@@ -107,3 +113,15 @@ def test_ipp_train_coma_takes_the_precision_flag(tmp_path):
                        "--set", "minibatch_size=60", "--warm-start", "none"]) == 0
     networks, _ = load_policy(out / "last.pt")
     assert networks.coma_config.precision == "bfloat16"
+
+
+def test_a_run_resumes_only_in_its_precision_and_the_refusal_names_it(tmp_path):
+    config = tiny_coma(missions=4, precision="bfloat16")
+    train(config, tiny_env(), tmp_path, progress=False, tensorboard=False, max_updates=1)
+    with pytest.raises(CheckpointError,
+                       match=r"precision = 'bfloat16' in the run, 'float32' now"):
+        train(config.replace(precision="float32"), tiny_env(), tmp_path, resume=True,
+              progress=False, tensorboard=False)
+    resumed = train(config, tiny_env(), tmp_path, resume=True, progress=False,
+                    tensorboard=False)
+    assert resumed.updates == 2
