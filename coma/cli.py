@@ -43,6 +43,7 @@ from .config import (
     preset,
 )
 from .learner import TrainingDiverged, train
+from .networks import bfloat16_hardware
 from .parallel import resolve_device
 from .persistence import DEFAULT_SHIPPED, resolve_policy
 from .recipes import RECIPES, Stage, recipe
@@ -272,6 +273,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, ImportError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
+    if any(config.precision == "bfloat16" for _, config, _ in stages) \
+            and bfloat16_hardware(resolve_device(args.device)) is False:
+        hardware = "this CPU" if args.device == "cpu" else "this GPU"
+        print(f"ipp-train coma: note: {hardware} has no bfloat16 instructions (AVX512-BF16, "
+              "AMX): --precision bfloat16 trains correctly but likely slower than float32 "
+              "here", file=sys.stderr)
     folders = _stage_folders(args.out, [stage for stage, _, _ in stages])
     compute = {"workers": args.workers, "backend": args.backend, "address": args.address,
                "device": args.device}

@@ -20,8 +20,8 @@ from torch import nn
 from ipp_toolkit.features import option_gain_cells
 from ipp_toolkit.team import N_ACTIONS
 
-__all__ = ["ConvNet", "GainPriorActor", "bounded_softmax", "epsilon_at", "greedy_actions",
-           "in_input_layout", "learning_forward", "mixed_precision"]
+__all__ = ["ConvNet", "GainPriorActor", "bfloat16_hardware", "bounded_softmax", "epsilon_at",
+           "greedy_actions", "in_input_layout", "learning_forward", "mixed_precision"]
 
 _KERNELS = (5, 4, 4)
 
@@ -125,6 +125,26 @@ def mixed_precision(precision: str, device: torch.device) -> contextlib.Abstract
     if precision == "float32":
         return contextlib.nullcontext()
     return torch.autocast(device.type, dtype=torch.bfloat16)
+
+
+def bfloat16_hardware(device: torch.device) -> bool | None:
+    """Whether ``device`` computes in bfloat16 itself (None where that is not known).
+
+    A CPU with AVX512-BF16 or AMX-BF16 does (``torch.cpu.get_capabilities``; on another CPU
+    torch converts to float32 around each operation, which costs more than it saves), as does
+    a GPU for which ``torch.cuda.is_bf16_supported()`` holds.
+    """
+    try:
+        if device.type == "cuda":
+            return bool(torch.cuda.is_bf16_supported())
+        if device.type == "cpu":
+            capabilities = torch.cpu.get_capabilities()
+            if "avx512_bf16" not in capabilities:
+                return None  # not an x86 CPU torch knows the flags of
+            return bool(capabilities["avx512_bf16"] or capabilities.get("amx_bf16"))
+    except (AttributeError, RuntimeError):
+        pass
+    return None
 
 
 def learning_forward(module: nn.Module, planes: torch.Tensor, precision: str) -> torch.Tensor:

@@ -9,10 +9,11 @@ import pytest
 import torch
 from helpers import tiny_coma, tiny_env
 
+import coma.cli
 from coma.cli import build_parser, configs_from_args
 from coma.config import COMAConfig, from_dict
 from coma.learner import make_optimisers, to_channels_last, train, update
-from coma.networks import ConvNet, learning_forward, mixed_precision
+from coma.networks import ConvNet, bfloat16_hardware, learning_forward, mixed_precision
 from coma.persistence import build_networks, load_policy
 from coma.planner import COMAPlanner
 from coma.rollout import collect_rollout
@@ -104,7 +105,10 @@ def test_a_bfloat16_run_is_reproducible_and_its_policy_flies_in_float32(tmp_path
     assert len(outcome["rows"]) == tiny_env().team.budget + 1
 
 
-def test_ipp_train_coma_takes_the_precision_flag(tmp_path):
+@pytest.mark.parametrize("native", [True, False])
+def test_ipp_train_coma_takes_the_precision_flag(tmp_path, monkeypatch, capsys, native):
+    # Where the CPU has no bfloat16 instructions, the run says it is likely slower, and runs.
+    monkeypatch.setattr(coma.cli, "bfloat16_hardware", lambda device: native)
     out = tmp_path / "run"
     assert train_main(["coma", "--out", str(out), "--missions", "2", "--agents", "2",
                        "--resolution", "1.0", "--no-progress", "--precision", "bfloat16",
@@ -113,6 +117,19 @@ def test_ipp_train_coma_takes_the_precision_flag(tmp_path):
                        "--set", "minibatch_size=60", "--warm-start", "none"]) == 0
     networks, _ = load_policy(out / "last.pt")
     assert networks.coma_config.precision == "bfloat16"
+    note = "this CPU has no bfloat16 instructions"
+    assert (note in capsys.readouterr().err) is not native
+
+
+@pytest.mark.parametrize(("capabilities", "answer"), [
+    ({"avx512_bf16": True, "amx_bf16": False}, True),   # e.g. AMD Zen 4 and 5
+    ({"avx512_bf16": False, "amx_bf16": True}, True),   # e.g. Intel Sapphire Rapids
+    ({"avx512_bf16": False, "amx_bf16": False}, False),  # e.g. Intel Cascade Lake
+    ({"asimd": True}, None),                             # flags torch lists for another CPU
+])
+def test_the_bfloat16_hardware_check_reads_the_cpu_flags(monkeypatch, capabilities, answer):
+    monkeypatch.setattr(torch.cpu, "get_capabilities", lambda: capabilities)
+    assert bfloat16_hardware(torch.device("cpu")) is answer
 
 
 def test_a_run_resumes_only_in_its_precision_and_the_refusal_names_it(tmp_path):
