@@ -173,12 +173,12 @@ class COMAConfig:
             actor and critic start this run instead of random networks or a warm start
             (fine-tuning, not in the paper); its variant, size and feature planes must match.
         precision: what the learning passes (the warm start's fits and the updates) compute
-            their convolutions and matrix products in: ``float32``, or ``bfloat16`` (mixed
-            precision: torch's autocast; weights, gradients, optimiser state and losses stay
-            float32). bfloat16 is faster where the hardware has bfloat16 instructions (recent
-            CPUs with AVX512-BF16 or AMX, GPUs) and slower elsewhere; it trains other
-            weights than float32 from the same seed. Missions always fly, and policies are
-            validated and deployed, in float32.
+            their convolutions in: ``float32``, or ``bfloat16`` (mixed precision: torch's
+            autocast; the fully connected heads, weights, gradients, optimiser state and
+            losses stay float32). bfloat16 is faster where the hardware has bfloat16
+            instructions (recent CPUs with AVX512-BF16 or AMX, GPUs) and slower elsewhere;
+            it trains other weights than float32 from the same seed. Missions always fly,
+            and policies are validated and deployed, in float32.
     """
 
     variant: str = "coma"
