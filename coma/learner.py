@@ -499,7 +499,9 @@ def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, o
 
     per_update = coma_config.missions_per_update
     total_updates = math.ceil(coma_config.missions / per_update)
-    bar = progress_bar(total_updates, f"COMA ({coma_config.variant})", "updates",
+    label = coma_config.variant + ("" if coma_config.precision == "float32"
+                                   else f", {coma_config.precision}")
+    bar = progress_bar(total_updates, f"COMA ({label})", "updates",
                        initial=state["update"], disable=not progress)
     updates_this_call = 0
     try:

@@ -111,14 +111,15 @@ def test_ipp_train_coma_takes_the_precision_flag(tmp_path, monkeypatch, capsys, 
     monkeypatch.setattr(coma.cli, "bfloat16_hardware", lambda device: native)
     out = tmp_path / "run"
     assert train_main(["coma", "--out", str(out), "--missions", "2", "--agents", "2",
-                       "--resolution", "1.0", "--no-progress", "--precision", "bfloat16",
+                       "--resolution", "1.0", "--precision", "bfloat16",
                        "--set", "width=8", "--set", "hidden=16",
                        "--set", "missions_per_update=2", "--set", "eval_missions=1",
                        "--set", "minibatch_size=60", "--warm-start", "none"]) == 0
     networks, _ = load_policy(out / "last.pt")
     assert networks.coma_config.precision == "bfloat16"
-    note = "this CPU has no bfloat16 instructions"
-    assert (note in capsys.readouterr().err) is not native
+    err = capsys.readouterr().err
+    assert ("this CPU has no bfloat16 instructions" in err) is not native
+    assert "COMA (coma, bfloat16)" in err  # the progress line names the precision
 
 
 @pytest.mark.parametrize(("capabilities", "answer"), [
