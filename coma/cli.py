@@ -14,7 +14,8 @@ processes or on Ray actors (``--address`` of a cluster, else a local Ray with K 
 ``--device cpu|cuda`` is where the networks learn (``coma.parallel``). The same seed trains
 the same weights whatever ``--workers`` and ``--backend``; each is checked before anything is
 written (a missing Ray, an address that does not answer, ``cuda`` where there is none: exit
-code 2).
+code 2). ``--precision bfloat16`` is part of the config (``COMAConfig.precision``), since it
+trains other numbers; where the hardware has no bfloat16 instructions a note says so.
 """
 
 from __future__ import annotations
