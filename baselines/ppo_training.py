@@ -26,7 +26,7 @@ from stable_baselines3 import PPO
 from ipp_toolkit.config import EnvConfig, start_for_team_size
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.progress import report_interrupt
-from ipp_toolkit.settings import build_env_config
+from ipp_toolkit.settings import build_env_config, setting_line
 from ipp_toolkit.team import N_ACTIONS
 from ipp_toolkit.vec import make_sb3_vec_env
 
@@ -73,7 +73,8 @@ def _ppo_run_format() -> RunFormat:
 
 def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path,
               progress: bool = True, resume: bool = False,
-              time_limit_s: float | None = None, command: str | None = None) -> Path:
+              time_limit_s: float | None = None, command: str | None = None,
+              announce: str = "") -> Path:
     """Train a shared PPO policy and write it to ``out_dir/policy.pt``.
 
     The PPO case of ``ipp-train sb3`` (:mod:`baselines.sb3_runner` runs it). The env is
@@ -92,6 +93,8 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         time_limit_s: stop after this many seconds of training (this call; a partial rollout
             is dropped) and save what was learnt; None trains for ``total_timesteps``.
         command: the command line that started the run, recorded in the JSON files.
+        announce: a line printed to stderr once the run folder is checked, before any work
+            (the command line's ``setting:`` line); nothing when empty.
 
     Returns:
         the path of the saved ``policy.pt``.
@@ -130,7 +133,7 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         make_env=make_env, make_model=make_model,
         payload=lambda model: model_payload(model, config, env_cfg),
         check_resume=check_resume, extra_record=extra, progress=progress, resume=resume,
-        time_limit_s=time_limit_s)
+        time_limit_s=time_limit_s, announce=announce)
 
 
 # --------------------------------------------------------------------------------------------
@@ -267,7 +270,7 @@ def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
             ent_coef=args.ent_coef, masked=args.masked, gain_prior=args.gain_prior)
         policy_kwargs(config, training_env_config(config, env_config))  # validate before work
         path = train_ppo(config, env_config, args.out, progress=not args.no_progress,
-                         resume=args.resume,
+                         resume=args.resume, announce=setting_line(env_config, args.config),
                          time_limit_s=None if args.time_limit is None else args.time_limit * 60,
                          command=command)
     except (ValueError, CheckpointError) as error:

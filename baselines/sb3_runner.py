@@ -21,6 +21,7 @@ imported by the planners.
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -150,6 +151,7 @@ def run_sb3_training(
     progress: bool = True,
     resume: bool = False,
     time_limit_s: float | None = None,
+    announce: str = "",
 ) -> Path:
     """Train (fresh, or resumed from ``out_dir/checkpoint.pt``) and write ``out_dir/policy.pt``.
 
@@ -171,6 +173,8 @@ def run_sb3_training(
         progress: show a tqdm bar.
         resume: continue from ``out_dir/checkpoint.pt``.
         time_limit_s: stop after this many seconds of this call and save what was learnt.
+        announce: a line printed to stderr once the run folder is checked, before any work
+            (the command line's ``setting:`` line); nothing when empty.
 
     Returns:
         the path of ``policy.pt``.
@@ -200,6 +204,8 @@ def run_sb3_training(
     elif ckpt_path.exists() or (out_dir / "policy.pt").exists():
         raise ValueError(f"{str(out_dir)!r} already holds a {run_format.algo_label} run; pass "
                          "resume=True (--resume) or choose another output folder")
+    if announce:
+        print(announce, file=sys.stderr)
     out_dir.mkdir(parents=True, exist_ok=True)
 
     done = int(state["num_timesteps"]) if state is not None else 0

@@ -35,6 +35,7 @@ from ipp_toolkit.config import EnvConfig
 from ipp_toolkit.config_io import config_to_dict
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
 from ipp_toolkit.progress import report_interrupt
+from ipp_toolkit.settings import setting_line
 from ipp_toolkit.vec import make_sb3_vec_env
 
 from .ppo import PPOTrainConfig, SB3RunConfig, config_from_record, config_record, save_policy
@@ -278,7 +279,7 @@ def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
 
 def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path,
               progress: bool = True, resume: bool = False, time_limit_s: float | None = None,
-              command: str | None = None) -> Path:
+              command: str | None = None, announce: str = "") -> Path:
     """Train ``config.algo`` with parameter sharing and write ``out_dir/policy.pt``.
 
     PPO and MaskablePPO are handed to :func:`baselines.ppo_training.train_ppo` (the
@@ -294,6 +295,8 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
             ``total_timesteps`` may change).
         time_limit_s: stop after this many seconds of this call and save what was learnt.
         command: the command line that started the run, recorded in the JSON files.
+        announce: a line printed to stderr once the run folder is checked, before any work
+            (the command line's ``setting:`` line); nothing when empty.
 
     Returns:
         the path of the saved ``policy.pt``.
@@ -308,7 +311,8 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
         raise ValueError(f"env_config must be an EnvConfig, got {type(env_config).__name__}")
     if config.algo in PPO_ALGORITHMS:
         return train_ppo(config.to_ppo_config(), env_config, out_dir, progress=progress,
-                         resume=resume, time_limit_s=time_limit_s, command=command)
+                         resume=resume, time_limit_s=time_limit_s, command=command,
+                         announce=announce)
     env_cfg = training_env_config(config, env_config)
     algo = config.algo
 
@@ -336,7 +340,7 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
         payload=lambda model: sb3_model_payload(model, config, env_cfg),
         check_resume=check_resume,
         extra_record={} if command is None else {"command": str(command)},
-        progress=progress, resume=resume, time_limit_s=time_limit_s)
+        progress=progress, resume=resume, time_limit_s=time_limit_s, announce=announce)
 
 
 # --------------------------------------------------------------------------------------------
@@ -416,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
                                 hyperparameters=_hyperparameters(algo, args))
         training_env_config(config, env_config)  # validate before any work
         path = train_sb3(config, env_config, out, progress=not args.no_progress,
-                         resume=args.resume,
+                         resume=args.resume, announce=setting_line(env_config, args.config),
                          time_limit_s=None if args.time_limit is None else args.time_limit * 60,
                          command=command)
     except (ValueError, CheckpointError) as error:

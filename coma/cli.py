@@ -32,7 +32,12 @@ from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import REMOVED_NAMES
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.ray_backend import add_backend_flags, check_backend_flags, probe
-from ipp_toolkit.settings import build_env_config, merge_sections, parse_feature_flags
+from ipp_toolkit.settings import (
+    build_env_config,
+    merge_sections,
+    parse_feature_flags,
+    setting_line,
+)
 
 from .config import (
     PRECISIONS,
@@ -309,7 +314,8 @@ def _train_stages(args: argparse.Namespace, stages: list[tuple[Stage, COMAConfig
                 print(f"stage {k + 1}/{len(stages)} ({stage.name}): {folders[k]}",
                       file=sys.stderr)
             result = train(coma_config, env_config, folders[k], resume=resume,
-                           progress=not args.no_progress, **compute)
+                           progress=not args.no_progress,
+                           announce=setting_line(env_config, args.config), **compute)
     except (FileExistsError, CheckpointError, ValueError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2

@@ -25,6 +25,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -319,7 +320,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
           max_updates: int | None = None,
           warm_start: WarmStartConfig | None = None, workers: int = 1,
           backend: str = "local", address: str | None = None,
-          device: str | torch.device = "cpu") -> TrainResult:
+          device: str | torch.device = "cpu", announce: str = "") -> TrainResult:
     """Train COMA (or a variant) and write its run folder.
 
     The folder gets ``config.json`` (both configs), ``progress.csv`` (one row per update),
@@ -350,6 +351,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             connection).
         device: where the networks learn: ``cpu`` or ``cuda``; rollouts always fly on the
             CPU, with a CPU copy of the actor. The warm start imitates on the CPU.
+        announce: a line printed to stderr once the run folder is checked, before any work
+            (the command line's ``setting:`` line); nothing when empty.
 
     The calling process is set up as a trainer for good: one torch and BLAS thread, and
     (glibc) freed memory kept for reuse (:func:`~ipp_toolkit.process_pool.retain_freed_memory`:
@@ -391,6 +394,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     if last_path.exists() and not resume:
         raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
                               "(--resume) to continue it, or choose another folder")
+    if announce:
+        print(announce, file=sys.stderr)
     # IG's reference flies before the actors exist (they hold their CPUs for the whole run):
     # on the cluster at --address, else in local processes (a local Ray of the run is not
     # started yet, and would cost its start-up twice).

@@ -42,6 +42,7 @@ from .config_io import config_from_dict, config_to_dict, read_config_file
 __all__ = [
     "build_env_config",
     "describe_config",
+    "setting_line",
     "parse_comm",
     "comm_label",
     "format_comm",
@@ -261,6 +262,13 @@ def describe_config(config: EnvConfig) -> str:
             f"{config.world.area_size:g} m area at r_M = {config.world.resolution:g} m, "
             f"waypoints every {config.world.grid_spacing:g} m, "
             f"budget {config.team.budget} steps")
+
+
+def setting_line(config: EnvConfig, config_file: str | os.PathLike[str] | None = None) -> str:
+    """The ``setting: ...`` line every command prints (to stderr) before it runs: the setting
+    in force (:func:`describe_config`) and the ``--config`` file it was read over, if any."""
+    line = f"setting: {describe_config(config)}"
+    return line + (f" (config file {str(config_file)!r})" if config_file else "")
 
 
 _TRUE, _FALSE = ("true", "1", "on", "yes"), ("false", "0", "off", "no")

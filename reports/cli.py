@@ -27,7 +27,7 @@ import numpy as np
 from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.progress import report_interrupt
 from ipp_toolkit.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
-from ipp_toolkit.settings import build_env_config, comm_label, describe_config, parse_comm
+from ipp_toolkit.settings import build_env_config, comm_label, parse_comm, setting_line
 
 
 def _comm_range(text: str) -> float:
@@ -248,8 +248,7 @@ def compare_main(argv: list[str] | None = None) -> int:
         if args.namespace == "validation":
             out = out.replace("compare-", "validate-")
     out_dir = Path(out)
-    print(f"setting: {describe_config(env_config)}"
-          + (f" (config file {str(args.config)!r})" if args.config else ""), file=sys.stderr)
+    print(setting_line(env_config, args.config), file=sys.stderr)
     try:
         comparison = compare(
             planners=args.planners, trials=args.trials, seed=args.seed, workers=args.workers,

@@ -120,6 +120,7 @@ def test_ipp_train_coma_takes_the_precision_flag(tmp_path, monkeypatch, capsys, 
     err = capsys.readouterr().err
     assert ("this CPU has no bfloat16 instructions" in err) is not native
     assert "COMA (coma, bfloat16)" in err  # the progress line names the precision
+    assert "setting: 2 UAVs" in err  # the setting in force, as every command prints it
 
 
 @pytest.mark.parametrize(("capabilities", "answer"), [

@@ -342,6 +342,7 @@ def test_command_line_trains_any_algorithm_case_insensitively(tmp_path, capsys):
             "--set", "buffer_size=300", "--set", "learning_starts=32",
             "--set", "n_quantiles=3", "--out", str(out), "--no-progress"]
     assert train_main(argv) == 0
+    assert "setting: 2 UAVs (fixed starts), D = 25 m" in capsys.readouterr().err  # printed first
     record = json.loads((out / "policy.json").read_text())
     assert record["algo"] == "QRDQN" and record["command"] == shlex.join(["ipp-train", *argv])
     assert record["hyperparameters"]["learning_rate"] == 1e-3
@@ -357,6 +358,7 @@ def test_command_line_trains_any_algorithm_case_insensitively(tmp_path, capsys):
     assert train_main(["sb3", "--algo", "PPO", "--timesteps", "64", "--n-envs", "1",
                        "--n-steps", "32", "--batch-size", "64", "--agents", "2",
                        "--out", str(ppo_out), "--no-progress"]) == 0
+    assert "setting: 2 UAVs" in capsys.readouterr().err
     record = json.loads((ppo_out / "policy.json").read_text())
     assert record["format"] == "ipp-toolkit/ppo" and record["algo"] == "ppo"
     assert record["command"].startswith("ipp-train sb3 --algo PPO")
