@@ -271,19 +271,15 @@ def make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
     return optimisers
 
 
-def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config: EnvConfig,
-            generator: torch.Generator, device: torch.device
-            ) -> tuple[COMANetworks, nn.Module, dict[str, torch.optim.Optimizer], dict[str, Any],
-                       list[dict[str, Any]]]:
-    """The run in ``last_path`` as it stopped: networks (in training mode, on ``device``),
-    target critic, optimisers, progress counters and logged rows; ``generator`` gets its
-    shuffling state. A run may resume on another device than it began on.
+def _resumable(last_path: Path, coma_config: COMAConfig, env_config: EnvConfig
+               ) -> tuple[COMANetworks, dict[str, Any]]:
+    """The checkpoint ``last_path`` (networks and payload), checked to belong to the run
+    ``coma_config`` and ``env_config`` describe (only ``missions`` may differ).
 
     Raises:
         CheckpointError: the checkpoint is corrupt or belongs to another run.
     """
     networks, data = load_policy(last_path)
-    to_channels_last(networks)
     stored, wanted = resume_fields(networks.coma_config), resume_fields(coma_config)
     if stored != wanted:
         changed = ", ".join(f"{name} = {stored.get(name)!r} in the run, {wanted.get(name)!r} now"
@@ -295,6 +291,23 @@ def _resume(last_path: Path, csv_path: Path, coma_config: COMAConfig, env_config
     if config_to_dict(networks.env_config) != config_to_dict(env_config):
         raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
                               "mission config; start a new folder instead")
+    return networks, data
+
+
+def _resume(resumable: tuple[COMANetworks, dict[str, Any]], last_path: Path, csv_path: Path,
+            coma_config: COMAConfig, generator: torch.Generator, device: torch.device
+            ) -> tuple[COMANetworks, nn.Module, dict[str, torch.optim.Optimizer], dict[str, Any],
+                       list[dict[str, Any]]]:
+    """The run in ``last_path`` (loaded and checked by :func:`_resumable`) as it stopped:
+    networks (in training mode, on ``device``), target critic, optimisers, progress counters
+    and logged rows; ``generator`` gets its shuffling state. A run may resume on another
+    device than it began on.
+
+    Raises:
+        CheckpointError: the checkpoint's target critic or optimisers cannot be restored.
+    """
+    networks, data = resumable
+    to_channels_last(networks)
     networks.coma_config = coma_config
     for module in (networks.actor, networks.critic, networks.value):
         if module is not None:
@@ -394,6 +407,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     if last_path.exists() and not resume:
         raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
                               "(--resume) to continue it, or choose another folder")
+    # A checkpoint of another run is refused before anything flies or any worker starts.
+    resumable = _resumable(last_path, coma_config, env_config) if resume else None
     if announce:
         print(announce, file=sys.stderr)
     # IG's reference flies before the actors exist (they hold their CPUs for the whole run):
@@ -410,19 +425,20 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     known = {**{("train", k): g for k, g in enumerate(geometries)},
              **{("check", k): g for k, g in enumerate(check_geometries)}}
     with make_workers(spec, workers, backend, address, known) as pool:
-        return _train_with(pool, coma_config, env_config, out, resume, progress, tensorboard,
-                           max_updates, warm_start, learner_device, settings, checks,
-                           reference)
+        return _train_with(pool, coma_config, env_config, out, resumable, progress,
+                           tensorboard, max_updates, warm_start, learner_device, settings,
+                           checks, reference)
 
 
 def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, out: Path,
-                resume: bool, progress: bool, tensorboard: bool, max_updates: int | None,
+                resumable: tuple[COMANetworks, dict[str, Any]] | None, progress: bool,
+                tensorboard: bool, max_updates: int | None,
                 warm_start: WarmStartConfig | None, device: torch.device,
                 settings: list[EnvConfig], checks: list[EnvConfig],
                 reference: list[float] | None) -> TrainResult:
     """The run of :func:`train` once its inputs are checked: ``pool`` flies the missions of
     the training ``settings`` and the validation ``checks``, the networks learn on
-    ``device``."""
+    ``device``; ``resumable`` is the checkpoint to continue from (:func:`_resumable`), if any."""
     last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
     budget = env_config.team.budget
 
@@ -442,9 +458,9 @@ def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, o
 
     generator = torch.Generator().manual_seed(coma_config.seed)
     history: list[dict[str, Any]] = []
-    if resume and last_path.exists():
+    if resumable is not None:
         networks, target_critic, optimisers, state, history = _resume(
-            last_path, csv_path, coma_config, env_config, generator, device)
+            resumable, last_path, csv_path, coma_config, generator, device)
     else:
         torch.manual_seed(coma_config.seed)
         networks = build_networks(coma_config, env_config)

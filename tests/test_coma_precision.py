@@ -10,6 +10,7 @@ import torch
 from helpers import tiny_coma, tiny_env
 
 import coma.cli
+import coma.learner
 from coma.cli import build_parser, configs_from_args
 from coma.config import COMAConfig, from_dict
 from coma.learner import make_optimisers, to_channels_last, train, update
@@ -134,13 +135,22 @@ def test_the_bfloat16_hardware_check_reads_the_cpu_flags(monkeypatch, capabiliti
     assert bfloat16_hardware(torch.device("cpu")) is answer
 
 
-def test_a_run_resumes_only_in_its_precision_and_the_refusal_names_it(tmp_path):
+def test_a_run_resumes_only_in_its_precision_and_the_refusal_names_it(tmp_path, monkeypatch,
+                                                                     capsys):
     config = tiny_coma(missions=4, precision="bfloat16")
     train(config, tiny_env(), tmp_path, progress=False, tensorboard=False, max_updates=1)
+
+    def fly_reference(*args, **kwargs):
+        raise AssertionError("IG's reference missions flew before the refusal")
+
+    # Refused before anything flies or starts: no start line, no reference missions.
+    monkeypatch.setattr(coma.learner, "reference_scores", fly_reference)
     with pytest.raises(CheckpointError,
                        match=r"precision = 'bfloat16' in the run, 'float32' now"):
-        train(config.replace(precision="float32"), tiny_env(), tmp_path, resume=True,
-              progress=False, tensorboard=False)
+        train(config.replace(precision="float32", selection="worst_vs_ig"), tiny_env(),
+              tmp_path, resume=True, progress=False, tensorboard=False, announce="START")
+    assert "START" not in capsys.readouterr().err
+    monkeypatch.undo()
     resumed = train(config, tiny_env(), tmp_path, resume=True, progress=False,
                     tensorboard=False)
     assert resumed.updates == 2
