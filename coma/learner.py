@@ -166,9 +166,8 @@ def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[st
 
             penalty = None
             if cfg.residual_penalty > 0 and isinstance(networks.actor, GainPriorActor):
-                with mixed_precision(precision, device):
+                with mixed_precision(precision, device):  # both parts float32 (the heads)
                     residual, prior = networks.actor.parts(actor_obs[batch])
-                residual, prior = residual.float(), prior.float()
                 logits = residual + prior
                 valid = masks[batch].to(residual.dtype)
                 centred = residual - (residual * valid).sum(-1, keepdim=True) / valid.sum(

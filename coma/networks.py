@@ -148,10 +148,10 @@ def bfloat16_hardware(device: torch.device) -> bool | None:
 
 
 def learning_forward(module: nn.Module, planes: torch.Tensor, precision: str) -> torch.Tensor:
-    """``module(planes)`` in ``precision`` (:func:`mixed_precision`), returned in float32 (the
-    losses are computed in float32 whatever the precision of the passes)."""
+    """``module(planes)`` in ``precision`` (:func:`mixed_precision`). The output is float32
+    either way (:class:`ConvNet`'s head runs in float32), so the losses are float32 too."""
     with mixed_precision(precision, planes.device):
-        return module(planes).float()
+        return module(planes)
 
 
 class GainPriorActor(nn.Module):
