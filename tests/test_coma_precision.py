@@ -33,7 +33,7 @@ def test_the_precision_is_checked_by_name_and_old_configs_read_float32():
     assert from_dict(COMAConfig(precision="bfloat16").to_dict()).precision == "bfloat16"
 
 
-def test_the_flag_and_set_choose_the_precision(capsys):
+def test_the_flag_and_set_choose_the_precision(tmp_path, capsys):
     parser = build_parser()
     for argv in (["--precision", "bfloat16"], ["--set", "precision=bfloat16"]):
         coma_config, _ = configs_from_args(parser.parse_args(["--out", "x", *argv]))
@@ -42,6 +42,12 @@ def test_the_flag_and_set_choose_the_precision(capsys):
     with pytest.raises(SystemExit) as exit_info:
         parser.parse_args(["--out", "x", "--precision", "half"])
     assert exit_info.value.code == 2 and "'half'" in capsys.readouterr().err
+
+    # Through --set: ipp-train coma exits 2 with one line naming the field and the value.
+    assert train_main(["coma", "--out", str(tmp_path / "run"), "--set", "precision=half"]) == 2
+    err = capsys.readouterr().err
+    assert "precision = 'half'" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "run").exists()
 
 
 def test_bfloat16_runs_the_convolutions_in_bfloat16_and_the_head_in_float32():
