@@ -12,7 +12,9 @@ object with ``single_thread`` and ``run(label, mission)`` serves.
 A pool can be started ahead of its tasks (``ipp-compare`` starts it first): its workers
 spawn and import the planners' modules (torch, SB3) at once, and one of them can build and
 check the planners (:meth:`WorkerPool.call`) before the tasks come, so the main process never
-imports those modules.
+imports those modules. The workers of a pool also share the compiling of the simulator's
+kernels when Numba's cache does not hold them yet (the first run of a checkout): each takes
+kernels from a shared counter, then waits for the others (:func:`_compile_kernels_together`).
 """
 
 from __future__ import annotations
@@ -141,8 +143,42 @@ def guard_worker(parent: int) -> None:
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
 
 
-def _init_worker(parent: int, modules: tuple[str, ...]) -> None:
-    """Process-pool initializer: one thread per worker, then import ``modules`` ahead.
+#: How long a worker waits for the others to compile their share of the kernels: long enough
+#: for a slow machine's whole share, short enough that a sibling that never starts (it failed
+#: to import something) costs only this once.
+_COMPILE_WAIT_S = 60.0
+
+
+def _compile_kernels_together(claimed: Any, everyone: Any,
+                              wait_s: float = _COMPILE_WAIT_S) -> int:
+    """Compile this worker's share of the mission kernels, then wait for the other workers'.
+
+    Every worker would otherwise compile all of them on its first mission, at the same time
+    as the others (7 s on the development VM, the first time a checkout runs); shared, each
+    compiles about 1 / n of them. ``claimed`` is a shared integer, the next kernel to take;
+    ``everyone`` a barrier for all the pool's workers. Returns how many this worker took. A
+    kernel that fails to compile here fails the mission that calls it, with its own error.
+    """
+    def claim() -> int:
+        with claimed.get_lock():
+            claimed.value += 1
+            return claimed.value - 1
+
+    from . import kernels
+
+    taken = 0
+    with contextlib.suppress(Exception):
+        taken = kernels.compile_mission_kernels(claim)
+    with contextlib.suppress(threading.BrokenBarrierError):
+        everyone.wait(timeout=wait_s)
+    return taken
+
+
+def _init_worker(parent: int, modules: tuple[str, ...], kernel_share: tuple[Any, Any] | None
+                 ) -> None:
+    """Process-pool initializer: one thread per worker, import ``modules`` ahead, then compile
+    a share of the kernels (``kernel_share``: :func:`_compile_kernels_together`'s counter
+    and barrier; None: each on first use).
 
     Ctrl-C reaches every process of the terminal's group; only the main process handles it
     (it stops the pool), so a worker ignores it instead of printing its own traceback. A
@@ -158,6 +194,8 @@ def _init_worker(parent: int, modules: tuple[str, ...]) -> None:
         # it, with the planner's own error.
         with contextlib.suppress(Exception):
             importlib.import_module(module)
+    if kernel_share is not None:
+        _compile_kernels_together(*kernel_share)
 
 
 def _worker_ready() -> None:
@@ -189,9 +227,14 @@ class WorkerPool:
         if n_workers < 1:
             raise ValueError(f"n_workers must be >= 1, got {n_workers}")
         self.n_workers = n_workers
+        context = multiprocessing.get_context("spawn")
+        # One process per worker, each starting with a share of the kernels to compile.
+        self.kernels_claimed = context.Value("i", 0)
+        kernel_share = ((self.kernels_claimed, context.Barrier(n_workers)) if n_workers > 1
+                        else None)
         self.executor = concurrent.futures.ProcessPoolExecutor(
-            max_workers=n_workers, mp_context=multiprocessing.get_context("spawn"),
-            initializer=_init_worker, initargs=(os.getpid(), tuple(modules)))
+            max_workers=n_workers, mp_context=context,
+            initializer=_init_worker, initargs=(os.getpid(), tuple(modules), kernel_share))
         # Workers inherit one thread each and an ignored Ctrl-C (a worker still importing
         # when it comes would otherwise print a traceback).
         with single_thread_environment(), children_ignore_sigint():

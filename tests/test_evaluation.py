@@ -583,7 +583,7 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
 @pytest.mark.parametrize("setup", [
     # an evaluation pool process, as its initializer leaves it
     "import os\nfrom ipp_toolkit.process_pool import _init_worker\n"
-    "_init_worker(os.getppid(), ())",
+    "_init_worker(os.getppid(), (), None)",
     # a Ray worker, as its first mission task of an evaluation leaves it (Ray not needed)
     "import types\nfrom ipp_toolkit.ray_backend import _prepared\n"
     "assert _prepared(types.SimpleNamespace()).single_thread",
