@@ -14,7 +14,8 @@ spawn and import the planners' modules (torch, SB3) at once, and one of them can
 check the planners (:meth:`WorkerPool.call`) before the tasks come, so the main process never
 imports those modules. The workers of a pool also share the compiling of the simulator's
 kernels when Numba's cache does not hold them yet (the first run of a checkout): each takes
-kernels from a shared counter, then waits for the others (:func:`_compile_kernels_together`).
+kernels from a shared counter and, if it compiled any, waits for the others to finish
+(:func:`_compile_kernels_together`).
 """
 
 from __future__ import annotations
@@ -143,21 +144,25 @@ def guard_worker(parent: int) -> None:
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
 
 
-#: How long a worker waits for the others to compile their share of the kernels: long enough
+#: How long a worker that compiled kernels waits for the others to finish theirs: long enough
 #: for a slow machine's whole share, short enough that a sibling that never starts (it failed
 #: to import something) costs only this once.
 _COMPILE_WAIT_S = 60.0
 
 
-def _compile_kernels_together(claimed: Any, everyone: Any,
+def _compile_kernels_together(claimed: Any, finished: Any, workers: int,
                               wait_s: float = _COMPILE_WAIT_S) -> int:
-    """Compile this worker's share of the mission kernels, then wait for the other workers'.
+    """Take a share of the mission kernels to compile; if any had to be compiled, wait for
+    the other workers to finish their share.
 
     Every worker would otherwise compile all of them on its first mission, at the same time
     as the others (7 s on the development VM, the first time a checkout runs); shared, each
-    compiles about 1 / n of them. ``claimed`` is a shared integer, the next kernel to take;
-    ``everyone`` a barrier for all the pool's workers. Returns how many this worker took. A
-    kernel that fails to compile here fails the mission that calls it, with its own error.
+    compiles about 1 / n of them and loads the rest from Numba's cache. Once cached, each
+    worker loads its share and goes on without waiting (a wait for the slowest worker's
+    start cost about 0.2 s a run). ``claimed`` and ``finished`` are shared integers: the
+    next kernel to take, and how many workers are done taking. Returns how many kernels this
+    worker compiled. A kernel that fails to compile here fails the mission that calls it,
+    with its own error.
     """
     def claim() -> int:
         with claimed.get_lock():
@@ -166,19 +171,22 @@ def _compile_kernels_together(claimed: Any, everyone: Any,
 
     from . import kernels
 
-    taken = 0
-    with contextlib.suppress(Exception):
-        taken = kernels.compile_mission_kernels(claim)
-    with contextlib.suppress(threading.BrokenBarrierError):
-        everyone.wait(timeout=wait_s)
-    return taken
+    compiled = 0
+    with contextlib.suppress(Exception):  # see above: the mission reports it
+        compiled = kernels.compile_mission_kernels(claim)
+    with finished.get_lock():
+        finished.value += 1
+    deadline = time.monotonic() + wait_s
+    while compiled and finished.value < workers and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return compiled
 
 
-def _init_worker(parent: int, modules: tuple[str, ...], kernel_share: tuple[Any, Any] | None
-                 ) -> None:
-    """Process-pool initializer: one thread per worker, import ``modules`` ahead, then compile
-    a share of the kernels (``kernel_share``: :func:`_compile_kernels_together`'s counter
-    and barrier; None: each on first use).
+def _init_worker(parent: int, modules: tuple[str, ...],
+                 kernel_share: tuple[Any, Any, int] | None) -> None:
+    """Process-pool initializer: one thread per worker, import ``modules`` ahead, then take
+    a share of the kernels (``kernel_share``: :func:`_compile_kernels_together`'s counters
+    and the number of workers; None: each on first use).
 
     Ctrl-C reaches every process of the terminal's group; only the main process handles it
     (it stops the pool), so a worker ignores it instead of printing its own traceback. A
@@ -221,6 +229,10 @@ class WorkerPool:
     start-up, then hand the pool to :func:`run_parallel` (through ``evaluate(pool=...)``),
     which shuts it down.
     :meth:`close` stops the workers of a pool that was not used (call it in a ``finally``).
+    With more than one worker, each takes a share of the simulator's kernels to compile or
+    load as it starts (:func:`_compile_kernels_together`): ``kernels_claimed`` counts the
+    kernels taken (plus one claim past the end per worker), ``kernels_finished`` the
+    workers done taking.
     """
 
     def __init__(self, n_workers: int, modules: Sequence[str] = ()) -> None:
@@ -230,8 +242,9 @@ class WorkerPool:
         context = multiprocessing.get_context("spawn")
         # One process per worker, each starting with a share of the kernels to compile.
         self.kernels_claimed = context.Value("i", 0)
-        kernel_share = ((self.kernels_claimed, context.Barrier(n_workers)) if n_workers > 1
-                        else None)
+        self.kernels_finished = context.Value("i", 0)
+        kernel_share = ((self.kernels_claimed, self.kernels_finished, n_workers)
+                        if n_workers > 1 else None)
         self.executor = concurrent.futures.ProcessPoolExecutor(
             max_workers=n_workers, mp_context=context,
             initializer=_init_worker, initargs=(os.getpid(), tuple(modules), kernel_share))
