@@ -10,7 +10,9 @@
 # lacks travel as wheels in .whl/ (ignored by git; name it in the run's carry), fetched here
 # for its Python 3.12 (versions of constraints.txt):
 #
-#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 #       --implementation cp --platform manylinux_2_17_x86_64 -d .whl #       gymnasium==1.4.0 pettingzoo==1.27.0 farama-notifications==0.0.6
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
+#       --implementation cp --platform manylinux_2_17_x86_64 -d .whl \
+#       gymnasium==1.4.0 pettingzoo==1.27.0 farama-notifications==0.0.6
 #
 # The toolkit itself is used from this checkout (PYTHONPATH), not installed, so the
 # machine's own torch serves.
