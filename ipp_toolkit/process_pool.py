@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any, Protocol
 
+from . import kernels
 from .planner_specs import PlannerSpec
 from .planners import (
     PlannerFactory,
@@ -168,8 +169,6 @@ def _compile_kernels_together(claimed: Any, finished: Any, workers: int,
         with claimed.get_lock():
             claimed.value += 1
             return claimed.value - 1
-
-    from . import kernels
 
     compiled = 0
     with contextlib.suppress(Exception):  # see above: the mission reports it
