@@ -7,13 +7,13 @@ from functools import partial
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.gain import CellGain, gains_by_altitude
-from ipp_toolkit.mapping import OUTCOME_WEIGHTINGS, expected_gain
+from ipp_toolkit.belief.gain import CellGain, gains_by_altitude
+from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
+from ipp_toolkit.belief.value_table import ValueTable
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
-from ipp_toolkit.sensor import Camera
-from ipp_toolkit.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS
-from ipp_toolkit.value_table import ValueTable
+from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS
+from ipp_toolkit.world.sensor import Camera
 
 __all__ = ["InformationGainPlanner", "PaperInformationGainPlanner", "expected_gain"]
 
@@ -45,7 +45,7 @@ class InformationGainPlanner(Planner):
     Cost: per agent and step the gain is looked up once over the union bounding box of the
     four horizontal candidates (they share the current altitude) and once over each of the
     up and down footprints. A cell's gain is a function of its log-odds, so it is computed
-    once per distinct log-odds value (:class:`~ipp_toolkit.value_table.ValueTable`, kept
+    once per distinct log-odds value (:class:`~ipp_toolkit.belief.value_table.ValueTable`, kept
     while the configuration is unchanged) and looked up by value. Each candidate's value is
     then a float64 slice sum of its box: with only four candidates per box that is ~20x
     cheaper than a summed-area table.
@@ -68,7 +68,7 @@ class InformationGainPlanner(Planner):
         overlap_discount: factor in [0, 1] on the gain of cells a heard lower-index teammate
             will already observe (0 = ignore them, 1 = no coordination).
         outcome_weighting: how the two readings are weighted in the expected gain, one of
-            :data:`ipp_toolkit.mapping.OUTCOME_WEIGHTINGS`: ``predictive`` (default) or
+            :data:`ipp_toolkit.belief.mapping.OUTCOME_WEIGHTINGS`: ``predictive`` (default) or
             ``belief``, the paper authors' form (see :class:`PaperInformationGainPlanner`).
     """
 

@@ -39,12 +39,12 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, MlpExtractor
 from torch import nn
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_from_dict, config_to_dict
-from ipp_toolkit.features import gain_plane_channels, option_gain_cells
+from ipp_toolkit.config.files import config_from_dict, config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
 from ipp_toolkit.planners import resolve_shipped
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.sim.features import gain_plane_channels, option_gain_cells
+from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = [
     "SB3RunConfig",
@@ -299,7 +299,7 @@ class GainPriorExtractor(SmallCNN):
 
     Output (B, features_dim + 6): the CNN's features, then ``gain(a) / max_a' gain(a')`` read
     from the ``gain`` planes at option a's waypoint
-    (:func:`~ipp_toolkit.features.option_gain_cells`; options outside the area read 0 and are
+    (:func:`~ipp_toolkit.sim.features.option_gain_cells`; options outside the area read 0 and are
     masked). :class:`GainPriorMlpExtractor` passes the
     six gains around the policy's hidden layer, so the action layer sees them linearly.
 

@@ -23,11 +23,11 @@ from typing import Any, Protocol
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
 
-from ipp_toolkit.config import EnvConfig, start_for_team_size
+from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
+from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.progress import report_interrupt
-from ipp_toolkit.settings import build_env_config, setting_line
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.sim.team import N_ACTIONS
 from ipp_toolkit.vec import make_sb3_vec_env
 
 from .ppo import (

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
 
 __all__ = ["RandomPlanner"]

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
 

@@ -37,11 +37,11 @@ from sb3_contrib.qrdqn.policies import QRDQNPolicy
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.dqn.policies import DQNPolicy
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_from_dict
-from ipp_toolkit.features import actor_plane_names
+from ipp_toolkit.config.files import config_from_dict
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.sim.features import actor_plane_names
+from ipp_toolkit.sim.team import N_ACTIONS
 
 from .ppo import CHECKPOINT_KIND as PPO_KIND
 from .ppo import TRAINING_KIND as PPO_TRAINING_KIND

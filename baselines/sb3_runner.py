@@ -33,10 +33,10 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from tqdm.auto import tqdm
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_from_dict
+from ipp_toolkit.config.files import config_from_dict
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import load_torch, save_torch, write_json
-from ipp_toolkit.process_pool import limit_blas_threads, retain_freed_memory
+from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 
 __all__ = ["RunFormat", "run_sb3_training", "progress_callback", "time_limit_callback",
            "checkpoint_callback"]
@@ -156,7 +156,8 @@ def run_sb3_training(
     """Train (fresh, or resumed from ``out_dir/checkpoint.pt``) and write ``out_dir/policy.pt``.
 
     The calling process is set up as a trainer for good: one torch and BLAS thread, and
-    (glibc) freed memory kept for reuse (:func:`~ipp_toolkit.process_pool.retain_freed_memory`).
+    (glibc) freed memory kept for reuse
+    (:func:`~ipp_toolkit.runs.process_pool.retain_freed_memory`).
 
     Args:
         out_dir: the run folder (created).

@@ -31,11 +31,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_to_dict
+from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import setting_line
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
-from ipp_toolkit.progress import report_interrupt
-from ipp_toolkit.settings import setting_line
+from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.vec import make_sb3_vec_env
 
 from .ppo import PPOTrainConfig, SB3RunConfig, config_from_record, config_record, save_policy

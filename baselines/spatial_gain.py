@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.gain import CellGain
-from ipp_toolkit.interest import InterestSmoother, interest_smoother
-from ipp_toolkit.mapping import interesting_gain
+from ipp_toolkit.belief.gain import CellGain
+from ipp_toolkit.belief.interest import InterestSmoother, interest_smoother
+from ipp_toolkit.belief.mapping import interesting_gain
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView
-from ipp_toolkit.sensor import Camera
+from ipp_toolkit.world.sensor import Camera
 
 from .information_gain import InformationGainPlanner
 
@@ -24,10 +24,11 @@ class SpatialGainPlanner(InformationGainPlanner):
     ``ig`` values a cell by its expected weighted-entropy reduction on the agent's local map,
     where cells are independent: a cell nobody measured is at the prior whatever surrounds
     it. This planner values a cell by ``pi(c) * interesting_gain(c)``: the entropy a reading
-    removes from the cell if it is interesting (:func:`~ipp_toolkit.mapping.interesting_gain`,
+    removes from the cell if it is interesting
+    (:func:`~ipp_toolkit.belief.mapping.interesting_gain`,
     the table's metric counts only interesting cells) times the probability that it is,
     estimated from its neighbourhood: the local map's probabilities smoothed by a Gaussian of
-    ``sigma`` metres (:mod:`ipp_toolkit.interest`). Having found part of a hotspot or a
+    ``sigma`` metres (:mod:`ipp_toolkit.belief.interest`). Having found part of a hotspot or a
     boundary, a UAV is drawn to the cells around it; regions measured as uninteresting lose
     their value. It uses only the agent's own local map, like ``ig``, and keeps ``ig``'s
     coordination rules (index order, heard lower-index teammates' next footprints discounted

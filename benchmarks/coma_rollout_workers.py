@@ -24,8 +24,8 @@ import torch  # noqa: E402
 from coma.config import preset  # noqa: E402
 from coma.parallel import RunSpec, make_workers, to_channels_last  # noqa: E402
 from coma.persistence import build_networks  # noqa: E402
-from ipp_toolkit.config import EnvConfig  # noqa: E402
-from ipp_toolkit.process_pool import limit_blas_threads  # noqa: E402
+from ipp_toolkit.config.schema import EnvConfig  # noqa: E402
+from ipp_toolkit.runs.process_pool import limit_blas_threads  # noqa: E402
 
 
 def main() -> None:

@@ -31,9 +31,9 @@ from coma.learner import make_optimisers, to_channels_last, update  # noqa: E402
 from coma.parallel import cpu_actor_state, resolve_device  # noqa: E402
 from coma.persistence import build_networks  # noqa: E402
 from coma.rollout import collect_rollout  # noqa: E402
-from ipp_toolkit.config import EnvConfig  # noqa: E402
-from ipp_toolkit.mission import MissionGeometry  # noqa: E402
-from ipp_toolkit.process_pool import limit_blas_threads, retain_freed_memory  # noqa: E402
+from ipp_toolkit.config.schema import EnvConfig  # noqa: E402
+from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory  # noqa: E402
+from ipp_toolkit.sim.mission import MissionGeometry  # noqa: E402
 
 
 def main() -> None:

@@ -40,8 +40,11 @@ def load_old(checkout: Path, workdir: Path) -> tuple[ModuleType, ModuleType, Mod
     """(config, mission, features) of the package ``checkout/ipp_toolkit``, imported as
     :data:`OLD_NAME` from a copy in ``workdir`` (kept: Numba's cache lives there)."""
     source = checkout / "ipp_toolkit"
-    if not (source / "mission.py").is_file():
-        raise SystemExit(f"--old {checkout}: no ipp_toolkit/mission.py there")
+    # the layered package (sim/, config/) or the flat one of earlier versions
+    names = (("config.schema", "sim.mission", "sim.features")
+             if (source / "sim" / "mission.py").is_file() else ("config", "mission", "features"))
+    if not (source / names[1].replace(".", "/")).with_suffix(".py").is_file():
+        raise SystemExit(f"--old {checkout}: no ipp_toolkit/sim/mission.py there")
     target = workdir / OLD_NAME
     if target.exists():
         shutil.rmtree(target)
@@ -50,7 +53,7 @@ def load_old(checkout: Path, workdir: Path) -> tuple[ModuleType, ModuleType, Mod
         (target / "data").symlink_to((source / "data").resolve())
     sys.path.insert(0, str(workdir))
     return tuple(importlib.import_module(f"{OLD_NAME}.{name}")  # type: ignore[return-value]
-                 for name in ("config", "mission", "features"))
+                 for name in names)
 
 
 def mission_list(text: str) -> list[int]:
@@ -78,9 +81,9 @@ def main() -> None:
     args = parser.parse_args()
     args.observe = args.observe or args.gain is not None
     args.workdir.mkdir(parents=True, exist_ok=True)
-    import ipp_toolkit.config as new_config
-    import ipp_toolkit.features as new_features
-    import ipp_toolkit.mission as new_mission
+    import ipp_toolkit.config.schema as new_config
+    import ipp_toolkit.sim.features as new_features
+    import ipp_toolkit.sim.mission as new_mission
 
     versions = {"old": load_old(args.old, args.workdir),
                 "new": (new_config, new_mission, new_features)}

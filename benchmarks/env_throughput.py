@@ -22,9 +22,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from ipp_toolkit.config import EnvConfig  # noqa: E402
-from ipp_toolkit.features import actor_observations, global_state  # noqa: E402
-from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
+from ipp_toolkit.config.schema import EnvConfig  # noqa: E402
+from ipp_toolkit.sim.features import actor_observations, global_state  # noqa: E402
+from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
 
 
 def random_valid(masks: np.ndarray, rng: np.random.Generator) -> np.ndarray:

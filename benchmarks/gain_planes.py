@@ -6,7 +6,7 @@
 
 Flies random valid missions and times, on one core, the ``gain`` planes of every agent after
 each step (start measurement included): once through the mission's incremental
-:class:`~ipp_toolkit.gain.FootprintGainCache` (what the ``coma_prior`` planner and training
+:class:`~ipp_toolkit.belief.gain.FootprintGainCache` (what the ``coma_prior`` planner and training
 pay) and once the footprint sums recomputed from the whole maps (the cost before the cache).
 """
 
@@ -21,11 +21,11 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from ipp_toolkit.config import EnvConfig  # noqa: E402
-from ipp_toolkit.features import gain_planes  # noqa: E402
-from ipp_toolkit.gain import recomputed_footprint_sums  # noqa: E402
-from ipp_toolkit.interest import interest_smoother  # noqa: E402
-from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
+from ipp_toolkit.belief.gain import recomputed_footprint_sums  # noqa: E402
+from ipp_toolkit.belief.interest import interest_smoother  # noqa: E402
+from ipp_toolkit.config.schema import EnvConfig  # noqa: E402
+from ipp_toolkit.sim.features import gain_planes  # noqa: E402
+from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
 
 
 def measure(config: EnvConfig, missions: int, incremental: bool, smoothing: float = 0.0) -> float:

@@ -24,9 +24,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from ipp_toolkit.config import EnvConfig  # noqa: E402
-from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
+from ipp_toolkit.config.schema import EnvConfig  # noqa: E402
 from ipp_toolkit.planners import Planner, make_planner, planner_views  # noqa: E402
+from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
 
 
 def run(planner: Planner, config: EnvConfig, geometry: MissionGeometry,

@@ -15,15 +15,15 @@ from __future__ import annotations
 import argparse
 import time
 
-from ipp_toolkit.evaluation import run_mission
-from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.config.settings import build_env_config
 from ipp_toolkit.planners import make_planner
-from ipp_toolkit.process_pool import (
+from ipp_toolkit.runs.evaluation import run_mission
+from ipp_toolkit.runs.process_pool import (
     limit_blas_threads,
     limit_torch_threads,
     retain_freed_memory,
 )
-from ipp_toolkit.settings import build_env_config
+from ipp_toolkit.sim.mission import MissionGeometry
 
 
 def main() -> None:
@@ -32,7 +32,7 @@ def main() -> None:
     parser.add_argument("--missions", type=int, default=20)
     args = parser.parse_args()
     limit_blas_threads()
-    retain_freed_memory()  # as ipp_toolkit.process_pool's workers do
+    retain_freed_memory()  # as ipp_toolkit.runs.process_pool's workers do
     config = build_env_config(None)
     geometry = MissionGeometry(config)
     print(f"{args.missions} test missions per planner, one process; ms per mission")

@@ -3,7 +3,7 @@
 This module owns the command line of COMA training: its flags (:func:`build_parser`), the
 training defaults over the paper's mission (:data:`TRAINING_DEFAULTS`), how flags, a
 ``--config`` file and ``--set FIELD=VALUE`` become a :class:`~coma.config.COMAConfig` and an
-:class:`~ipp_toolkit.config.EnvConfig` (:func:`configs_from_args`; :func:`coerce_value` and
+:class:`~ipp_toolkit.config.schema.EnvConfig` (:func:`configs_from_args`; :func:`coerce_value` and
 :func:`int_list` also serve ``ipp-study``), and :func:`main` with its exit codes. ``--set``
 names a nested field with a dot (``--set warm_start.missions=100``); the older flat names
 (``--set warm_start_missions=100``) are still read (:func:`coma.config.nested_fields`).
@@ -27,17 +27,17 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import REMOVED_NAMES
-from ipp_toolkit.progress import report_interrupt
-from ipp_toolkit.ray_backend import add_backend_flags, check_backend_flags, probe
-from ipp_toolkit.settings import (
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import (
     build_env_config,
     merge_sections,
     parse_feature_flags,
     setting_line,
 )
+from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.planners import REMOVED_NAMES
+from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.runs.ray_backend import add_backend_flags, check_backend_flags, probe
 
 from .config import (
     PRECISIONS,
@@ -290,7 +290,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                "device": args.device}
     with contextlib.ExitStack() as stack:
         if args.backend == "ray":  # one Ray for every stage
-            from ipp_toolkit.ray_backend import session
+            from ipp_toolkit.runs.ray_backend import session
 
             try:
                 stack.enter_context(session(args.address, args.workers))

@@ -6,7 +6,8 @@ network, a warm start that imitates the ``ig`` planner before COMA improves on i
 exploration starts at eps = 0.1, and PPO's clipped surrogate with normalised counterfactual
 advantages for the actor; see the README for what each choice measured).
 The mission itself (team, world, features) is an
-:class:`~ipp_toolkit.config.EnvConfig`, kept separately and stored beside this in checkpoints.
+:class:`~ipp_toolkit.config.schema.EnvConfig`, kept separately and stored beside this in
+checkpoints.
 
 The warm start's settings are one nested section, :class:`WarmStartConfig` (``warm_start``);
 dicts, ``--set`` and :meth:`COMAConfig.replace` name its fields ``warm_start.missions`` or
@@ -24,7 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
-from ipp_toolkit.config import EnvConfig, start_for_team_size
+from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 
 __all__ = ["VARIANTS", "PRECISIONS", "PRESETS", "FLAT_NAMES", "WarmStartConfig", "COMAConfig",
            "from_dict", "nested_fields", "preset", "mission_settings"]

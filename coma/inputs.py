@@ -12,9 +12,9 @@ import dataclasses
 
 import numpy as np
 
-from ipp_toolkit.config import FeatureConfig
-from ipp_toolkit.features import actor_plane_names, critic_observations, critic_plane_names
-from ipp_toolkit.mission import MissionState
+from ipp_toolkit.config.schema import FeatureConfig
+from ipp_toolkit.sim.features import actor_plane_names, critic_observations, critic_plane_names
+from ipp_toolkit.sim.mission import MissionState
 
 __all__ = ["critic_channels", "value_channels", "critic_input", "value_input"]
 

@@ -12,7 +12,7 @@ start (``coma.warm_start``) imitates a planner first. Hyper-parameters live in
 ``coma.run_files`` keeps its progress log.
 
 Reproducibility: mission k of a run always has the same terrain and sensor noise
-(``ipp_toolkit.seeding``) and samples its actions from its own stream
+(``ipp_toolkit.world.seeding``) and samples its actions from its own stream
 (``coma.rollout.sampling_generator``); mini-batch shuffling draws from one torch Generator
 whose state is checkpointed, so an interrupted run resumed with ``resume=True`` continues
 exactly as if it had not stopped. The missions of an update may be flown by several workers
@@ -34,14 +34,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_to_dict
-from ipp_toolkit.features import actor_plane_names
+from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, write_json
-from ipp_toolkit.mission import MissionGeometry
-from ipp_toolkit.process_pool import limit_blas_threads, retain_freed_memory
-from ipp_toolkit.progress import progress_bar
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
+from ipp_toolkit.runs.progress import progress_bar
+from ipp_toolkit.sim.features import actor_plane_names
+from ipp_toolkit.sim.mission import MissionGeometry
+from ipp_toolkit.sim.team import N_ACTIONS
 
 from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from .config import COMAConfig, mission_settings
@@ -367,7 +367,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
             (the command line's ``setting:`` line); nothing when empty.
 
     The calling process is set up as a trainer for good: one torch and BLAS thread, and
-    (glibc) freed memory kept for reuse (:func:`~ipp_toolkit.process_pool.retain_freed_memory`:
+    (glibc) freed memory kept for reuse (:func:`~ipp_toolkit.runs.process_pool.retain_freed_memory`:
     an update's activations and a rollout's planes are tens of MB each, which glibc would
     otherwise hand back and fault in afresh, at least until its own threshold rises).
 

@@ -17,8 +17,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ipp_toolkit.features import option_gain_cells
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.sim.features import option_gain_cells
+from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bfloat16_hardware", "bounded_softmax", "epsilon_at",
            "greedy_actions", "in_input_layout", "learning_forward", "mixed_precision"]
@@ -158,7 +158,7 @@ class GainPriorActor(nn.Module):
     """Actor whose logits are a learned residual over the ``ig`` planner's objective.
 
     ``logits(u) = ConvNet(planes)(u) + beta * gain(u) / max_u' gain(u')``, where ``gain(u)`` is
-    read from the agent-centred ``gain`` planes (:func:`ipp_toolkit.features.gain_planes`) at
+    read from the agent-centred ``gain`` planes (:func:`ipp_toolkit.sim.features.gain_planes`) at
     option u's waypoint: the horizontal moves next to the centre of ``gain_level``, up and
     down at the centre of ``gain_up`` / ``gain_down``. The ConvNet's output layer starts at
     zero, so the starting greedy policy is the best option by expected gain (``ig``'s choice

@@ -16,7 +16,7 @@ machines of one kind: two CPU models may round the same network differently).
   copy of the actor when they are on a GPU.
 * :class:`ProcessWorkers` (``workers=K > 1``, the local backend): a "spawn" process pool kept
   for the whole run, each worker with one torch, BLAS and OpenMP thread
-  (``ipp_toolkit.process_pool``) and its own copy of the networks and geometries. A worker
+  (``ipp_toolkit.runs.process_pool``) and its own copy of the networks and geometries. A worker
   that dies (killed, out of memory) breaks the pool: a new pool flies the call's blocks again,
   up to :data:`MAX_RETRIES` times.
 * :class:`RayWorkers` (``backend="ray"``): K Ray actors of one CPU each, on a local Ray with K
@@ -41,16 +41,16 @@ from typing import Any
 
 import torch
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mission import MissionGeometry
-from ipp_toolkit.process_pool import (
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.runs.process_pool import (
     children_ignore_sigint,
     guard_worker,
     prepare_worker_process,
     single_thread_environment,
     stop_workers,
 )
-from ipp_toolkit.ray_backend import check_backend
+from ipp_toolkit.runs.ray_backend import check_backend
+from ipp_toolkit.sim.mission import MissionGeometry
 
 from .config import COMAConfig
 from .networks import ConvNet
@@ -64,7 +64,7 @@ __all__ = ["MAX_RETRIES", "RunSpec", "RolloutWorker", "Workers", "InProcess",
 
 MAX_RETRIES = 3
 """How often a call is flown again after a worker died (the local pool; Ray's own retries of
-an actor's call: ``ipp_toolkit.ray_backend.MAX_RETRIES``)."""
+an actor's call: ``ipp_toolkit.runs.ray_backend.MAX_RETRIES``)."""
 
 
 def to_channels_last(networks: COMANetworks) -> None:
@@ -361,8 +361,8 @@ class RayWorkers(Workers):
     """K Ray actors of one CPU each (``backend="ray"``)."""
 
     def __init__(self, spec: RunSpec, count: int, address: str | None = None):
-        from ipp_toolkit.ray_backend import MAX_RETRIES as RAY_RETRIES
-        from ipp_toolkit.ray_backend import connect
+        from ipp_toolkit.runs.ray_backend import MAX_RETRIES as RAY_RETRIES
+        from ipp_toolkit.runs.ray_backend import connect
 
         self.count = count
         self._cluster = connect(address, count)
@@ -432,7 +432,7 @@ def make_workers(spec: RunSpec, workers: int = 1, backend: str = "local",
     Raises:
         ValueError: ``workers`` below 1, an unknown backend, an address without Ray, or a
             Ray cluster with fewer CPUs than ``workers``.
-        ipp_toolkit.ray_backend.RayUnavailableError: Ray is not installed.
+        ipp_toolkit.runs.ray_backend.RayUnavailableError: Ray is not installed.
         ConnectionError: no Ray cluster answers at ``address``.
     """
     check_workers(workers, backend, address)
@@ -448,8 +448,8 @@ def check_workers(workers: int, backend: str, address: str | None) -> None:
 
     Raises:
         ValueError: ``workers`` below 1 or not an integer; a bad backend or address (as
-            :func:`ipp_toolkit.ray_backend.check_backend`).
-        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
+            :func:`ipp_toolkit.runs.ray_backend.check_backend`).
+        ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers = {workers!r}: must be an integer >= 1")

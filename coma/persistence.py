@@ -2,7 +2,7 @@
 
 A policy file holds the actor, the critic (the teaching examples need it) and, for
 ``central_qv``, the state-value critic, with the :class:`~coma.config.COMAConfig` and the
-mission's :class:`~ipp_toolkit.config.EnvConfig` as plain dicts. Training checkpoints add the
+mission's :class:`~ipp_toolkit.config.schema.EnvConfig` as plain dicts. Training checkpoints add the
 optimisers, the target critic, the sampling generator and the progress counters. Files are
 written atomically and read with ``torch.load(weights_only=True)``.
 
@@ -22,13 +22,13 @@ from typing import Any
 
 import torch
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_from_dict, config_to_dict
-from ipp_toolkit.features import actor_plane_names, gain_plane_channels
+from ipp_toolkit.config.files import config_from_dict, config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
 from ipp_toolkit.planners import check_policy_transfer as check_transfer
 from ipp_toolkit.planners import resolve_shipped
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.sim.features import actor_plane_names, gain_plane_channels
+from ipp_toolkit.sim.team import N_ACTIONS
 
 from .config import COMAConfig, from_dict
 from .inputs import critic_channels, value_channels

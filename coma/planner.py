@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 import torch
 
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
 
 from .config import mission_settings

@@ -5,7 +5,7 @@ actions, the behaviour policy's probabilities, rewards; :meth:`Rollout.concatena
 parts flown by several workers) and :func:`collect_rollout`, which plays E missions of B steps
 at once, sampling every agent's action from the bounded softmax of the actor (one forward
 pass per group of missions and step); the missions are reset and stepped by the mission
-driver (:mod:`ipp_toolkit.driver`), this module decides the actions and records the learner's
+driver (:mod:`ipp_toolkit.sim.driver`), this module decides the actions and records the learner's
 inputs. The learner (``coma.learner``) trains on rollouts,
 ``coma.parallel`` splits their missions over workers, the warm start (``coma.warm_start``)
 fills them with a demonstrator's actions, and the throughput benchmark times them.
@@ -31,13 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.driver import fly_missions, start_missions
-from ipp_toolkit.features import actor_observations
-from ipp_toolkit.mission import MissionGeometry, MissionState
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import Planner, planner_views
-from ipp_toolkit.seeding import planner_seed
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.sim.driver import fly_missions, start_missions
+from ipp_toolkit.sim.features import actor_observations
+from ipp_toolkit.sim.mission import MissionGeometry, MissionState
+from ipp_toolkit.sim.team import N_ACTIONS
+from ipp_toolkit.world.seeding import planner_seed
 
 from .inputs import critic_input, value_input
 from .networks import bounded_softmax
@@ -133,7 +133,7 @@ def actor_batches(first_mission: int, n_missions: int,
 def sampling_generator(seed: int, mission: int, namespace: str = "train") -> torch.Generator:
     """The torch Generator that samples the actions of mission ``mission`` of run ``seed``.
 
-    Seeded with the mission's planner stream (:func:`ipp_toolkit.seeding.planner_seed`: the
+    Seeded with the mission's planner stream (:func:`ipp_toolkit.world.seeding.planner_seed`: the
     actor is the planner that flies the mission), independent of its terrain, start, sensor
     and message streams, and of every other mission's.
     """
@@ -160,7 +160,7 @@ def collect_rollout(networks: COMANetworks, env_config: EnvConfig, geometry: Mis
     """Play ``n_missions`` missions in lock-step with the bounded-softmax policy.
 
     Missions ``first_mission ... first_mission + n_missions - 1`` of run ``seed`` are used, so
-    consecutive updates see fresh terrains; :func:`ipp_toolkit.driver.fly_missions` flies them,
+    consecutive updates see fresh terrains; :func:`ipp_toolkit.sim.driver.fly_missions` flies them,
     and the policy callback here records a step's inputs before the step. The actor runs once
     per step for all agents of each group of :func:`actor_batches`; the critic inputs are built
     with the joint action just sampled. Mission k draws its actions from its own stream

@@ -18,11 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 from torch import nn
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.driver import fly_missions, start_missions
-from ipp_toolkit.features import actor_observations
-from ipp_toolkit.mission import MissionGeometry, MissionState
-from ipp_toolkit.team import N_ACTIONS
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.sim.driver import fly_missions, start_missions
+from ipp_toolkit.sim.features import actor_observations
+from ipp_toolkit.sim.mission import MissionGeometry, MissionState
+from ipp_toolkit.sim.team import N_ACTIONS
 
 from .config import COMAConfig
 from .networks import greedy_actions
@@ -70,7 +70,7 @@ def fly_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometr
                first_mission: int, n_missions: int, namespace: str = "validation"
                ) -> GreedyFlights:
     """Fly missions ``first_mission .. first_mission + n_missions - 1`` of run ``seed`` in
-    lock-step (:func:`ipp_toolkit.driver.fly_missions`) with the greedy policy and record
+    lock-step (:func:`ipp_toolkit.sim.driver.fly_missions`) with the greedy policy and record
     each one (the actor scores the agents of each group of :func:`coma.rollout.actor_batches`
     together, so a mission's record does not depend on the missions flown beside it)."""
     features = env_config.features
@@ -145,9 +145,9 @@ def reference_scores(settings: Sequence[EnvConfig], seed: int, n_missions: int,
                      address: str | None = None) -> list[float]:
     """``planner``'s mean final entropy on the validation missions of each setting (the
     missions :func:`evaluate_greedy` flies), for ``selection = "worst_vs_ig"``; flown by
-    :func:`ipp_toolkit.evaluation.evaluate` with ``workers``, ``backend`` and ``address``
+    :func:`ipp_toolkit.runs.evaluation.evaluate` with ``workers``, ``backend`` and ``address``
     (the same numbers on any)."""
-    from ipp_toolkit.evaluation import evaluate
+    from ipp_toolkit.runs.evaluation import evaluate
 
     scores = []
     for config in settings:

@@ -26,10 +26,10 @@ from typing import Any
 import torch
 from torch import nn
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import make_planner
-from ipp_toolkit.progress import progress_bar
+from ipp_toolkit.runs.progress import progress_bar
+from ipp_toolkit.sim.mission import MissionGeometry
 
 from .advantages import td_lambda_targets
 from .config import WarmStartConfig

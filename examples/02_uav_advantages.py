@@ -29,9 +29,9 @@ from coma.advantages import counterfactual_advantage  # noqa: E402
 from coma.inputs import critic_input  # noqa: E402
 from coma.networks import bounded_softmax, greedy_actions  # noqa: E402
 from coma.persistence import load_policy, resolve_policy  # noqa: E402
-from ipp_toolkit.features import actor_observations  # noqa: E402
-from ipp_toolkit.mission import reset_mission, step_mission  # noqa: E402
-from ipp_toolkit.team import ACTION_DELTAS, ACTION_NAMES  # noqa: E402
+from ipp_toolkit.sim.features import actor_observations  # noqa: E402
+from ipp_toolkit.sim.mission import reset_mission, step_mission  # noqa: E402
+from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES  # noqa: E402
 
 
 def advantages_at(networks, state) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

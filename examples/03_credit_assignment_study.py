@@ -31,8 +31,8 @@ from coma.config import VARIANTS, COMAConfig
 from coma.learner import train
 from coma.persistence import load_policy
 from coma.validation import evaluate_greedy
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.sim.mission import MissionGeometry
 
 
 def small_mission() -> EnvConfig:

@@ -1,14 +1,27 @@
 """ipp-toolkit: multi-UAV adaptive informative path planning with multi-agent RL.
 
-The simulator core (config, terrain, sensor, mapping, team, mission, features) and its
-PettingZoo view (:class:`IPPEnv`). Learners, planners and reports build on this package;
-it imports none of them.
+The simulator and everything a planner or learner builds on; it imports none of them. Its
+subpackages are its layers, and imports flow down this list only:
+
+- :mod:`ipp_toolkit.config`: the mission's settings (dataclasses, YAML files, the builder);
+- :mod:`ipp_toolkit.world`: terrains and their families, the camera, random streams;
+- :mod:`ipp_toolkit.belief`: occupancy maps, entropy, expected gain, the prior of interest;
+- :mod:`ipp_toolkit.sim`: the mission core (team rules, reset, step, driver), feature planes,
+  rendering;
+- :mod:`ipp_toolkit.env` and :mod:`ipp_toolkit.vec`: the PettingZoo view and its SB3 view;
+- :mod:`ipp_toolkit.planners`: the planner interface, the per-UAV view and the registry;
+- :mod:`ipp_toolkit.runs`: the evaluation runner, result store, process pool and Ray backend.
+
+``ipp_toolkit._native`` holds the compiled (Numba) inner loops and ``ipp_toolkit.io`` the
+files that must never be half-written; both are used at every layer. Two imports still go up
+the list: the config checks terrain names against the world's registry (lazily), and the
+camera takes its footprint rectangle and the sensor's entropy from the belief layer.
 """
 
-from .config import EnvConfig
-from .config_io import load_config, save_config
+from .config.files import load_config, save_config
+from .config.schema import EnvConfig
 from .env import IPPEnv, parallel_env
-from .mission import InvalidActionError, MissionState, reset_mission, step_mission
+from .sim.mission import InvalidActionError, MissionState, reset_mission, step_mission
 
 __version__ = "0.1.0"
 

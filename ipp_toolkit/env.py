@@ -32,15 +32,15 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .config import EnvConfig
-from .features import (
+from .config.schema import EnvConfig
+from .sim.features import (
     actor_observations,
     actor_plane_names,
     critic_observations,
     global_state,
     state_plane_names,
 )
-from .mission import (
+from .sim.mission import (
     InvalidActionError,
     MissionGeometry,
     MissionState,
@@ -48,7 +48,7 @@ from .mission import (
     reset_mission,
     step_mission,
 )
-from .team import N_ACTIONS
+from .sim.team import N_ACTIONS
 
 __all__ = ["IPPEnv", "parallel_env"]
 
@@ -253,7 +253,7 @@ class IPPEnv(ParallelEnv):
             return None
         if self.mission is None:
             raise RuntimeError("call reset() before render()")
-        from .rendering import render_state
+        from .sim.rendering import render_state
 
         return render_state(self.mission)
 

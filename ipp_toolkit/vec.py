@@ -46,9 +46,9 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from .config import EnvConfig, check_int
+from .config.schema import EnvConfig, check_int
 from .env import IPPEnv
-from .team import N_ACTIONS
+from .sim.team import N_ACTIONS
 
 __all__ = ["IPPVecEnv", "INVALID_ACTION_POLICIES", "make_sb3_vec_env"]
 

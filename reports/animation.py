@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import atomic_write
-from ipp_toolkit.mission import MissionState
 from ipp_toolkit.planners import Planner
-from ipp_toolkit.rendering import render_state
+from ipp_toolkit.runs.evaluation import run_mission
+from ipp_toolkit.sim.mission import MissionState
+from ipp_toolkit.sim.rendering import render_state
 
 __all__ = ["animate_mission"]
 
@@ -24,7 +24,7 @@ def animate_mission(config: EnvConfig, planner: Planner, path: str | os.PathLike
     """Fly one mission with ``planner`` and write it as an animated GIF (one frame per step).
 
     Each frame shows the terrain, the team's global map with the UAVs and their footprints,
-    and every UAV's own map (:func:`ipp_toolkit.rendering.render_state`).
+    and every UAV's own map (:func:`ipp_toolkit.sim.rendering.render_state`).
 
     Args:
         config: the mission configuration.

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ipp_toolkit.config.settings import build_env_config, comm_label, parse_comm, setting_line
 from ipp_toolkit.env import IPPEnv
-from ipp_toolkit.progress import report_interrupt
-from ipp_toolkit.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
-from ipp_toolkit.settings import build_env_config, comm_label, parse_comm, setting_line
+from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.runs.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
 
 
 def _comm_range(text: str) -> float:
@@ -91,7 +91,7 @@ def simulate_main(argv: list[str] | None = None) -> int:
         rows.append({"step": env.mission.step, "reward": reward, **metrics})
         print(f"{env.mission.step:>4} {reward:8.3f} {metrics['entropy']:8.3f} "
               f"{metrics['f1']:6.3f} {metrics['rmse']:6.3f}")
-    from ipp_toolkit.rendering import save_png
+    from ipp_toolkit.sim.rendering import save_png
 
     save_png(env.render(), args.out / "final.png")
     tmp = args.out / "metrics.csv.tmp"

@@ -6,10 +6,10 @@ Example (a notebook)::
     comparison = compare(agents=4, comm=25.0, planners="ig,coverage,random", trials=20)
     comparison            # renders the Markdown table; comparison.plot("figs") draws
 
-:func:`compare` builds the :class:`~ipp_toolkit.config.EnvConfig` (the one builder,
-:func:`ipp_toolkit.settings.build_env_config`: keyword > config file > defaults),
+:func:`compare` builds the :class:`~ipp_toolkit.config.schema.EnvConfig` (the one builder,
+:func:`ipp_toolkit.config.settings.build_env_config`: keyword > config file > defaults),
 checks and builds every planner (:func:`resolve_planners`) before anything is written, runs
-:func:`ipp_toolkit.evaluation.evaluate` and summarises the rows; with ``out`` it also writes
+:func:`ipp_toolkit.runs.evaluation.evaluate` and summarises the rows; with ``out`` it also writes
 the tables and figures next to the raw results.
 """
 
@@ -25,7 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import build_env_config, format_comm, safe_name
 from ipp_toolkit.io import write_json
 from ipp_toolkit.planners import (
     Planner,
@@ -36,16 +37,15 @@ from ipp_toolkit.planners import (
     planner_modules,
     planners_in_process,
 )
-from ipp_toolkit.process_pool import WorkerPool
-from ipp_toolkit.ray_backend import check_backend
-from ipp_toolkit.result_store import shard_path, trajectory_path
-from ipp_toolkit.settings import build_env_config, format_comm, safe_name
+from ipp_toolkit.runs.process_pool import WorkerPool
+from ipp_toolkit.runs.ray_backend import check_backend
+from ipp_toolkit.runs.result_store import shard_path, trajectory_path
 
 from .tables import Summary, summarise, to_markdown, write_tables
 
 if TYPE_CHECKING:
-    from ipp_toolkit.evaluation import EvaluationResult
-    from ipp_toolkit.planner_specs import PlannerSpec
+    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.runs.evaluation import EvaluationResult
 
 __all__ = [
     "Comparison",
@@ -58,7 +58,8 @@ __all__ = [
 ]
 
 build_config = build_env_config
-"""The one config builder (:func:`ipp_toolkit.settings.build_env_config`) under its old name."""
+"""The one config builder (:func:`ipp_toolkit.config.settings.build_env_config`) under its old
+name."""
 
 
 def draw_trajectory(out_dir: Path, config: EnvConfig, label: str, mission: int,
@@ -236,7 +237,7 @@ def _listed_items(planners: str | Sequence[str | PlannerSpec]) -> list[str | Pla
 
 def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
                     note: Callable[[str], None] | None) -> list[tuple[PlannerSpec, Planner]]:
-    from ipp_toolkit.planner_specs import PlannerSpec
+    from ipp_toolkit.planners.specs import PlannerSpec
 
     keyword = _planner_keyword(planners)
     if keyword is not None:
@@ -347,7 +348,7 @@ def compare(agents: int | None = None, comm: float | None = None,
     Args:
         agents, comm, terrain, threshold, config, resolution, budget, area_size,
             grid_spacing: the configuration, see
-            :func:`ipp_toolkit.settings.build_env_config` (None: the config's value, else the
+            :func:`ipp_toolkit.config.settings.build_env_config` (None: the config's value, else the
             paper's: 4 UAVs, D = 25 m, ``split``).
         planners: see :func:`resolve_planners`; None: every available registered planner.
         trials: number of test missions (>= 1).
@@ -365,7 +366,7 @@ def compare(agents: int | None = None, comm: float | None = None,
         namespace: ``test`` (the held-out missions) or ``validation`` (the missions to select
             policies and settings on; never select on test missions).
         backend: ``"local"`` (processes on this machine) or ``"ray"`` (one Ray task per
-            mission; the same results), see :func:`ipp_toolkit.evaluation.evaluate`.
+            mission; the same results), see :func:`ipp_toolkit.runs.evaluation.evaluate`.
         address: with ``backend="ray"``, the Ray cluster (``HOST:PORT`` of its head); None
             starts a local Ray for the run. A process already connected to Ray (a study's
             :func:`reports.studies.backend_session`, or ``ray.init`` by the caller) uses
@@ -376,9 +377,9 @@ def compare(agents: int | None = None, comm: float | None = None,
 
     Raises:
         ValueError: bad input, checked before anything is written;
-            ``ipp_toolkit.evaluation.EvaluationError`` (a ValueError) when ``out`` holds
+            ``ipp_toolkit.runs.evaluation.EvaluationError`` (a ValueError) when ``out`` holds
             results of another configuration.
-        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
+        ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
         ConnectionError: no Ray cluster answers at ``address``.
     """
     if isinstance(trials, bool) or int(trials) != trials or trials < 1:
@@ -418,7 +419,7 @@ def compare(agents: int | None = None, comm: float | None = None,
                                                       note or _print_note)
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
-        from ipp_toolkit.evaluation import evaluate
+        from ipp_toolkit.runs.evaluation import evaluate
 
         drawn: set[tuple[str, int]] = set()
 
@@ -458,7 +459,7 @@ def compare(agents: int | None = None, comm: float | None = None,
 def _requested_specs(planners: str | Sequence[str | PlannerSpec] | None) -> list[PlannerSpec]:
     """The planners ``planners`` asks for, as far as they parse, unbuilt (to warm the workers
     and to see what is stored already; a keyword's planners as if all were available)."""
-    from ipp_toolkit.planner_specs import PlannerSpec
+    from ipp_toolkit.planners.specs import PlannerSpec
 
     keyword = _planner_keyword(planners)
     if keyword is not None:

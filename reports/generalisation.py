@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.ray_backend import check_backend
-from ipp_toolkit.settings import comm_label, format_comm
-from ipp_toolkit.terrain_families import real_raster_names
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import comm_label, format_comm
+from ipp_toolkit.runs.ray_backend import check_backend
+from ipp_toolkit.world.families import real_raster_names
 
 from .compare import DEFAULT_PLANNERS, compare
 from .plots import _colour, _new_figure, save_figure
@@ -194,10 +194,10 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
     Raises:
         ValueError: bad input (an unknown planner, no reference among the planners), checked
             on the first cell before anything is written.
-        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
+        ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
         ConnectionError: no Ray cluster answers at ``address``.
     """
-    from ipp_toolkit.planner_specs import PlannerSpec
+    from ipp_toolkit.planners.specs import PlannerSpec
 
     check_backend(backend, address)
     names = planners.split(",") if isinstance(planners, str) else list(planners)

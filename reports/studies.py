@@ -10,7 +10,7 @@ UAVs at 25 m flies 2 and 8 UAVs at 0, 25 m and infinite range without retraining
 validation missions.
 
 Every study runs on the ``local`` backend (processes on this machine) or on ``ray``
-(:mod:`ipp_toolkit.ray_backend`): one Ray for the whole study (:func:`backend_session`), every
+(:mod:`ipp_toolkit.runs.ray_backend`): one Ray for the whole study (:func:`backend_session`), every
 mission flown as a Ray task as by ``ipp-compare --backend ray``, every training run one Ray
 task (one CPU) that resumes its folder when retried or run again.
 """
@@ -27,17 +27,17 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_to_dict
-from ipp_toolkit.ray_backend import check_backend
-from ipp_toolkit.settings import build_env_config, comm_label
+from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import build_env_config, comm_label
+from ipp_toolkit.runs.ray_backend import check_backend
 
 from .compare import compare
 from .plots import _colour, _new_figure, save_figure
 from .tables import Summary, atomic_write_text
 
 if TYPE_CHECKING:
-    from ipp_toolkit.ray_backend import RayCluster
+    from ipp_toolkit.runs.ray_backend import RayCluster
 
 __all__ = ["Setting", "RobustnessStudy", "robustness_study", "CreditStudy",
            "credit_assignment_study", "ablation_study", "seed_table", "ABLATIONS",
@@ -53,14 +53,14 @@ def backend_session(backend: str, address: str | None,
     study and shut down (disconnected) at its end; the evaluations inside reuse it.
 
     Raises:
-        as :func:`ipp_toolkit.ray_backend.check_backend`; ConnectionError: no Ray cluster
+        as :func:`ipp_toolkit.runs.ray_backend.check_backend`; ConnectionError: no Ray cluster
         answers at ``address``.
     """
     check_backend(backend, address)
     if backend == "local":
         yield None
         return
-    from ipp_toolkit.ray_backend import session
+    from ipp_toolkit.runs.ray_backend import session
 
     with session(address, workers) as cluster:
         yield cluster
@@ -232,7 +232,7 @@ def train_run(task: tuple[str, dict, dict, str, bool]) -> str:
 
     from coma.config import preset
     from coma.learner import train
-    from ipp_toolkit.config_io import config_from_dict
+    from ipp_toolkit.config.files import config_from_dict
 
     _label, coma_values, env_values, folder, progress = task
     torch.set_num_threads(1)
@@ -266,7 +266,7 @@ def train_runs(tasks: list[TrainTask], workers: int, cluster: RayCluster | None 
     import multiprocessing
     import os
 
-    from ipp_toolkit.process_pool import guard_worker
+    from ipp_toolkit.runs.process_pool import guard_worker
 
     if cluster is not None:
         return _train_on_ray(tasks, cluster, progress, run)
@@ -284,8 +284,8 @@ def train_runs(tasks: list[TrainTask], workers: int, cluster: RayCluster | None 
 def _train_on_ray(tasks: list[TrainTask], cluster: RayCluster, progress: bool,
                   run: Callable[[TrainTask], Any]) -> dict[str, Path]:
     """The Ray case of :func:`train_runs`."""
-    from ipp_toolkit.progress import progress_bar
-    from ipp_toolkit.ray_backend import run_calls
+    from ipp_toolkit.runs.progress import progress_bar
+    from ipp_toolkit.runs.ray_backend import run_calls
 
     quiet = [(label, values, env, folder, False)  # worker output is not forwarded
              for label, values, env, folder, _ in tasks]
@@ -372,7 +372,7 @@ def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str,
 
     With several training ``seeds``, the text starts with :func:`seed_table` over ``runs``.
     """
-    from ipp_toolkit.planner_specs import PlannerSpec
+    from ipp_toolkit.planners.specs import PlannerSpec
 
     specs = [PlannerSpec("coma", {"checkpoint": str(path)}, label=label)
              for label, path in policies.items()]
@@ -492,7 +492,7 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
     """
     from dataclasses import fields
 
-    from ipp_toolkit.config import FeatureConfig
+    from ipp_toolkit.config.schema import FeatureConfig
 
     switches = {f.name for f in fields(FeatureConfig) if f.type in (bool, "bool")}
     unknown = sorted(set(ablations) - switches - set(ABLATIONS))

@@ -39,11 +39,11 @@ from typing import Any
 
 import numpy as np
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_to_dict
+from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import build_env_config, describe_config, safe_name
 from ipp_toolkit.io import write_json
-from ipp_toolkit.ray_backend import check_backend
-from ipp_toolkit.settings import build_env_config, describe_config, safe_name
+from ipp_toolkit.runs.ray_backend import check_backend
 
 from .compare import compare
 from .studies import (
@@ -473,7 +473,7 @@ def sweep_study(sweep: Mapping[str, Sequence[tuple[str, Any]]] | Sequence[str],
         ValueError: bad input (see :func:`sweep_grid`; a scoring seed among the training
             seeds, a run folder holding another run), checked before anything is written.
     """
-    from ipp_toolkit.planner_specs import PlannerSpec
+    from ipp_toolkit.planners.specs import PlannerSpec
 
     grid_values = parse_sweep(sweep) if _is_items(sweep) else dict(sweep)  # type: ignore[arg-type]
     seeds = list(seeds)

@@ -1,6 +1,6 @@
 """Summary tables of an evaluation: the paper's Table I from tidy per-step rows.
 
-:func:`summarise` reduces the rows of :func:`ipp_toolkit.evaluation.evaluate` (one per planner,
+:func:`summarise` reduces the rows of :func:`ipp_toolkit.runs.evaluation.evaluate` (one per planner,
 mission and step) to mean and standard deviation per planner and metric at 33 / 67 / 100 % of
 the budget, plus the mean planning time per step. The writers render a :class:`Summary` as
 Markdown, CSV or LaTeX (pure functions returning strings); :func:`write_tables` writes all
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from ipp_toolkit.config.settings import format_comm
 from ipp_toolkit.io import atomic_write
-from ipp_toolkit.settings import format_comm
 
 __all__ = [
     "Stat",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from helpers import small_config
 
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
 
 
 @pytest.fixture

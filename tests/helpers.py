@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from coma.config import COMAConfig
-from ipp_toolkit.config import EnvConfig, start_for_team_size
+from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 
 
 def small_config(n_agents: int = 4, comm_range: float = 25.0, resolution: float = 0.5,
@@ -64,7 +64,7 @@ def page_faults_of_reallocation(setup: str = "") -> int:
     """Page faults of a fresh interpreter that runs ``setup`` (Python code), then frees and
     allocates again ten times arrays the size of a rollout's planes, an activation and a
     gradient (25, 7.5 and 2.5 MB): about 0 where freed memory is kept for reuse
-    (:func:`ipp_toolkit.process_pool.retain_freed_memory`), about 1,800 with glibc's defaults.
+    (:func:`ipp_toolkit.runs.process_pool.retain_freed_memory`), about 1,800 with glibc's defaults.
     """
     done = subprocess.run([sys.executable, "-c", setup + "\n" + _CHURN], capture_output=True,
                           text=True, timeout=300)

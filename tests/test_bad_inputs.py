@@ -115,7 +115,7 @@ def test_resume_without_a_run_is_refused(tmp_path, capsys, trainer):
 
 
 def test_unknown_reset_option_is_named():
-    from ipp_toolkit.config import EnvConfig
+    from ipp_toolkit.config.schema import EnvConfig
     from ipp_toolkit.env import IPPEnv
 
     env = IPPEnv(EnvConfig().replace(world={"resolution": 1.0}))
@@ -300,7 +300,7 @@ def test_a_worker_starting_after_its_main_process_died_exits_at_once():
     import subprocess
     import sys
 
-    script = ("import os, time; from ipp_toolkit.process_pool import guard_worker; "
+    script = ("import os, time; from ipp_toolkit.runs.process_pool import guard_worker; "
               "guard_worker(os.getppid() + 1 if os.getppid() > 1 else 2); time.sleep(30)")
     finished = subprocess.run([sys.executable, "-c", script], timeout=20)
     assert finished.returncode == 1
@@ -351,7 +351,7 @@ def test_compare_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, argv, me
     (": : :\n", "not valid YAML"),
 ])
 def test_bad_config_files_name_the_key_and_the_file(tmp_path, text, message):
-    from ipp_toolkit.config_io import load_config
+    from ipp_toolkit.config.files import load_config
 
     path = _yaml_file(tmp_path, text)
     with pytest.raises(ValueError, match=message) as error:
@@ -373,10 +373,10 @@ def test_bad_config_files_name_the_key_and_the_file(tmp_path, text, message):
     ("IPPEnv(EnvConfig()).reset(seed=0, options={'mission': -1})", "mission"),
 ])
 def test_python_api_bad_input_raises_value_error_naming_it(call, message):
-    from ipp_toolkit.config import EnvConfig  # noqa: F401 - used by the calls
+    from ipp_toolkit.config.schema import EnvConfig  # noqa: F401 - used by the calls
     from ipp_toolkit.env import IPPEnv  # noqa: F401
-    from ipp_toolkit.evaluation import evaluate  # noqa: F401
     from ipp_toolkit.planners import make_planner  # noqa: F401
+    from ipp_toolkit.runs.evaluation import evaluate  # noqa: F401
     from ipp_toolkit.vec import make_sb3_vec_env  # noqa: F401
 
     with pytest.raises(ValueError, match=message):
@@ -386,8 +386,8 @@ def test_python_api_bad_input_raises_value_error_naming_it(call, message):
 def test_a_raster_with_only_nodata_is_refused(tmp_path):
     import numpy as np
 
-    from ipp_toolkit.config import EnvConfig
-    from ipp_toolkit.mission import reset_mission
+    from ipp_toolkit.config.schema import EnvConfig
+    from ipp_toolkit.sim.mission import reset_mission
 
     path = tmp_path / "empty.npy"
     np.save(path, np.full((64, 64), np.nan))

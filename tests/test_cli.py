@@ -29,8 +29,8 @@ def _have(module: str) -> bool:
         return False
 
 
-needs_evaluation = pytest.mark.skipif(not _have("ipp_toolkit.evaluation"),
-                                      reason="ipp_toolkit.evaluation is not written yet")
+needs_evaluation = pytest.mark.skipif(not _have("ipp_toolkit.runs.evaluation"),
+                                      reason="ipp_toolkit.runs.evaluation is not written yet")
 needs_baselines = pytest.mark.skipif(
     not (_have("baselines.random_planner") and _have("baselines.coverage")),
     reason="the baseline planners random and coverage are not written yet")
@@ -130,7 +130,7 @@ def test_unknown_planner_exits_2_and_lists_registered(capsys, tmp_path):
 def test_an_unknown_planner_is_refused_before_workers_start_listing_this_process_planners(
         capsys, tmp_path, monkeypatch):
     import ipp_toolkit.planners as planners_module
-    from ipp_toolkit import process_pool
+    from ipp_toolkit.runs import process_pool
 
     def no_pool(*args, **kwargs):
         raise AssertionError("a worker pool was started for a run that is refused")

@@ -18,9 +18,9 @@ from coma.learner import TrainingDiverged, setting_of_update, train
 from coma.persistence import check_transfer, load_policy
 from coma.planner import COMAPlanner
 from coma.rollout import collect_rollout
-from ipp_toolkit.evaluation import run_mission
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.runs.evaluation import run_mission
+from ipp_toolkit.sim.mission import MissionGeometry
 from reports.cli import train_main
 
 
@@ -196,9 +196,9 @@ def test_nan_loss_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch
     config, env = tiny_coma(missions=6), tiny_env()
     train(config, env, tmp_path, progress=False, tensorboard=False, max_updates=1)
     before = (tmp_path / "last.pt").read_bytes()
-    import ipp_toolkit.driver  # the mission loop of COMA's rollouts
+    import ipp_toolkit.sim.driver  # the mission loop of COMA's rollouts
 
-    monkeypatch.setattr(ipp_toolkit.driver, "step_mission", lambda state, actions: float("nan"))
+    monkeypatch.setattr(ipp_toolkit.sim.driver, "step_mission", lambda state, actions: float("nan"))
     with pytest.raises(TrainingDiverged, match=r"critic loss is nan at update 2.*update 1"):
         train(config, env, tmp_path, resume=True, progress=False, tensorboard=False)
     assert (tmp_path / "last.pt").read_bytes() == before
@@ -332,7 +332,7 @@ def test_shipped_policies_load_by_name_and_fly(name):
 
 def test_cli_agents_keeps_the_configs_start_choice(tmp_path):
     from coma.cli import build_parser, configs_from_args
-    from ipp_toolkit.config_io import config_to_dict
+    from ipp_toolkit.config.files import config_to_dict
 
     random_starts = config_to_dict(tiny_env().replace(team={"start": "random"}))
     path = tmp_path / "mission.yaml"
@@ -374,7 +374,7 @@ def test_critic_warmup_leaves_the_actor_alone(tmp_path):
 
 def test_gain_prior_actor_reads_each_options_waypoint():
     from coma.networks import GainPriorActor
-    from ipp_toolkit.team import ACTION_DELTAS
+    from ipp_toolkit.sim.team import ACTION_DELTAS
 
     actor = GainPriorActor(5, 11, (2, 3, 4), width=8, hidden=16, beta=50.0)
     c = 5
@@ -396,9 +396,9 @@ def test_gain_prior_policy_starts_at_the_best_expected_gain(tmp_path):
 
     from coma.networks import greedy_actions
     from coma.persistence import build_networks
-    from ipp_toolkit.features import actor_observations, footprint_gain
-    from ipp_toolkit.mission import reset_mission, step_mission
-    from ipp_toolkit.team import ACTION_DELTAS
+    from ipp_toolkit.sim.features import actor_observations, footprint_gain
+    from ipp_toolkit.sim.mission import reset_mission, step_mission
+    from ipp_toolkit.sim.team import ACTION_DELTAS
 
     env = tiny_env(4).replace(features={"gain": True})
     config = tiny_coma(gain_prior=30.0, missions=2)
@@ -429,8 +429,8 @@ def test_gain_prior_policy_starts_at_the_best_expected_gain(tmp_path):
 def test_residual_penalty_keeps_the_gain_prior_actor_near_its_prior(tmp_path):
     import torch
 
-    from ipp_toolkit.features import actor_observations
-    from ipp_toolkit.mission import reset_mission
+    from ipp_toolkit.sim.features import actor_observations
+    from ipp_toolkit.sim.mission import reset_mission
 
     env = tiny_env(4).replace(features={"gain": True})
     sizes = {}
@@ -501,9 +501,9 @@ def test_coma_sees_what_the_pettingzoo_env_shows_on_the_same_missions():
     missions and actions must give the same actor planes, critic planes, masks and rewards."""
     from coma.persistence import build_networks
     from coma.rollout import collect_rollout
-    from ipp_toolkit.config import EnvConfig
+    from ipp_toolkit.config.schema import EnvConfig
     from ipp_toolkit.env import IPPEnv
-    from ipp_toolkit.mission import MissionGeometry
+    from ipp_toolkit.sim.mission import MissionGeometry
 
     config = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 2},
                                  terrain={"kind": "blobs"},

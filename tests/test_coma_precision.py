@@ -18,9 +18,9 @@ from coma.networks import ConvNet, bfloat16_hardware, learning_forward, mixed_pr
 from coma.persistence import build_networks, load_policy
 from coma.planner import COMAPlanner
 from coma.rollout import collect_rollout
-from ipp_toolkit.evaluation import run_mission
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.runs.evaluation import run_mission
+from ipp_toolkit.sim.mission import MissionGeometry
 from reports.cli import train_main
 
 

@@ -39,8 +39,8 @@ from coma.persistence import build_networks, load_policy
 from coma.rollout import ACTOR_BATCH_MISSIONS, Rollout, actor_batches, collect_rollout
 from coma.run_files import saved_update
 from coma.validation import GreedyFlights, evaluate_greedy, fly_greedy
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mission import MissionGeometry
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.sim.mission import MissionGeometry
 
 HAS_RAY = importlib.util.find_spec("ray") is not None
 TIMING = ("transitions_per_s", "wall_s")
@@ -326,7 +326,7 @@ def ray_cluster():
         pytest.skip('Ray is not installed (pip install -c constraints.txt -e ".[ray]")')
     import ray
 
-    from ipp_toolkit.ray_backend import start_local
+    from ipp_toolkit.runs.ray_backend import start_local
 
     start_local(2)
     try:
@@ -415,7 +415,7 @@ def test_the_trainer_process_keeps_freed_memory_for_reuse(tmp_path):
     setup = f"""
 from coma.config import COMAConfig
 from coma.learner import train
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
 env = EnvConfig().replace(world={{"resolution": 1.0}}, team={{"n_agents": 2, "budget": 3}})
 coma = COMAConfig(width=8, hidden=16, missions=2, missions_per_update=2, minibatch_size=40,
                   epochs=1, eval_every=1, eval_missions=1, checkpoint_every=1,

@@ -2,8 +2,8 @@ import math
 
 import pytest
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import config_to_dict, load_config, save_config
+from ipp_toolkit.config.files import config_to_dict, load_config, save_config
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.env import IPPEnv
 
 
@@ -80,7 +80,7 @@ def test_env_rejects_non_config():
 
 
 def test_altitudes_are_independent_of_the_waypoint_spacing_and_fixed_starts_snap():
-    from ipp_toolkit.config import fixed_start_waypoints
+    from ipp_toolkit.config.schema import fixed_start_waypoints
 
     # The paper's real-world field: 40 m at r_M = 8 cm, waypoints every 4 m, levels 5/10/15 m.
     field = EnvConfig().replace(world={"area_size": 40.0, "resolution": 0.08,
@@ -101,8 +101,10 @@ def test_altitudes_are_independent_of_the_waypoint_spacing_and_fixed_starts_snap
 
 def test_the_yaml_functions_still_import_from_config_and_unknown_names_fail():
     import ipp_toolkit.config as config
-    import ipp_toolkit.config_io as config_io
-    from ipp_toolkit.config import load_config as old_path  # scripts written before the split
+    import ipp_toolkit.config.files as config_io
+    from ipp_toolkit.config import (
+        load_config as old_path,  # scripts written before the split
+    )
 
     assert old_path is config_io.load_config
     assert config.config_to_dict is config_io.config_to_dict

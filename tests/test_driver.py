@@ -1,7 +1,7 @@
-"""The mission driver (ipp_toolkit.driver), and COMA's observations against IPPEnv's.
+"""The mission driver (ipp_toolkit.sim.driver), and COMA's observations against IPPEnv's.
 
 COMA's rollouts fly their missions through the driver and build the actor planes with
-``ipp_toolkit.features.actor_observations``; the PettingZoo view (``IPPEnv``) steps the same
+``ipp_toolkit.sim.features.actor_observations``; the PettingZoo view (``IPPEnv``) steps the same
 ``MissionState`` one step at a time. Replaying a rollout's actions in the env must show every
 agent, at every step, the very planes and masks the rollout recorded (and give the same
 rewards). The one documented difference: the env's ``keep_failed`` view zeroes a failed UAV's
@@ -19,11 +19,11 @@ from helpers import random_valid_actions, small_config
 from coma.config import COMAConfig
 from coma.persistence import build_networks
 from coma.rollout import Rollout, collect_rollout
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.driver import fly_missions, start_missions
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.env import IPPEnv
-from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
 from ipp_toolkit.planners import make_planner
+from ipp_toolkit.sim.driver import fly_missions, start_missions
+from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission
 
 SEED, FIRST, MISSIONS = 5, 3, 2
 

@@ -8,8 +8,8 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from ipp_toolkit.env import IPPEnv
-from ipp_toolkit.features import actor_plane_names, critic_plane_names, state_plane_names
-from ipp_toolkit.mission import InvalidActionError
+from ipp_toolkit.sim.features import actor_plane_names, critic_plane_names, state_plane_names
+from ipp_toolkit.sim.mission import InvalidActionError
 
 TEAMS = [2, 4, 8]
 RANGES = [0.0, 25.0, math.inf]

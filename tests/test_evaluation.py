@@ -1,4 +1,4 @@
-"""Tests of the evaluation runner (``ipp_toolkit.evaluation``)."""
+"""Tests of the evaluation runner (``ipp_toolkit.runs.evaluation``)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,9 @@ import numpy as np
 import pytest
 from helpers import page_faults_of_reallocation, small_config
 
-from ipp_toolkit.evaluation import (
+from ipp_toolkit.planners import Planner, available_planners, planner_modules, register_planner
+from ipp_toolkit.planners.specs import PlannerSpec
+from ipp_toolkit.runs.evaluation import (
     RESULT_COLUMNS,
     EvaluationError,
     EvaluationResult,
@@ -24,11 +26,9 @@ from ipp_toolkit.evaluation import (
     load_results,
     run_mission,
 )
-from ipp_toolkit.mission import reset_mission
-from ipp_toolkit.planner_specs import PlannerSpec
-from ipp_toolkit.planners import Planner, available_planners, planner_modules, register_planner
-from ipp_toolkit.process_pool import WorkerPool
-from ipp_toolkit.seeding import planner_seed
+from ipp_toolkit.runs.process_pool import WorkerPool
+from ipp_toolkit.sim.mission import reset_mission
+from ipp_toolkit.world.seeding import planner_seed
 
 BUDGET = 4
 
@@ -535,9 +535,9 @@ def _python(code: str, *args: str) -> str:
 def test_a_worker_freezes_what_its_first_mission_with_a_planner_loaded():
     code = """
 import gc, sys
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import _Entry, _Runner
-from ipp_toolkit.planner_specs import PlannerSpec
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.runs.evaluation import _Entry, _Runner
+from ipp_toolkit.planners.specs import PlannerSpec
 config = EnvConfig().replace(world={"resolution": 0.5}, team={"budget": 3})
 entries = {name: _Entry(PlannerSpec.parse(name)) for name in ("random", "coverage")}
 runner = _Runner(config, 0, "test", entries, frozenset(), single_thread=sys.argv[1] == "worker")
@@ -559,10 +559,10 @@ print(*counts)
 def test_a_worker_reuses_freed_memory_without_new_page_faults():
     code = """
 import resource, sys
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.runs.evaluation import run_mission
 from ipp_toolkit.planners import make_planner
-from ipp_toolkit.process_pool import retain_freed_memory
+from ipp_toolkit.runs.process_pool import retain_freed_memory
 if sys.argv[1] == "retain":
     assert retain_freed_memory()
 config = EnvConfig().replace(team={"budget": 3})  # r_M = 0.1 m: 500 x 500 maps
@@ -582,10 +582,10 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
                     reason="retain_freed_memory sets glibc's allocator")
 @pytest.mark.parametrize("setup", [
     # an evaluation pool process, as its initializer leaves it
-    "import os\nfrom ipp_toolkit.process_pool import _init_worker\n"
+    "import os\nfrom ipp_toolkit.runs.process_pool import _init_worker\n"
     "_init_worker(os.getppid(), (), None)",
     # a Ray worker, as its first mission task of an evaluation leaves it (Ray not needed)
-    "import types\nfrom ipp_toolkit.ray_backend import _prepared\n"
+    "import types\nfrom ipp_toolkit.runs.ray_backend import _prepared\n"
     "assert _prepared(types.SimpleNamespace()).single_thread",
 ], ids=["pool", "ray"])
 def test_every_mission_worker_keeps_freed_memory_for_reuse(setup):

@@ -5,8 +5,8 @@ import pytest
 from helpers import random_valid_actions, small_config
 
 from ipp_toolkit.env import IPPEnv
-from ipp_toolkit.evaluation import evaluate
-from ipp_toolkit.mission import reset_mission, step_mission
+from ipp_toolkit.runs.evaluation import evaluate
+from ipp_toolkit.sim.mission import reset_mission, step_mission
 
 
 @pytest.mark.parametrize("team, match", [
@@ -52,7 +52,7 @@ def test_a_failed_uav_stops_moving_sensing_and_communicating():
 
 
 def test_a_failed_uav_holds_no_cell():
-    from ipp_toolkit.team import ACTION_NAMES, action_masks, resolve_moves
+    from ipp_toolkit.sim.team import ACTION_NAMES, action_masks, resolve_moves
 
     east = ACTION_NAMES.index("east")
     positions = np.array([[2, 2, 0], [3, 2, 0]])  # agent 0 next to agent 1, east of it
@@ -151,7 +151,7 @@ def test_stop_workers_ends_running_tasks_and_the_manager_thread_at_once():
     import multiprocessing
     import time
 
-    from ipp_toolkit.process_pool import stop_workers
+    from ipp_toolkit.runs.process_pool import stop_workers
 
     executor = concurrent.futures.ProcessPoolExecutor(
         max_workers=1, mp_context=multiprocessing.get_context("spawn"))

@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 from helpers import random_valid_actions, small_config
 
-from ipp_toolkit.features import (
+from ipp_toolkit.belief.mapping import expected_gain
+from ipp_toolkit.sim.features import (
     GAIN_PLANES,
     actor_observations,
     actor_plane_names,
     footprint_gain,
     gain_planes,
 )
-from ipp_toolkit.mapping import expected_gain
-from ipp_toolkit.mission import reset_mission, step_mission
+from ipp_toolkit.sim.mission import reset_mission, step_mission
 
 
 def _mid_mission(config, steps: int = 4, seed: int = 3):
@@ -90,7 +90,7 @@ def test_gain_planes_rank_moves_like_the_ig_planner(gain_config):
     """Without teammates to discount, ig's choice is the best move by the planes' gain."""
     from baselines.information_gain import InformationGainPlanner
     from ipp_toolkit.planners import agent_views
-    from ipp_toolkit.team import ACTION_DELTAS
+    from ipp_toolkit.sim.team import ACTION_DELTAS
 
     planner = InformationGainPlanner()
     planner.reset(gain_config, 0)

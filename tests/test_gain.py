@@ -7,20 +7,20 @@ import math
 import numpy as np
 import pytest
 
-from ipp_toolkit import kernels
-from ipp_toolkit.box_sums import BoxLayout
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.features import footprint_gain, gain_planes
-from ipp_toolkit.gain import (
+from ipp_toolkit._native import kernels
+from ipp_toolkit.belief.box_sums import BoxLayout
+from ipp_toolkit.belief.gain import (
     FootprintGainCache,
     _overlap_matrix,
     footprint_sums,
     recomputed_footprint_sums,
 )
-from ipp_toolkit.interest import BlockMeanCache, InterestSmoother, block_means
-from ipp_toolkit.mapping import interesting_gain
-from ipp_toolkit.mission import MissionGeometry, reset_mission, step_mission
-from ipp_toolkit.team import ACTION_NAMES
+from ipp_toolkit.belief.interest import BlockMeanCache, InterestSmoother, block_means
+from ipp_toolkit.belief.mapping import interesting_gain
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.sim.features import footprint_gain, gain_planes
+from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission
+from ipp_toolkit.sim.team import ACTION_NAMES
 
 
 def full_footprint_gain(state) -> np.ndarray:
@@ -67,7 +67,7 @@ def test_missions_of_one_geometry_share_gains_and_overlaps_which_stay_exact(monk
     """The per-value gains (a process-wide memo) and the footprint overlaps of refreshed
     regions (per camera, bounded) are shared by missions; the sums still equal a full
     recomputation, also when the bounded overlap cache is cleared mid-mission."""
-    import ipp_toolkit.gain as gain
+    import ipp_toolkit.belief.gain as gain
 
     monkeypatch.setattr(gain, "_OVERLAP_CACHE_BYTES", 200_000)  # a few dozen regions
     config = EnvConfig().replace(world={"resolution": 0.5})
@@ -213,7 +213,7 @@ def test_gain_smoothing_is_validated():
 
 
 def test_a_policy_gets_its_own_gain_smoothing_on_any_mission():
-    from ipp_toolkit.features import actor_observations
+    from ipp_toolkit.sim.features import actor_observations
 
     plain = EnvConfig().replace(world={"resolution": 0.5}, features={"gain": True})
     smoothed = plain.replace(features={"gain": True, "gain_smoothing": 5.0})
@@ -250,7 +250,7 @@ def test_block_means_are_numpys_means_to_the_bit(block):
 
 
 def test_block_means_take_the_ordered_sums_on_the_default_maps():
-    import ipp_toolkit.interest as interest
+    import ipp_toolkit.belief.interest as interest
 
     prob = np.random.default_rng(0).random((4, 500, 500), dtype=np.float32)
     block_means(prob, 5)
@@ -387,7 +387,7 @@ def test_block_mean_cache_equals_the_full_maps_block_means_at_every_step(agents,
 
 
 def test_block_mean_cache_takes_the_whole_maps_where_the_order_is_unchecked(monkeypatch):
-    import ipp_toolkit.interest as interest
+    import ipp_toolkit.belief.interest as interest
 
     config = EnvConfig().replace(world={"resolution": 0.5})
     state = reset_mission(config, seed=0)

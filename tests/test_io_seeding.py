@@ -1,4 +1,4 @@
-"""Atomic files (ipp_toolkit.io) and the mission's random streams (ipp_toolkit.seeding)."""
+"""Atomic files (ipp_toolkit.io) and the mission's random streams (ipp_toolkit.world.seeding)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ipp_toolkit.io import atomic_write, write_json
-from ipp_toolkit.seeding import mission_streams
+from ipp_toolkit.world.seeding import mission_streams
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):

@@ -11,8 +11,8 @@ import time
 
 import pytest
 
-from ipp_toolkit import kernels
-from ipp_toolkit.process_pool import WorkerPool
+from ipp_toolkit._native import kernels
+from ipp_toolkit.runs.process_pool import WorkerPool
 
 needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not importable")
 
@@ -22,7 +22,7 @@ needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not imp
 _FLOWN_TYPES = """
 import json, sys, tempfile
 from pathlib import Path
-from ipp_toolkit import kernels
+from ipp_toolkit._native import kernels
 from reports.compare import compare
 
 with tempfile.TemporaryDirectory() as folder:
@@ -71,7 +71,7 @@ def test_a_worker_that_compiled_waits_for_the_others_then_goes_on_alone():
     # them and does not wait.
     script = (
         "import multiprocessing, sys, time\n"
-        "from ipp_toolkit.process_pool import _compile_kernels_together\n"
+        "from ipp_toolkit.runs.process_pool import _compile_kernels_together\n"
         "values = [multiprocessing.Value('i', 0) for _ in range(2)]\n"
         "start = time.monotonic()\n"
         "compiled = _compile_kernels_together(*values, 2, wait_s=0.5)\n"

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from ipp_toolkit.block_grid import BlockGrid
-from ipp_toolkit.mapping import (
+from ipp_toolkit.belief.block_grid import BlockGrid
+from ipp_toolkit.belief.mapping import (
     LOGODDS_CLIP,
     BeliefMaps,
     binary_entropy,

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 from helpers import random_valid_actions, small_config
 
-from ipp_toolkit.mapping import binary_entropy, class_weights
-from ipp_toolkit.mission import (
+from ipp_toolkit.belief.mapping import binary_entropy, class_weights
+from ipp_toolkit.sim.mission import (
     InvalidActionError,
     compute_metrics,
     reset_mission,

@@ -11,11 +11,11 @@ from test_planners import fly, hand_built_state
 
 from baselines.coverage import CoveragePlanner, PaperCoveragePlanner, paper_lawnmower_paths
 from baselines.information_gain import InformationGainPlanner, PaperInformationGainPlanner
-from ipp_toolkit.mapping import LOGODDS_CLIP, entropy_from_logodds, expected_gain
-from ipp_toolkit.mission import MissionState, reset_mission
+from ipp_toolkit.belief.mapping import LOGODDS_CLIP, entropy_from_logodds, expected_gain
 from ipp_toolkit.planners import agent_views, make_planner
-from ipp_toolkit.sensor import Camera
-from ipp_toolkit.team import ACTION_NAMES
+from ipp_toolkit.sim.mission import MissionState, reset_mission
+from ipp_toolkit.sim.team import ACTION_NAMES
+from ipp_toolkit.world.sensor import Camera
 
 UP, NORTH, EAST, SOUTH, WEST, DOWN = range(6)
 LN3 = math.log(3.0)

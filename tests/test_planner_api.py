@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 from helpers import small_config
 
-from ipp_toolkit.mission import reset_mission, step_mission
 from ipp_toolkit.planners import (
     Planner,
     agent_views,
@@ -13,6 +12,7 @@ from ipp_toolkit.planners import (
     planner_views,
     register_planner,
 )
+from ipp_toolkit.sim.mission import reset_mission, step_mission
 
 
 @register_planner("test-first-valid")
@@ -50,8 +50,8 @@ def test_views_are_read_only_and_local():
 
 
 def test_planners_without_local_maps_get_empty_ones_and_the_maps_stay_unbuilt():
-    from ipp_toolkit import kernels
-    from ipp_toolkit.evaluation import run_mission
+    from ipp_toolkit._native import kernels
+    from ipp_toolkit.runs.evaluation import run_mission
 
     state = reset_mission(small_config(), seed=0)
     views = agent_views(state, with_observations=False, with_local_maps=False)

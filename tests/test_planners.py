@@ -9,12 +9,12 @@ from helpers import small_config
 from baselines.coverage import CoveragePlanner, boustrophedon
 from baselines.information_gain import InformationGainPlanner, expected_gain
 from baselines.random_planner import RandomPlanner
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import LOGODDS_CLIP, binary_entropy, class_weights
-from ipp_toolkit.mission import MissionState, reset_mission, step_mission
+from ipp_toolkit.belief.mapping import LOGODDS_CLIP, binary_entropy, class_weights
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import Planner, agent_views, available_planners, make_planner
-from ipp_toolkit.sensor import Camera
-from ipp_toolkit.team import ACTION_NAMES
+from ipp_toolkit.sim.mission import MissionState, reset_mission, step_mission
+from ipp_toolkit.sim.team import ACTION_NAMES
+from ipp_toolkit.world.sensor import Camera
 
 PLANNERS = ("random", "coverage", "ig")
 UP, NORTH, EAST, SOUTH, WEST, DOWN = range(6)

@@ -23,12 +23,12 @@ from baselines.ppo import (
 )
 from baselines.ppo_training import main, train_ppo, training_env_config
 from baselines.sb3_planner import PPOPlanner
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import run_mission
-from ipp_toolkit.features import gain_plane_channels, option_gain_cells
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, save_torch
-from ipp_toolkit.mission import reset_mission
 from ipp_toolkit.planners import agent_views
+from ipp_toolkit.runs.evaluation import run_mission
+from ipp_toolkit.sim.features import gain_plane_channels, option_gain_cells
+from ipp_toolkit.sim.mission import reset_mission
 from ipp_toolkit.vec import make_sb3_vec_env
 
 torch.set_num_threads(1)
@@ -372,7 +372,7 @@ def test_the_trainer_process_keeps_freed_memory_for_reuse(tmp_path):
     setup = f"""
 from baselines.ppo import PPOTrainConfig
 from baselines.ppo_training import train_ppo
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
 config = PPOTrainConfig(total_timesteps=128, **{TINY!r})
 train_ppo(config, EnvConfig(), {str(tmp_path / "run")!r}, progress=False)
 """

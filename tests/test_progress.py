@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import io
 
-from ipp_toolkit.progress import LineProgress, progress_bar
+from ipp_toolkit.runs.progress import LineProgress, progress_bar
 
 
 def test_a_log_gets_one_short_line_every_five_percent():

@@ -25,13 +25,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipp_toolkit import ray_backend
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import evaluate, load_results
-from ipp_toolkit.planner_specs import PlannerSpec
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import Planner, register_planner
-from ipp_toolkit.ray_backend import RayCluster, RayUnavailableError, probe, start_local
-from ipp_toolkit.seeding import planner_seed
+from ipp_toolkit.planners.specs import PlannerSpec
+from ipp_toolkit.runs import ray_backend
+from ipp_toolkit.runs.evaluation import evaluate, load_results
+from ipp_toolkit.runs.ray_backend import RayCluster, RayUnavailableError, probe, start_local
+from ipp_toolkit.world.seeding import planner_seed
 from reports.cli import compare_main, study_main
 from reports.studies import credit_assignment_study, robustness_study, train_run, train_runs
 
@@ -204,7 +204,7 @@ def test_one_backend_check_serves_every_caller(tmp_path, backend, address, messa
 
 
 def test_the_toolkit_does_not_import_ray():
-    code = ("import sys, ipp_toolkit.evaluation, ipp_toolkit.ray_backend, reports.cli, "
+    code = ("import sys, ipp_toolkit.runs.evaluation, ipp_toolkit.runs.ray_backend, reports.cli, "
             "reports.compare, reports.studies, reports.generalisation; "
             "print('ray' in sys.modules)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -471,7 +471,7 @@ def train_or_die_once(task):
     """
     from coma.config import preset
     from coma.learner import train
-    from ipp_toolkit.config_io import config_from_dict
+    from ipp_toolkit.config.files import config_from_dict
 
     label, values, env, folder, _ = task
     marker = Path(folder).with_name(Path(folder).name + ".killed")
@@ -517,7 +517,7 @@ def test_a_killed_training_worker_is_retried_and_resumes_its_run(ray_cluster, tm
     import torch
 
     from coma.persistence import load_policy
-    from ipp_toolkit.config_io import config_to_dict
+    from ipp_toolkit.config.files import config_to_dict
     from reports.studies import training_mission
 
     env = config_to_dict(training_mission(1.0))
@@ -539,7 +539,7 @@ def test_a_killed_training_worker_is_retried_and_resumes_its_run(ray_cluster, tm
 
 @pytest.mark.slow
 def test_a_training_error_on_ray_is_the_runs_own_error(ray_cluster, tmp_path):
-    from ipp_toolkit.config_io import config_to_dict
+    from ipp_toolkit.config.files import config_to_dict
     from ipp_toolkit.io import CheckpointError
     from reports.studies import training_mission
 

@@ -9,7 +9,7 @@ import pytest
 from coma import recipes
 from coma.cli import build_parser, main, stage_configs
 from coma.persistence import SHIPPED_POLICIES, load_policy, resolve_policy
-from ipp_toolkit.config_io import config_to_dict
+from ipp_toolkit.config.files import config_to_dict
 
 # Fields a recipe does not fix: how long the recorded run was meant to go (it was stopped at
 # the documented mission count) and where the shipped file's start lay on its author's disk.

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ipp_toolkit.rendering import PALETTE, prob_to_rgb, render_mission, save_png
+from ipp_toolkit.sim.rendering import PALETTE, prob_to_rgb, render_mission, save_png
 
 H = 100
 AREA = 50.0

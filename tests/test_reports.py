@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ipp_toolkit.config import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig
 from reports.compare import Comparison, build_config, safe_name
 from reports.plots import curves_from_rows, plot_curves, plot_trajectories
 from reports.tables import (
@@ -316,9 +316,9 @@ def test_build_config_terrain_file(tmp_path):
         build_config(agents=0)
 
 
-@pytest.mark.skipif(importlib.util.find_spec("ipp_toolkit.evaluation") is None
+@pytest.mark.skipif(importlib.util.find_spec("ipp_toolkit.runs.evaluation") is None
                     or importlib.util.find_spec("baselines.random_planner") is None,
-                    reason="needs ipp_toolkit.evaluation and the random baseline")
+                    reason="needs ipp_toolkit.runs.evaluation and the random baseline")
 def test_compare_in_memory_then_plot(tmp_path):
     from reports import compare
 

@@ -28,11 +28,11 @@ from baselines.sb3_training import (
     train_sb3,
     training_env_config,
 )
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import run_mission
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, save_torch
-from ipp_toolkit.mission import reset_mission
 from ipp_toolkit.planners import agent_views
+from ipp_toolkit.runs.evaluation import run_mission
+from ipp_toolkit.sim.mission import reset_mission
 from ipp_toolkit.vec import make_sb3_vec_env
 from reports.cli import compare_main, train_main
 

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from ipp_toolkit.config import SensorConfig, WorldConfig
-from ipp_toolkit.sensor import Camera, footprint_side
+from ipp_toolkit.config.schema import SensorConfig, WorldConfig
+from ipp_toolkit.world.sensor import Camera, footprint_side
 
 
 def test_footprint_side_per_altitude():

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from coma.cli import build_parser, configs_from_args
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.config_io import load_config
-from ipp_toolkit.settings import (
+from ipp_toolkit.config.files import load_config
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import (
     build_env_config,
     comm_label,
     format_comm,
@@ -179,7 +179,7 @@ def test_ipp_compare_validation_namespace(tmp_path, capsys, monkeypatch):
 
 
 def test_describe_config_names_a_raster_threshold_or_its_quantile(tmp_path):
-    from ipp_toolkit.settings import describe_config
+    from ipp_toolkit.config.settings import describe_config
 
     raster = tmp_path / "field.npy"
     np.save(raster, np.arange(16.0).reshape(4, 4))
@@ -200,7 +200,7 @@ def test_ipp_compare_runs_a_raster_thresholded_at_a_quantile(tmp_path, capsys):
 
 
 def test_feature_flags_are_typed_by_the_feature_config():
-    from ipp_toolkit.settings import parse_feature_flags
+    from ipp_toolkit.config.settings import parse_feature_flags
 
     parsed = parse_feature_flags(["gain=true", "own_position=off", "gain_smoothing=5",
                                   "agent_id_scale=8"])

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.evaluation import evaluate
-from ipp_toolkit.mapping import entropy_from_logodds
+from ipp_toolkit.belief.mapping import entropy_from_logodds
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, make_planner
-from ipp_toolkit.sensor import Camera
-from ipp_toolkit.team import ACTION_NAMES
+from ipp_toolkit.runs.evaluation import evaluate
+from ipp_toolkit.sim.team import ACTION_NAMES
+from ipp_toolkit.world.sensor import Camera
 
 CONFIG = EnvConfig().replace(world={"resolution": 0.5})
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipp_toolkit.config_io import config_to_dict
+from ipp_toolkit.config.files import config_to_dict
 from reports.cli import study_main
 from reports.studies import training_mission
 from reports.sweep import (

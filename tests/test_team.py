@@ -1,6 +1,6 @@
 import numpy as np
 
-from ipp_toolkit.team import ACTION_NAMES, action_masks, communication_matrix, resolve_moves
+from ipp_toolkit.sim.team import ACTION_NAMES, action_masks, communication_matrix, resolve_moves
 
 
 def test_action_order():
@@ -63,7 +63,7 @@ def test_message_drop_is_seeded():
 
 def _reference_masks(positions, grid_points, n_altitudes, active=None):
     """The NumPy formulation action_masks replaced (kept as its reference)."""
-    from ipp_toolkit.team import ACTION_DELTAS
+    from ipp_toolkit.sim.team import ACTION_DELTAS
 
     positions = np.asarray(positions, dtype=np.int64)
     targets = positions[:, None, :] + ACTION_DELTAS[None, :, :]
@@ -80,7 +80,7 @@ def _reference_masks(positions, grid_points, n_altitudes, active=None):
 
 def _reference_moves(positions, actions, moving=None, active=None):
     """The NumPy formulation resolve_moves replaced (kept as its reference)."""
-    from ipp_toolkit.team import ACTION_DELTAS
+    from ipp_toolkit.sim.team import ACTION_DELTAS
 
     n = len(positions)
     moving = np.ones(n, dtype=bool) if moving is None else np.asarray(moving, dtype=bool)

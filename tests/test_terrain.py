@@ -10,10 +10,10 @@ import pytest
 import tifffile
 from PIL import Image
 
-from ipp_toolkit import terrain
-from ipp_toolkit.config import EnvConfig, TerrainConfig, WorldConfig, terrain_kinds
-from ipp_toolkit.mission import reset_mission
-from ipp_toolkit.terrain import (
+from ipp_toolkit.config.schema import EnvConfig, TerrainConfig, WorldConfig, terrain_kinds
+from ipp_toolkit.sim.mission import reset_mission
+from ipp_toolkit.world import terrain
+from ipp_toolkit.world.terrain import (
     TERRAIN_GENERATORS,
     generate_terrain,
     half_plane,

@@ -8,11 +8,11 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from ipp_toolkit.config import EnvConfig, TerrainConfig, WorldConfig
-from ipp_toolkit.mission import reset_mission
-from ipp_toolkit.settings import build_env_config
-from ipp_toolkit.terrain import generate_terrain
-from ipp_toolkit.terrain_families import RASTER_FOLDER, real_crop, real_rasters
+from ipp_toolkit.config.schema import EnvConfig, TerrainConfig, WorldConfig
+from ipp_toolkit.config.settings import build_env_config
+from ipp_toolkit.sim.mission import reset_mission
+from ipp_toolkit.world.families import RASTER_FOLDER, real_crop, real_rasters
+from ipp_toolkit.world.terrain import generate_terrain
 
 COARSE = WorldConfig(resolution=0.5)
 

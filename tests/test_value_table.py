@@ -5,14 +5,16 @@ import numpy as np
 import pytest
 from helpers import random_valid_actions
 
-from ipp_toolkit import kernels, mission, value_table
-from ipp_toolkit.block_grid import BlockGrid
-from ipp_toolkit.config import EnvConfig
-from ipp_toolkit.mapping import BELIEF_COLUMNS, LOGODDS_CLIP, belief_columns
-from ipp_toolkit.mission import reset_mission, step_mission
-from ipp_toolkit.seeding import mission_streams
-from ipp_toolkit.sensor_noise import assembled_entropy, compiled_noise_ok
-from ipp_toolkit.value_table import DerivedMemo, ValueTable
+from ipp_toolkit._native import kernels
+from ipp_toolkit.belief import value_table
+from ipp_toolkit.belief.block_grid import BlockGrid
+from ipp_toolkit.belief.mapping import BELIEF_COLUMNS, LOGODDS_CLIP, belief_columns
+from ipp_toolkit.belief.value_table import DerivedMemo, ValueTable
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.sim import mission
+from ipp_toolkit.sim.mission import reset_mission, step_mission
+from ipp_toolkit.world.seeding import mission_streams
+from ipp_toolkit.world.sensor_noise import assembled_entropy, compiled_noise_ok
 
 needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not importable")
 

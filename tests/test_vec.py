@@ -211,7 +211,7 @@ def test_algorithms_that_cannot_mask_train_on_the_default_view(algo):
 
 
 def test_invalid_actions_are_held_counted_and_penalised():
-    from ipp_toolkit.mission import InvalidActionError
+    from ipp_toolkit.sim.mission import InvalidActionError
 
     config = small_config(n_agents=2)
     vec = make_sb3_vec_env(config, n_envs=1, seed=0, invalid_penalty=0.5)

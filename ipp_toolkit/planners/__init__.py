@@ -31,10 +31,10 @@ from typing import Any
 
 import numpy as np
 
-from .config import EnvConfig, FeatureConfig
-from .features import actor_observations
-from .io import CheckpointError
-from .mission import MissionState
+from ..config.schema import EnvConfig, FeatureConfig
+from ..io import CheckpointError
+from ..sim.features import actor_observations
+from ..sim.mission import MissionState
 
 __all__ = [
     "AgentView",
@@ -229,7 +229,7 @@ def _entry_points() -> dict[str, metadata.EntryPoint]:
 
 def planner_modules(names: Sequence[str]) -> list[str]:
     """The modules of the entry-point planners among ``names``, each once (a worker process
-    imports them ahead of its tasks: :class:`ipp_toolkit.process_pool.WorkerPool`)."""
+    imports them ahead of its tasks: :class:`ipp_toolkit.runs.process_pool.WorkerPool`)."""
     entries = _entry_points()
     return list(dict.fromkeys(entries[name].module for name in names if name in entries))
 

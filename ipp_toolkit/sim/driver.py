@@ -1,7 +1,7 @@
 """The mission driver: E missions of one run, flown in lock-step to the end of the budget.
 
 One loop drives every whole-mission flight of the project: the evaluation's
-:func:`ipp_toolkit.evaluation.run_mission` (E = 1, a planner's timed ``act``), COMA's
+:func:`ipp_toolkit.runs.evaluation.run_mission` (E = 1, a planner's timed ``act``), COMA's
 rollouts (``coma.rollout.collect_rollout``: the sampled actor, or demonstrator planners for
 the warm start) and its greedy validation flights (``coma.validation.fly_greedy``). The
 driver owns what they share: the missions' reset (:func:`start_missions`), the budget and
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import EnvConfig
+from ..config.schema import EnvConfig
 from .mission import MissionGeometry, MissionState, reset_mission, step_mission
 
 __all__ = ["Flight", "JointPolicy", "Observer", "fly_missions", "start_missions"]

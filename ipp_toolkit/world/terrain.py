@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import NAN_POLICIES, TerrainConfig, WorldConfig
+from ..config.schema import NAN_POLICIES, TerrainConfig, WorldConfig
 
 __all__ = [
     "TERRAIN_GENERATORS",
@@ -509,4 +509,4 @@ def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Ge
 
 
 # The realistic families register themselves on import; they build on the helpers above.
-from . import terrain_families  # noqa: E402, F401
+from . import families  # noqa: E402, F401

@@ -3,7 +3,7 @@
 This module owns :class:`PlannerSpec` (a registry name, its JSON-safe keyword options and the
 label that names it in results) and the command line's planner syntax
 ``[LABEL:]NAME[=CHECKPOINT]`` (:meth:`PlannerSpec.parse`, :func:`as_specs`). The evaluation
-runner (:mod:`ipp_toolkit.evaluation`), the result store and the reports read specs from here.
+runner (:mod:`ipp_toolkit.runs.evaluation`), the result store and the reports read specs from here.
 """
 
 from __future__ import annotations

@@ -1,11 +1,12 @@
-"""The whole-step Numba kernels of :mod:`ipp_toolkit.kernels` (imported on first use; see there)."""
+"""The whole-step Numba kernels of :mod:`ipp_toolkit._native.kernels` (imported on first use; see
+there)."""
 
 from __future__ import annotations
 
 import numba
 import numpy as np
 
-from ._compiled_kernels import _float_bits, _jit, _prefetch_line, intern_pattern
+from .compiled_kernels import _float_bits, _jit, _prefetch_line, intern_pattern
 
 
 @_jit
@@ -16,7 +17,7 @@ def _block_sum(values, start, n):
     accumulators (longer runs are halved recursively first), not left to right; the
     measurement planes must be the numbers ``np.add.reduceat`` gave, so this follows its
     loop exactly. Planning blocks of over 129 cells, which would need the halving, take the
-    per-rectangle path instead (:attr:`ipp_toolkit.mission.MissionGeometry.whole_step`).
+    per-rectangle path instead (:attr:`ipp_toolkit.sim.mission.MissionGeometry.whole_step`).
     """
     if n < 8:
         res = -0.0
@@ -95,7 +96,7 @@ def _block_rows(readings, cols, lo, n, weight_no, weight_yes, out, accumulators)
 
 @_jit
 def read_cells(truth, rects, thresholds, noise, offsets, weights, edges, readings, planes):
-    """See :func:`ipp_toolkit.kernels.read_cells`."""
+    """See :func:`ipp_toolkit._native.kernels.read_cells`."""
     n_blocks = edges.shape[0] - 1
     for f in range(rects.shape[0]):
         r0, r1, c0, c1 = rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3]
@@ -188,7 +189,7 @@ def _most_senders(target_offsets):
 @numba.njit(cache=True, nogil=True, boundscheck=False, inline="always")
 def _plus_reading(value, deltas, f, read, low, high):
     """clip(value + the increment of reading ``read`` of footprint f, low, high): one
-    cell's addition in :meth:`ipp_toolkit.mapping.BeliefMaps.add_evidence`."""
+    cell's addition in :meth:`ipp_toolkit.belief.mapping.BeliefMaps.add_evidence`."""
     value = value + (deltas[f, 1] if read else deltas[f, 0])
     if value < low:
         return low
@@ -202,7 +203,8 @@ def _add_readings(row_values, rects, readings, offsets, deltas, senders, u, last
                   seg_lo, seg_hi, low, high):
     """Add to ``row_values`` (row i, indexed by column) the increments of every footprint
     senders[u:last] over the runs, footprint by footprint, each sum clipped to [low, high]:
-    per cell, the additions of :meth:`ipp_toolkit.mapping.BeliefMaps.add_evidence`, in order."""
+    per cell, the additions of :meth:`ipp_toolkit.belief.mapping.BeliefMaps.add_evidence`, in
+    order."""
     for v in range(u, last):
         g = senders[v]
         if not rects[g, 0] <= i < rects[g, 1]:
@@ -229,12 +231,12 @@ def _add_readings(row_values, rects, readings, offsets, deltas, senders, u, last
 def fuse_evidence(value_index, readings, offsets, rects, deltas, clip, target_maps,
                   target_offsets, senders, slot, table_bits, size, shift, multiplier, limit,
                   cursor, pairs, values, transitions, delta_slots):
-    """See :func:`ipp_toolkit.kernels.fuse_evidence`.
+    """See :func:`ipp_toolkit._native.kernels.fuse_evidence`.
 
     Each cell of a target is visited once, in the first of the target's footprints (in
     order) that covers it: its value (the table's value at its index) gets the readings of
     every footprint covering it, in order, and the sum is interned, so that interning
-    follows the per-footprint order of :meth:`~ipp_toolkit.mapping.BeliefMaps.refresh`.
+    follows the per-footprint order of :meth:`~ipp_toolkit.belief.mapping.BeliefMaps.refresh`.
     A cell under one footprint of the target (most cells) takes its new index from
     ``transitions[old index, 2 * delta slot + reading]`` once that is known: the same
     float32 sum of the same two numbers, so the same value, without the addition and the
@@ -385,7 +387,7 @@ def _apply_run(pairs, position, n, table_prob, table_wentropy, block_sums, block
 def apply_targets(pairs, table_prob, table_entropy, table_weights, table_wentropy,
                   block_of_cell, edges, prob_blocks, wentropy_blocks, rects, target_maps,
                   target_offsets, senders, truth, stats):
-    """See :func:`ipp_toolkit.kernels.apply_targets`.
+    """See :func:`ipp_toolkit._native.kernels.apply_targets`.
 
     Walks the targets as :func:`fuse_evidence` did, reading its (old, new) pairs in order:
     the maps themselves are not read. Cells an earlier footprint of the target refreshed

@@ -2,7 +2,7 @@
 
 ``split`` (one straight boundary) is the paper's terrain; a policy trained only on it learns
 "sweep along the boundary" and transfers badly. These families cover what real fields look
-like, and :func:`ipp_toolkit.terrain.generate_terrain` dispatches to them by name:
+like, and :func:`ipp_toolkit.world.terrain.generate_terrain` dispatches to them by name:
 
 ``fractal``
     A Gaussian random field with a power-law spectrum (power ~ 1 / f^b, b drawn per mission
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import TerrainConfig, WorldConfig
+from ..config.schema import TerrainConfig, WorldConfig
 from .terrain import _bilinear_weights, generate_terrain, register_terrain, resample_area_average
 
 __all__ = ["RealRaster", "real_rasters", "real_raster_names", "real_crop", "fractal_field",
@@ -46,7 +46,7 @@ __all__ = ["RealRaster", "real_rasters", "real_raster_names", "real_crop", "frac
 DEFAULT_THRESHOLD_QUANTILE = (0.4, 0.9)
 """Quantile range of ``fractal`` and ``real`` when ``terrain.threshold_quantile`` is unset."""
 
-RASTER_FOLDER = Path(__file__).resolve().parent / "data" / "rasters"
+RASTER_FOLDER = Path(__file__).resolve().parents[1] / "data" / "rasters"
 
 _FRACTAL_SPACING = 1.0  # lattice spacing in metres: the field ignores r_M
 _MIN_VALID_SHARE = 0.5  # a map cell is data when at least half of it lies on data pixels

@@ -3,14 +3,14 @@
 The ``gain`` feature planes (and anything else that ranks waypoints by IG's objective) need,
 for every local map k, altitude z and waypoint (x, y), the sum over the waypoint's footprint
 of the per-cell expected weighted-entropy reduction
-(:func:`~ipp_toolkit.mapping.expected_gain`). Computed from scratch this is three
+(:func:`~ipp_toolkit.belief.mapping.expected_gain`). Computed from scratch this is three
 ``expected_gain`` passes over every map (250,000 cells each at r_M = 0.1 m) and two cumsums
 per pass: ~70 ms per map and step on one core.
 
 Only cells whose belief changed have a new per-cell gain, and a step changes a map only under
 the footprints of the readings it fused. :class:`FootprintGainCache` keeps, per local map, the
 per-cell gain at every altitude and the footprint sums, and updates both where the maps'
-change log (:attr:`~ipp_toolkit.mapping.BeliefMaps.changes`) says a region was refreshed:
+change log (:attr:`~ipp_toolkit.belief.mapping.BeliefMaps.changes`) says a region was refreshed:
 the per-cell gain is looked up for the region's log-odds (a table per mission: a cell's gain
 is a function of its log-odds), and each waypoint's sum moves by the sum of the change over
 the part of its footprint inside the region (footprints are separable into rows and columns,
@@ -22,10 +22,10 @@ The result equals a full recomputation up to float64 summation order (checked ov
 missions in ``tests/test_gain.py``).
 
 Two per-cell objectives are kept this way (``objective``): ``"ig"``, the ``ig`` planner's
-:func:`~ipp_toolkit.mapping.expected_gain`, and ``"interesting"``,
-:func:`~ipp_toolkit.mapping.interesting_gain` (the entropy a reading removes from a cell
+:func:`~ipp_toolkit.belief.mapping.expected_gain`, and ``"interesting"``,
+:func:`~ipp_toolkit.belief.mapping.interesting_gain` (the entropy a reading removes from a cell
 that is interesting). The second is meant to be weighted by how likely each cell is to be
-interesting (:mod:`ipp_toolkit.interest`); that weight moves everywhere at every step, but it
+interesting (:mod:`ipp_toolkit.belief.interest`); that weight moves everywhere at every step, but it
 is constant over squares of cells (blocks of ~0.5 m). The footprints' bounds and the squares'
 edges cut every map into segments (:class:`BoxLayout`), and each segment's sum of the
 per-cell gain is kept per map and summed again only where the map changed;
@@ -44,11 +44,11 @@ from functools import partial
 
 import numpy as np
 
-from . import kernels
+from .._native import kernels
+from ..world.sensor import Camera
 from .block_grid import Rect
 from .box_sums import BoxLayout
 from .mapping import BeliefMaps, belief_columns, expected_gain, interesting_gain
-from .sensor import Camera
 from .value_table import DerivedMemo, exact_memo
 
 __all__ = ["CellGain", "FootprintGainCache", "OBJECTIVES", "cell_objective",
@@ -85,7 +85,7 @@ def gains_by_altitude(logodds: np.ndarray, accuracy: np.ndarray, delta_logodds: 
         delta_logodds: (Z, 2) log-odds increments per altitude (``Camera.delta_logodds``).
         cell_gain: the per-cell objective (:func:`cell_objective`).
         prob, entropy: the values' probability and entropy; by default
-            :func:`~ipp_toolkit.mapping.belief_columns` of them, the function the maps' value
+            :func:`~ipp_toolkit.belief.mapping.belief_columns` of them, the function the maps' value
             table holds, so a gain looked up by log-odds is bit for bit the one computed
             from the maps' caches.
 
@@ -141,7 +141,8 @@ def _separable_bounds(rects: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Row bounds (Z, G, 2) per waypoint row and column bounds (Z, G, 2) per waypoint column.
 
     A footprint's rows depend only on the waypoint's y and altitude and its columns only on x
-    and altitude (:class:`~ipp_toolkit.sensor.Camera`); checked here, as the box sums rely on it.
+    and altitude (:class:`~ipp_toolkit.world.sensor.Camera`); checked here, as the box sums rely on
+    it.
     """
     rows, cols = rects[:, :, :1, 0:2], rects[:, :1, :, 2:4]
     if not (np.array_equal(np.broadcast_to(rows, rects[..., 0:2].shape), rects[..., 0:2])
@@ -190,7 +191,7 @@ def _coalesce(regions: list[Rect]) -> list[Rect]:
 class FootprintGainCache:
     """Footprint sums of the expected gain on the first ``n_maps`` maps of ``maps``.
 
-    Build it once per mission (:func:`ipp_toolkit.features.footprint_gain` keeps one on the
+    Build it once per mission (:func:`ipp_toolkit.sim.features.footprint_gain` keeps one on the
     mission state); :meth:`sums` brings it up to date with the maps' change log first.
 
     Args:
@@ -421,7 +422,7 @@ _GAIN_MEMOS: dict[tuple[object, ...], DerivedMemo] = {}
 
 
 def _gain_memo(objective: str, weights: tuple[float, ...], camera: Camera) -> DerivedMemo:
-    """The process-wide :class:`~ipp_toolkit.value_table.DerivedMemo` of the per-altitude
+    """The process-wide :class:`~ipp_toolkit.belief.value_table.DerivedMemo` of the per-altitude
     gains of a log-odds value for this objective and camera: every mission of a
     configuration meets the same values, and computes their gains once per process."""
     key = (objective, weights, _camera_key(camera))
@@ -440,7 +441,7 @@ class _GainTable:
 
     A cell's gain at altitude z is a function of its log-odds (through its probability and
     entropy), so it is computed once per value of the maps'
-    :class:`~ipp_toolkit.value_table.ValueTable`, with the objective's per-cell function on
+    :class:`~ipp_toolkit.belief.value_table.ValueTable`, with the objective's per-cell function on
     the table's own probability and entropy (the maps' caches hold the same numbers), and
     looked up through the maps' ``value_index``: a looked-up gain is bit for bit the one
     computed cell by cell.

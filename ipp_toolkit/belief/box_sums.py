@@ -6,10 +6,10 @@ constant on, cut the rows and columns of a map into segments (:class:`BoxLayout`
 pair of a row and a column segment lies inside one square and inside or outside each box.
 So the sum of a per-cell value times a blockwise weight over every box needs the value's
 sum over each segment pair once (kept per map by
-:class:`~ipp_toolkit.gain.FootprintGainCache` and summed again only where a map changed),
+:class:`~ipp_toolkit.belief.gain.FootprintGainCache` and summed again only where a map changed),
 then one product per segment pair and its additions per box. Every sum is float64 and added
-in a fixed order, by the compiled kernels (:func:`ipp_toolkit.kernels.segment_sums`,
-:func:`ipp_toolkit.kernels.weighted_segment_sums`) and by their NumPy references here alike.
+in a fixed order, by the compiled kernels (:func:`ipp_toolkit._native.kernels.segment_sums`,
+:func:`ipp_toolkit._native.kernels.weighted_segment_sums`) and by their NumPy references here alike.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from . import kernels
+from .._native import kernels
 from .block_grid import Rect
 
 __all__ = ["BoxLayout"]

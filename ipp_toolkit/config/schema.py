@@ -1,5 +1,5 @@
 """Configuration of a mission: dataclasses with validation (YAML in and out:
-:mod:`ipp_toolkit.config_io`).
+:mod:`ipp_toolkit.config.files`).
 
 Every number of the simulator is a field here; the defaults reproduce the paper.
 Validation happens at construction and names the bad field and value, so a typo in a YAML
@@ -134,7 +134,7 @@ class SensorConfig:
 
 def terrain_kinds() -> tuple[str, ...]:
     """The built-in terrain kinds and every kind added with ``terrain.register_terrain``."""
-    from .terrain import TERRAIN_GENERATORS  # terrain imports this module: look up lazily
+    from ..world.terrain import TERRAIN_GENERATORS  # terrain imports this module: look up lazily
 
     return tuple(dict.fromkeys((*TERRAIN_KINDS, *TERRAIN_GENERATORS)))
 
@@ -147,9 +147,9 @@ class TerrainConfig:
         kind: ``split`` (straight boundary at any angle), ``split-axis`` (the authors' four
             axis-aligned splits), ``blobs`` (thresholded smooth random field), ``fractal``
             (thresholded random field with a power-law spectrum: hotspots of many sizes),
-            ``real`` (crops of the bundled real rasters, :mod:`ipp_toolkit.terrain_families`),
+            ``real`` (crops of the bundled real rasters, :mod:`ipp_toolkit.world.families`),
             ``mixture`` (one of several kinds per mission, see ``mixture``), ``raster`` (one
-            raster file), or a kind added with :func:`ipp_toolkit.terrain.register_terrain`.
+            raster file), or a kind added with :func:`ipp_toolkit.world.terrain.register_terrain`.
         share_min, share_max: range of the interesting share for ``split``/``blobs``.
         blob_scale: correlation length of the ``blobs`` field in metres.
         raster: path of a .npy/.png/.tif file for ``raster`` (or pass an array to the
@@ -211,7 +211,7 @@ class TerrainConfig:
         if self.crop_fraction[0] <= 0.0:
             _fail("terrain", "crop_fraction", self.crop_fraction, "must lie in (0, 1]")
         if self.real_sources not in REAL_SOURCES:
-            from .terrain_families import real_raster_names  # imports this module: lazily
+            from ..world.families import real_raster_names  # imports this module: lazily
 
             if self.real_sources not in real_raster_names():
                 _fail("terrain", "real_sources", self.real_sources,
@@ -449,12 +449,12 @@ class FeatureConfig:
             larger class weight (so in [0, 1]). It is the quantity the ``ig`` planner
             maximises, given to the actor at full map resolution instead of the 5 m block
             means of (b)-(e) (a departure, see docs/departures.md;
-            :func:`ipp_toolkit.features.gain_planes`).
+            :func:`ipp_toolkit.sim.features.gain_planes`).
         gain_smoothing: 0 keeps ``ig``'s objective in the ``gain`` planes; > 0 (metres) puts
             the ``ig_spatial`` objective there instead: the entropy a reading removes from
             interesting cells, weighted by each cell's probability of being interesting
             smoothed over its neighbourhood with a Gaussian of this standard deviation
-            (:mod:`ipp_toolkit.interest`; the maps treat cells as independent, real fields
+            (:mod:`ipp_toolkit.belief.interest`; the maps treat cells as independent, real fields
             are not). Same scale, divided by the largest footprint's cell count.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
@@ -565,16 +565,3 @@ def _build(cls: type, values: Mapping[str, Any], section: str) -> Any:
         raise ValueError(f"invalid config: unknown key(s) {unknown} in section {section!r}; "
                          f"known keys: {sorted(known)}")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
-
-_MOVED_TO_CONFIG_IO = ("read_config_file", "load_config", "save_config", "config_from_dict",
-                       "config_to_dict")
-
-
-def __getattr__(name: str) -> Any:
-    """The dict and YAML functions live in :mod:`ipp_toolkit.config_io`; importing them from
-    here still works (scripts written before the split)."""
-    if name in _MOVED_TO_CONFIG_IO:
-        from . import config_io
-
-        return getattr(config_io, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,6 +1,6 @@
 """The files of an evaluation folder: identity, per-mission shards, trajectories, results.csv.
 
-``ipp_toolkit.evaluation`` runs missions; this module owns how their results are stored and
+``ipp_toolkit.runs.evaluation`` runs missions; this module owns how their results are stored and
 read back, so a folder can be resumed, checked against the configuration that made it and
 grown with more planners. Layout (written atomically, file by file)::
 
@@ -27,13 +27,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .config import EnvConfig
-from .config_io import config_from_dict, config_to_dict
-from .io import atomic_write, write_json
-from .settings import safe_name
+from ..config.files import config_from_dict, config_to_dict
+from ..config.schema import EnvConfig
+from ..config.settings import safe_name
+from ..io import atomic_write, write_json
 
 if TYPE_CHECKING:
-    from .planner_specs import PlannerSpec
+    from ..planners.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
            "check_folder", "shard_path", "trajectory_path", "stored_planners", "read_shard",
@@ -59,7 +59,7 @@ class EvaluationError(ValueError):
 
 def folder_identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, Any]:
     """What ``config.json`` records of a run: layout version, config, seed, namespace, version."""
-    from . import __version__
+    from .. import __version__
 
     # Through JSON so that it compares equal to what is read back from config.json.
     return json.loads(json.dumps({"format": _FORMAT, "config": config_to_dict(config),

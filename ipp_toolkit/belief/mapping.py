@@ -17,9 +17,9 @@ from functools import cache, partial
 
 import numpy as np
 
-from . import kernels
+from .._native import kernels
+from .._native.kernels import REGION_STATS
 from .block_grid import BlockGrid, Rect
-from .kernels import REGION_STATS
 from .value_table import DerivedMemo, ValueTable
 
 __all__ = [
@@ -141,7 +141,8 @@ def belief_columns(logodds: np.ndarray, weight_interesting: float = 1.0,
 
 @cache
 def _belief_memo(weight_interesting: float, weight_uninteresting: float) -> DerivedMemo:
-    """The process-wide :class:`~ipp_toolkit.value_table.DerivedMemo` of :func:`belief_columns`
+    """The process-wide :class:`~ipp_toolkit.belief.value_table.DerivedMemo` of
+    :func:`belief_columns`
     with these class weights (every mission of a configuration meets the same values)."""
     return DerivedMemo(partial(belief_columns, weight_interesting=weight_interesting,
                                weight_uninteresting=weight_uninteresting), len(BELIEF_COLUMNS))
@@ -159,7 +160,7 @@ class BeliefMaps:
     the planning-grid planes (the actors' default observations) never builds them.
 
     Attributes:
-        table: the :class:`~ipp_toolkit.value_table.ValueTable` of every log-odds value the
+        table: the :class:`~ipp_toolkit.belief.value_table.ValueTable` of every log-odds value the
             maps hold, with their :data:`BELIEF_COLUMNS`.
         value_index: (M, H, W) int32, each cell's index into :attr:`table` (as of its last
             refresh).
@@ -170,7 +171,7 @@ class BeliefMaps:
         prob_blocks: (M, G, G) float64 block sums of ``prob``.
         wentropy_blocks: (M, G, G) float64 block sums of the weighted entropy W(p) H(p).
         changes: every (map index, rect) refreshed so far, in order: caches built on the
-            maps (:class:`ipp_toolkit.gain.FootprintGainCache`, the arrays above) update
+            maps (:class:`ipp_toolkit.belief.gain.FootprintGainCache`, the arrays above) update
             only these regions.
 
     Writing :attr:`logodds` directly and then calling :meth:`refresh` over the written
@@ -335,7 +336,7 @@ class BeliefMaps:
         Args:
             rects: (F, 4) int64 footprint rectangle of each reading.
             readings: (cells,) bool the readings one after another, each row-major
-                (:func:`ipp_toolkit.kernels.read_cells`).
+                (:func:`ipp_toolkit._native.kernels.read_cells`).
             offsets: (F + 1,) int64 where each reading starts in ``readings`` (and the end).
             deltas: (F, 2) float32 log-odds increments (d0, d1) of a 0 / 1 in each reading.
             target_maps: (T,) int64 map indices; target_offsets (T + 1,) int64; senders
@@ -523,7 +524,7 @@ def interesting_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
     helps it only where the cell is interesting; there the reading is 1 with probability a:
     ``a (H(p) - H(p1)) + (1 - a) (H(p) - H(p0))`` in bits, with l1 = clip(l + d1) and
     l0 = clip(l + d0). Multiplied by the probability that the cell is interesting (e.g. the
-    smoothed one of :class:`~ipp_toolkit.interest.InterestSmoother`) it is the reading's
+    smoothed one of :class:`~ipp_toolkit.belief.interest.InterestSmoother`) it is the reading's
     expected contribution to the metric. ``prob`` is unused (same signature as
     :func:`expected_gain`, so the two are interchangeable per-cell objectives).
 

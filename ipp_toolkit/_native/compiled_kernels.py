@@ -1,4 +1,4 @@
-"""The Numba kernels of :mod:`ipp_toolkit.kernels` (imported on first use; see there)."""
+"""The Numba kernels of :mod:`ipp_toolkit._native.kernels` (imported on first use; see there)."""
 
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ def intern_pattern(pattern, slot, table_bits, size, shift, multiplier):
 
 @_jit
 def find_or_add(bits, slot, table_bits, size, shift, multiplier, out):
-    """See :func:`ipp_toolkit.kernels.find_or_add`."""
+    """See :func:`ipp_toolkit._native.kernels.find_or_add`."""
     rows, cols = bits.shape
     for i in range(rows):
         for j in range(cols):
@@ -91,7 +91,7 @@ def find_or_add(bits, slot, table_bits, size, shift, multiplier, out):
 def apply_values(ids, value_index, prob, entropy, wentropy, table_prob, table_entropy,
                  table_wentropy, block_of_row, block_of_col, prob_blocks,
                  wentropy_blocks):
-    """See :func:`ipp_toolkit.kernels.apply_values`."""
+    """See :func:`ipp_toolkit._native.kernels.apply_values`."""
     rows, cols = ids.shape
     for i in range(rows):
         block_row = block_of_row[i]
@@ -113,7 +113,7 @@ def apply_values_with_stats(ids, value_index, prob, entropy, wentropy, table_pro
                             table_entropy, table_weights, table_wentropy, block_of_row,
                             block_of_col, prob_blocks, wentropy_blocks,
                             truth):
-    """See :func:`ipp_toolkit.kernels.apply_values_with_stats`."""
+    """See :func:`ipp_toolkit._native.kernels.apply_values_with_stats`."""
     stats = np.zeros(N_STATS)
     two = np.float32(2.0)
     half = np.float32(0.5)
@@ -150,7 +150,7 @@ def apply_values_with_stats(ids, value_index, prob, entropy, wentropy, table_pro
 @_jit
 def gather_caches(value_index, values, table_prob, table_entropy, table_wentropy, maps,
                   rects, logodds, prob, entropy, wentropy):
-    """See :func:`ipp_toolkit.kernels.gather_caches`."""
+    """See :func:`ipp_toolkit._native.kernels.gather_caches`."""
     for r in range(maps.shape[0]):
         m = maps[r]
         r0, r1, c0, c1 = rects[r, 0], rects[r, 1], rects[r, 2], rects[r, 3]
@@ -170,7 +170,7 @@ def gather_caches(value_index, values, table_prob, table_entropy, table_wentropy
 
 @_jit
 def gain_changes(values, value_index, cells, r0, r1, c0, c1, delta):
-    """See :func:`ipp_toolkit.kernels.gain_changes`."""
+    """See :func:`ipp_toolkit._native.kernels.gain_changes`."""
     for i in range(r1 - r0):
         indices = value_index[r0 + i, c0:c1]
         for z in range(values.shape[0]):
@@ -185,7 +185,7 @@ def gain_changes(values, value_index, cells, r0, r1, c0, c1, delta):
 
 @_jit
 def gain_lookup(values, value_index, cells, r0, r1, c0, c1):
-    """See :func:`ipp_toolkit.kernels.gain_lookup`."""
+    """See :func:`ipp_toolkit._native.kernels.gain_lookup`."""
     for i in range(r1 - r0):
         indices = value_index[r0 + i, c0:c1]
         for z in range(values.shape[0]):
@@ -197,7 +197,7 @@ def gain_lookup(values, value_index, cells, r0, r1, c0, c1):
 
 @_jit
 def segment_sums(cells, row_edges, col_edges, s0, s1, t0, t1, out):
-    """See :func:`ipp_toolkit.kernels.segment_sums`."""
+    """See :func:`ipp_toolkit._native.kernels.segment_sums`."""
     c0, c1 = col_edges[t0], col_edges[t1]
     column_sums = np.empty(c1 - c0)
     for s in range(s0, s1):
@@ -220,7 +220,7 @@ def segment_sums(cells, row_edges, col_edges, s0, s1, t0, t1, out):
 @_jit
 def weighted_segment_sums(sums, weight, row_block, col_block, row_segments, col_segments,
                           out):
-    """See :func:`ipp_toolkit.kernels.weighted_segment_sums`.
+    """See :func:`ipp_toolkit._native.kernels.weighted_segment_sums`.
 
     Every loop that adds runs along the row segments (or footprint columns), one independent
     sum per element, so the additions vectorise; each element's sum still takes its terms one

@@ -6,7 +6,7 @@ precedence rule::
 
     explicit value (a flag or keyword that is not None)  >  the config file  >  defaults
 
-"Defaults" are the paper's (:class:`~ipp_toolkit.config.EnvConfig`) with a tool's own
+"Defaults" are the paper's (:class:`~ipp_toolkit.config.schema.EnvConfig`) with a tool's own
 defaults on top (``ipp-train coma`` trains at r_M = 0.5 m with the own-position plane, for
 example). A key the YAML file does not write is not "set" by it: the tool's default applies.
 
@@ -28,7 +28,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .config import (
+from .files import config_from_dict, config_to_dict, read_config_file
+from .schema import (
     EnvConfig,
     FeatureConfig,
     TeamConfig,
@@ -37,7 +38,6 @@ from .config import (
     start_for_team_size,
     terrain_kinds,
 )
-from .config_io import config_from_dict, config_to_dict, read_config_file
 
 __all__ = [
     "build_env_config",
@@ -102,7 +102,7 @@ def _check_raster_file(name: str, nan_policy: str) -> str:
                          f"{', '.join(named_terrain_kinds())} or a raster FILE)")
     if not path.is_file():
         raise ValueError(f"cannot read terrain file {name!r}: not a file")
-    from .terrain import load_raster, prepare_raster
+    from ..world.terrain import load_raster, prepare_raster
 
     try:
         prepare_raster(load_raster(path), nan_policy, repr(name))

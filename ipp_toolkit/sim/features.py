@@ -2,7 +2,7 @@
 
 Every plane is G x G (one cell per waypoint). Map planes average the map cells of each
 waypoint's 5 m x 5 m block (entropy planes average W H per cell, not H of the mean). Each
-plane can be switched off in :class:`~ipp_toolkit.config.FeatureConfig` for ablations.
+plane can be switched off in :class:`~ipp_toolkit.config.schema.FeatureConfig` for ablations.
 
 Value ranges: the centred position plane lies in [-1, 1] (-1 marks out-of-area cells), every
 other plane in [0, 1].
@@ -14,9 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .config import ACTOR_PLANES, FeatureConfig
-from .gain import FootprintGainCache
-from .interest import BlockMeanCache, interest_smoother
+from ..belief.gain import FootprintGainCache
+from ..belief.interest import BlockMeanCache, interest_smoother
+from ..config.schema import ACTOR_PLANES, FeatureConfig
 from .mission import MissionState
 from .team import ACTION_DELTAS, N_ACTIONS
 
@@ -186,17 +186,17 @@ def footprint_gain(state: MissionState, smoothing: float | None = None) -> np.nd
     """Expected gain of a reading from every waypoint, on every agent's local map.
 
     The gain of one reading from waypoint (ix, iy, iz) is the sum over its footprint of
-    :func:`~ipp_toolkit.mapping.expected_gain` (the ``ig`` planner's objective), divided by
+    :func:`~ipp_toolkit.belief.mapping.expected_gain` (the ``ig`` planner's objective), divided by
     the cell count of the largest footprint and by the larger class weight: it lies in
     [0, 1] whatever the map resolution, and it ranks the waypoints exactly as the sums do.
     The sums are kept on the state and updated only where the maps changed since the last
-    call (:class:`~ipp_toolkit.gain.FootprintGainCache`).
+    call (:class:`~ipp_toolkit.belief.gain.FootprintGainCache`).
 
     With ``smoothing > 0`` (metres; None: the mission's ``features.gain_smoothing``, but a
     policy passes its own, as it may fly a mission configured otherwise) the sums are the
     ``ig_spatial`` objective instead:
-    :func:`~ipp_toolkit.mapping.interesting_gain` weighted by the smoothed probability of the
-    interesting class (:mod:`ipp_toolkit.interest`), divided by the same cell count (at most
+    :func:`~ipp_toolkit.belief.mapping.interesting_gain` weighted by the smoothed probability of the
+    interesting class (:mod:`ipp_toolkit.belief.interest`), divided by the same cell count (at most
     1; slightly negative where only cells believed uninteresting are left).
 
     Returns:

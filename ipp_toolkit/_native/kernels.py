@@ -1,8 +1,9 @@
 """Compiled inner loops of the belief maps (Numba), with the NumPy code as their reference.
 
-A refresh of one footprint rectangle of one map (:meth:`ipp_toolkit.mapping.BeliefMaps.refresh`)
+A refresh of one footprint rectangle of one map
+(:meth:`ipp_toolkit.belief.mapping.BeliefMaps.refresh`)
 reads each cell's log-odds, finds its value in the maps'
-:class:`~ipp_toolkit.value_table.ValueTable`, writes the cached probability, entropy and
+:class:`~ipp_toolkit.belief.value_table.ValueTable`, writes the cached probability, entropy and
 weighted entropy and moves the planning-grid block sums by the change; for the global map it
 also moves the running sums of the metrics and the reward. In NumPy that is some twenty passes
 over the rectangle; compiled it is two (find the values, then apply them), several times
@@ -10,7 +11,7 @@ faster, with bit-identical cached values (the kernels only look values up, every
 computed by the table's NumPy code) and block and metric sums equal up to float64 summation
 order.
 
-A whole step of the mission (:func:`ipp_toolkit.mission.step_mission`) has its own three
+A whole step of the mission (:func:`ipp_toolkit.sim.mission.step_mission`) has its own three
 kernels, which do for every map at once what the per-rectangle calls above do one call at a
 time, with the same float operations in the same order (so the same numbers to the last bit):
 :func:`read_cells` turns the sensor noise into readings and their block planes,
@@ -20,11 +21,11 @@ index), writing only the maps' index array and a list of (old, new) index pairs,
 :func:`apply_targets` moves the block sums and metric sums from those pairs (after the new
 values' columns are derived). The per-cell log-odds and caches are looked up from the index
 array only when somebody reads them (:func:`gather_caches`;
-:class:`~ipp_toolkit.mapping.BeliefMaps`). A cell that several footprints of one map cover
+:class:`~ipp_toolkit.belief.mapping.BeliefMaps`). A cell that several footprints of one map cover
 is looked up and written once (a second refresh would move nothing); the statistics of the
 global map still count it once per footprint, as the reward always did.
 :func:`sensor_noise` draws the step's sensor noise (NumPy's streams, bit for bit;
-:mod:`ipp_toolkit.sensor_noise`). The NumPy fallback keeps the per-rectangle code.
+:mod:`ipp_toolkit.world.sensor_noise`). The NumPy fallback keeps the per-rectangle code.
 
 Numba is a dependency of the toolkit; where it cannot be imported (an exotic platform, or
 ``IPP_TOOLKIT_NO_NUMBA=1`` in the environment, which the tests use to check both paths) the
@@ -55,7 +56,7 @@ REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positi
                 "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
                 "new_weighted_entropy")
 """The statistics vector of :func:`apply_values_with_stats` (and of
-:meth:`ipp_toolkit.mapping.BeliefMaps.refresh_with_stats`), in order: the changes inside the
+:meth:`ipp_toolkit.belief.mapping.BeliefMaps.refresh_with_stats`), in order: the changes inside the
 region of the sum of H over interesting cells, of the sum of (1 - p)^2 over them, of the true
 and of the predicted positives (p > 0.5), then the sums of W' H (posterior weights, prior
 entropies), of W H before and of W' H' after."""
@@ -79,19 +80,19 @@ def _compiled() -> Any:
     """
     global _module
     if _module is None:
-        from . import _compiled_kernels
+        from . import compiled_kernels
 
-        _module = _compiled_kernels
+        _module = compiled_kernels
     return _module
 
 
 def _compiled_step() -> Any:
-    """The whole-step kernels (:mod:`ipp_toolkit._compiled_step`), imported on first use."""
+    """The whole-step kernels (:mod:`ipp_toolkit._native.compiled_step`), imported on first use."""
     global _step_module
     if _step_module is None:
-        from . import _compiled_step
+        from . import compiled_step
 
-        _step_module = _compiled_step
+        _step_module = compiled_step
     return _step_module
 
 
@@ -163,7 +164,7 @@ def fuse_evidence(*arrays: Any) -> tuple[int, bool]:
     of the footprints is visited once, in the first footprint that covers it: the log-odds
     increments of every footprint over it are added in order to its value (d1 where the
     reading is 1, else d0, each sum clipped to [-clip, clip], as
-    :meth:`ipp_toolkit.mapping.BeliefMaps.add_evidence`), then the sum is interned into the
+    :meth:`ipp_toolkit.belief.mapping.BeliefMaps.add_evidence`), then the sum is interned into the
     open-addressing table (as :func:`find_or_add`) and its index written to ``value_index``.
     Values are interned in the order the per-footprint refreshes intern them, so they get
     the same indices. A cell's value is the table's value at its index: the maps' index
@@ -249,7 +250,7 @@ def segment_sums(cells: np.ndarray, row_edges: np.ndarray, col_edges: np.ndarray
     ``row_edges[s + 1]``), ``col_edges`` the columns. Per segment s, its rows are added one
     after another into one float64 sum per column; per column segment t, those column sums
     are added one after another into ``out[s, t]``
-    (:meth:`ipp_toolkit.box_sums.BoxLayout.reference_segment_sums` adds in the same order).
+    (:meth:`ipp_toolkit.belief.box_sums.BoxLayout.reference_segment_sums` adds in the same order).
 
     Args:
         cells: (H, W) float32 per-cell values (one map, one altitude).
@@ -270,7 +271,7 @@ def weighted_segment_sums(sums: np.ndarray, weight: np.ndarray, row_block: np.nd
     ``sums[s, t] * float64(weight[row_block[s], col_block[t]])``. Footprint (y, x) is the row
     segments ``row_segments[y]`` times the column segments ``col_segments[x]``: per row
     segment, a footprint column's weighted segments are added in order, then per footprint
-    row its row segments: a fixed order, on any CPU (:class:`ipp_toolkit.box_sums.BoxLayout`
+    row its row segments: a fixed order, on any CPU (:class:`ipp_toolkit.belief.box_sums.BoxLayout`
     holds the NumPy reference, in the same order).
 
     Args:
@@ -295,7 +296,7 @@ def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> Non
 
     Args:
         words: (F, n) uint32 assembled entropy of each stream (see
-            :mod:`ipp_toolkit.sensor_noise`).
+            :mod:`ipp_toolkit.world.sensor_noise`).
         offsets: (F + 1,) int64 where each stream's numbers start in ``out`` (and the end).
         out: (cells,) float32 output.
     """
@@ -303,13 +304,13 @@ def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> Non
 
 
 def _compiled_noise() -> Any:
-    """The sensor-noise kernel's module (:mod:`ipp_toolkit._compiled_noise`), imported on
+    """The sensor-noise kernel's module (:mod:`ipp_toolkit._native.compiled_noise`), imported on
     first use."""
     global _noise_module
     if _noise_module is None:
-        from . import _compiled_noise
+        from . import compiled_noise
 
-        _noise_module = _compiled_noise
+        _noise_module = compiled_noise
     return _noise_module
 
 
@@ -366,7 +367,7 @@ def compile_mission_kernels(claim: Callable[[], int] | None = None) -> int:
     kernel not yet taken from a shared ``claim`` until none is left; one that compiled
     something then waits for the others to finish theirs (else it would compile one they
     are still compiling) and loads theirs from the cache when it first calls them
-    (:class:`ipp_toolkit.process_pool.WorkerPool` does this). Once cached, this is a load
+    (:class:`ipp_toolkit.runs.process_pool.WorkerPool` does this). Once cached, this is a load
     (about 0.35 s for all of them).
 
     Args:

@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from .block_grid import Rect
-from .config import SensorConfig, WorldConfig
-from .mapping import binary_entropy, logit
+from ..belief.block_grid import Rect
+from ..belief.mapping import binary_entropy, logit
+from ..config.schema import SensorConfig, WorldConfig
 
 __all__ = ["Camera", "footprint_side"]
 

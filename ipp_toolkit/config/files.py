@@ -1,6 +1,6 @@
 """A mission's configuration as nested dicts and YAML files: read, check, build, write.
 
-:mod:`ipp_toolkit.config` owns the dataclasses and their validation; this module owns their
+:mod:`ipp_toolkit.config.schema` owns the dataclasses and their validation; this module owns their
 plain form (what a ``--config`` file, a run folder's ``config.json`` and the result folders
 hold). Unknown sections and keys are refused by name, and the file's name is in every
 message about a file.
@@ -18,8 +18,8 @@ from typing import Any
 
 import yaml
 
-from .config import _SECTIONS, EnvConfig, _build
-from .io import atomic_write, read_yaml
+from ..io import atomic_write, read_yaml
+from .schema import _SECTIONS, EnvConfig, _build
 
 __all__ = ["read_config_file", "load_config", "save_config", "config_from_dict",
            "config_to_dict"]

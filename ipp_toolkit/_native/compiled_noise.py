@@ -1,6 +1,6 @@
-"""The Numba sensor-noise kernel of :func:`ipp_toolkit.kernels.sensor_noise` (imported on
+"""The Numba sensor-noise kernel of :func:`ipp_toolkit._native.kernels.sensor_noise` (imported on
 first use): NumPy's ``SeedSequence``, ``PCG64`` and ``Generator.random(dtype=np.float32)``,
-the same numbers (:mod:`ipp_toolkit.sensor_noise` checks them against NumPy)."""
+the same numbers (:mod:`ipp_toolkit.world.sensor_noise` checks them against NumPy)."""
 
 from __future__ import annotations
 
@@ -104,7 +104,7 @@ def _pcg64_seeded(words):
 
 @_jit
 def sensor_noise(words, offsets, out):
-    """See :func:`ipp_toolkit.kernels.sensor_noise`."""
+    """See :func:`ipp_toolkit._native.kernels.sensor_noise`."""
     scale = np.float32(1.0 / 16777216.0)
     shift = np.uint64(8)
     for f in range(words.shape[0]):

@@ -1,6 +1,6 @@
 """The process pool of the evaluation runner: tasks flown in spawned, single-threaded workers.
 
-This module owns how :func:`ipp_toolkit.evaluation.evaluate` runs with ``workers > 1``: a
+This module owns how :func:`ipp_toolkit.runs.evaluation.evaluate` runs with ``workers > 1``: a
 "spawn" process pool (:class:`WorkerPool`) whose workers run one intra-op thread
 (:func:`single_thread_environment`, :func:`limit_torch_threads`) and keep the task runner
 that comes with their tasks (pickled once, unpickled once per worker); which planner
@@ -33,14 +33,14 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any, Protocol
 
-from . import kernels
-from .planner_specs import PlannerSpec
-from .planners import (
+from .._native import kernels
+from ..planners import (
     PlannerFactory,
     entry_point_planners,
     planner_factory,
     planners_in_process,
 )
+from ..planners.specs import PlannerSpec
 
 __all__ = ["TaskRunner", "WorkerPool", "children_ignore_sigint", "stop_workers", "guard_worker",
            "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
@@ -68,7 +68,7 @@ def limit_blas_threads() -> Any:
     The toolkit's matrix products are small and many (footprint sums, smoothing): on a
     2-core machine OpenBLAS's threads made them ten times slower than one thread (measured
     in docs/performance.md), and processes, not threads, are its parallelism. The CLI, the
-    trainers and the evaluation workers call this; :func:`ipp_toolkit.evaluation.evaluate`
+    trainers and the evaluation workers call this; :func:`ipp_toolkit.runs.evaluation.evaluate`
     uses it as a context manager in the calling process.
     """
     from threadpoolctl import threadpool_limits

@@ -7,7 +7,7 @@ distinct values (a few thousand, against ~30,000 cells under one footprint at r_
 own NumPy function (so a looked-up value is bit for bit the one computed cell by cell), and
 finds a value's index through an open-addressing hash table of its bit pattern (Knuth's
 multiplicative hash, linear probing, at most half full). Lookup and insertion run in a
-compiled kernel (:func:`ipp_toolkit.kernels.find_or_add`) where Numba is available, else in
+compiled kernel (:func:`ipp_toolkit._native.kernels.find_or_add`) where Numba is available, else in
 vectorised NumPy probing rounds; both give every value one index.
 """
 
@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from . import kernels
+from .._native import kernels
 
 __all__ = ["ValueTable", "DerivedMemo", "exact_memo"]
 
@@ -148,8 +148,8 @@ class ValueTable:
         """Let a compiled pass intern values into the table, growing it when the pass stops.
 
         ``run(slot, bits, size, shift, multiplier, limit)`` interns (as
-        :func:`ipp_toolkit.kernels.find_or_add` does) and returns ``(size, True)`` when it is
-        done, or ``(size, False)`` when it stopped because the table might otherwise hold
+        :func:`ipp_toolkit._native.kernels.find_or_add` does) and returns ``(size, True)`` when it
+        is done, or ``(size, False)`` when it stopped because the table might otherwise hold
         more than ``limit`` values; then the table grows, with room for at least ``room``
         more values, and ``run`` is called again, to go on where it stopped (it keeps its
         own place). New values get their derived columns once, at the end. Unlike
@@ -208,7 +208,8 @@ class ValueTable:
             self._slot[slot] = index
 
     def _find_or_add_numpy(self, bits: np.ndarray, out: np.ndarray) -> None:
-        """:func:`ipp_toolkit.kernels.find_or_add` in NumPy: probing rounds over all cells."""
+        """:func:`ipp_toolkit._native.kernels.find_or_add` in NumPy: probing rounds over all
+        cells."""
         mask = len(self._slot) - 1
         slot = ((bits * _MULTIPLIER) >> np.uint32(32 - self._slot_bits)).astype(np.intp)
         pending = np.arange(len(bits))

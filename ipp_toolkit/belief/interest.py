@@ -10,7 +10,7 @@ says more than the prior. :class:`InterestSmoother` estimates
 with K a Gaussian of standard deviation ``sigma`` metres, normalised over the cells inside
 the area (so the border is not pulled towards 0). The table's metric is the entropy of the
 *truly interesting* cells, so the value of reading a cell is pi(c) times the entropy a
-reading removes from an interesting cell (:func:`~ipp_toolkit.mapping.interesting_gain`):
+reading removes from an interesting cell (:func:`~ipp_toolkit.belief.mapping.interesting_gain`):
 the ``ig_spatial`` planner and the actor's ``gain`` planes with ``gain_smoothing > 0`` rank
 waypoints by the footprint sums of that product.
 
@@ -178,7 +178,7 @@ class BlockMeanCache:
     takes NumPy's mean), the means are taken from the whole maps at every call instead.
 
     Args:
-        maps: the :class:`~ipp_toolkit.mapping.BeliefMaps` of a mission.
+        maps: the :class:`~ipp_toolkit.belief.mapping.BeliefMaps` of a mission.
         n_maps: the first ``n_maps`` maps of the stack.
         block: side of the squares in cells (divides the map size).
     """

@@ -2,10 +2,10 @@
 
 Each measurement (step s, UAV k) draws its cells' noise from its own stream,
 ``MissionStreams.sensor(s, k).random(cells, dtype=np.float32)``
-(:mod:`ipp_toolkit.seeding`): a ``SeedSequence``, a ``PCG64`` and a ``Generator`` built for
+(:mod:`ipp_toolkit.world.seeding`): a ``SeedSequence``, a ``PCG64`` and a ``Generator`` built for
 every measurement, about 25 us each, and NumPy's draws at about 3 ns a number.
 :func:`fill_sensor_noise` gives the
-same numbers from one compiled pass (:func:`ipp_toolkit.kernels.sensor_noise`, which follows
+same numbers from one compiled pass (:func:`ipp_toolkit._native.kernels.sensor_noise`, which follows
 NumPy's seeding and generator bit for bit); it checks that pass against NumPy once per process
 and uses NumPy itself wherever the compiled kernels are off or the check fails (a NumPy whose
 streams changed).
@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import kernels
+from .._native import kernels
 from .seeding import MissionStreams, mission_streams
 
 __all__ = ["fill_sensor_noise", "entropy_prefix", "assembled_entropy", "compiled_noise_ok"]

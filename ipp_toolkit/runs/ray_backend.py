@@ -1,7 +1,7 @@
 """The Ray backend of the evaluation runner: missions flown as Ray tasks, on one machine or many.
 
-:func:`ipp_toolkit.evaluation.evaluate` with ``backend="ray"`` runs its (planner label,
-mission) tasks here instead of in :mod:`ipp_toolkit.process_pool`, with the same contract:
+:func:`ipp_toolkit.runs.evaluation.evaluate` with ``backend="ray"`` runs its (planner label,
+mission) tasks here instead of in :mod:`ipp_toolkit.runs.process_pool`, with the same contract:
 every result is handed to ``finish`` in the calling process as it arrives (so the result
 folder is written there, one atomic shard per mission, exactly as with the local backend);
 on a failed mission no more tasks start, the running ones are awaited and stored, and the

@@ -22,13 +22,14 @@ from typing import Any
 
 import numpy as np
 
-from . import kernels
-from .block_grid import BlockGrid, Rect
-from .config import EnvConfig, fixed_start_waypoints
-from .mapping import BeliefMaps
-from .seeding import MissionStreams, mission_streams
-from .sensor import Camera
-from .sensor_noise import entropy_prefix, fill_sensor_noise
+from .._native import kernels
+from ..belief.block_grid import BlockGrid, Rect
+from ..belief.mapping import BeliefMaps
+from ..config.schema import EnvConfig, fixed_start_waypoints
+from ..world.seeding import MissionStreams, mission_streams
+from ..world.sensor import Camera
+from ..world.sensor_noise import entropy_prefix, fill_sensor_noise
+from ..world.terrain import generate_terrain
 from .team import (
     ACTION_NAMES,
     N_ACTIONS,
@@ -37,7 +38,6 @@ from .team import (
     positions_in_metres,
     resolve_moves,
 )
-from .terrain import generate_terrain
 
 __all__ = [
     "MissionGeometry",
@@ -150,10 +150,10 @@ class MissionState:
         failure_step: (N,) int, the step at which each UAV fails (budget + 1: never).
         history: metrics after every step, s = 0..step.
         gain_cache: the footprint gain cache of the local maps
-            (:class:`ipp_toolkit.gain.FootprintGainCache`), built on first use by
-            :func:`ipp_toolkit.features.footprint_gain`; None until then.
+            (:class:`ipp_toolkit.belief.gain.FootprintGainCache`), built on first use by
+            :func:`ipp_toolkit.sim.features.footprint_gain`; None until then.
         block_mean_cache: the local maps' block means of probability
-            (:class:`ipp_toolkit.interest.BlockMeanCache`), likewise.
+            (:class:`ipp_toolkit.belief.interest.BlockMeanCache`), likewise.
     """
 
     config: EnvConfig
@@ -486,7 +486,7 @@ def _reward(state: MissionState, numerator: float, denominator: float) -> float:
 def _measure_exchange_fuse_compiled(state: MissionState) -> float:
     """:func:`_measure_exchange_fuse` in the whole-step kernels, with the same numbers.
 
-    The readings come from the same noise streams (:mod:`ipp_toolkit.sensor_noise`), their
+    The readings come from the same noise streams (:mod:`ipp_toolkit.world.sensor_noise`), their
     planes are summed as ``np.add.reduceat`` sums them, and :meth:`BeliefMaps.fuse_targets`
     fuses them into the local maps (each agent's heard readings, in agent order) and then
     the global one.
@@ -550,7 +550,7 @@ def _fold_region_stats(stats: _GlobalStats, sums: np.ndarray | list[float]
     """Fold one refreshed global region into the running sums.
 
     Args:
-        sums: the region's changes, :data:`ipp_toolkit.mapping.REGION_STATS`.
+        sums: the region's changes, :data:`ipp_toolkit.belief.mapping.REGION_STATS`.
 
     Returns the region's share of the reward's numerator, sum W'(H - H'), and of the
     correction of its denominator, sum (W' - W) H, with W' the posterior weights.

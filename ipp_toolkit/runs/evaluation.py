@@ -8,7 +8,7 @@ derived from ``(namespace, seed, k)`` only.
 
 With ``out_dir`` every finished mission is stored at once as a shard, written atomically, so an
 interrupted run resumes where it stopped, and a folder grows when other planners are flown
-into it (the layout: :mod:`ipp_toolkit.result_store`).
+into it (the layout: :mod:`ipp_toolkit.runs.result_store`).
 
 Results are tidy rows, one per (planner, mission, step) with the columns
 :data:`RESULT_COLUMNS`; :meth:`EvaluationResult.curves` turns them into (missions, B + 1)
@@ -16,12 +16,13 @@ arrays. :func:`load_results` reads a folder back.
 
 This module owns one planner's mission (:func:`run_mission`: its views, its timed ``act``,
 its rows), the task runner that flies one (planner label, mission) with cached planners, and
-:func:`evaluate`. Its neighbours own the rest: the mission loop (:mod:`ipp_toolkit.driver`,
+:func:`evaluate`. Its neighbours own the rest: the mission loop (:mod:`ipp_toolkit.sim.driver`,
 shared with COMA's rollouts), planner specs and their syntax
-(:mod:`ipp_toolkit.planner_specs`), the planner seed (:func:`ipp_toolkit.seeding.planner_seed`),
-the worker processes (:mod:`ipp_toolkit.process_pool`), the backend check and the optional
-Ray backend (:mod:`ipp_toolkit.ray_backend`, which imports Ray only when asked) and the
-folder layout (:mod:`ipp_toolkit.result_store`).
+(:mod:`ipp_toolkit.planners.specs`), the planner seed
+(:func:`ipp_toolkit.world.seeding.planner_seed`),
+the worker processes (:mod:`ipp_toolkit.runs.process_pool`), the backend check and the optional
+Ray backend (:mod:`ipp_toolkit.runs.ray_backend`, which imports Ray only when asked) and the
+folder layout (:mod:`ipp_toolkit.runs.result_store`).
 """
 
 from __future__ import annotations
@@ -38,19 +39,21 @@ from typing import Any
 
 import numpy as np
 
-from .config import EnvConfig, check_int
-from .config_io import config_from_dict
-from .driver import fly_missions, start_missions
-from .io import write_json
-from .mission import MissionGeometry, MissionState
-from .planner_specs import PlannerSpec, as_specs
-from .planners import (
+from ..config.files import config_from_dict
+from ..config.schema import EnvConfig, check_int
+from ..config.settings import safe_name
+from ..io import write_json
+from ..planners import (
     Planner,
     PlannerFactory,
     check_planner_name,
     make_planner,
     planner_views,
 )
+from ..planners.specs import PlannerSpec, as_specs
+from ..sim.driver import fly_missions, start_missions
+from ..sim.mission import MissionGeometry, MissionState
+from ..world.seeding import planner_seed
 from .process_pool import (
     WorkerPool,
     limit_blas_threads,
@@ -76,8 +79,6 @@ from .result_store import (
     write_shard,
     write_trajectory,
 )
-from .seeding import planner_seed
-from .settings import safe_name
 
 __all__ = [
     "RESULT_COLUMNS",
@@ -184,7 +185,7 @@ def run_mission(config: EnvConfig, planner: Planner, seed: int, mission: int,
 
 
 # --------------------------------------------------------------------------------------------
-# Running many missions (in this process, or in worker processes: ipp_toolkit.process_pool)
+# Running many missions (in this process, or in worker processes: ipp_toolkit.runs.process_pool)
 
 
 @dataclass
@@ -395,13 +396,13 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             rows)`` as soon as a recorded mission has been flown (not for one read back from
             ``out_dir``), e.g. to draw it while the other missions fly.
         backend: ``"local"`` (this process, or the process pool) or ``"ray"``: one Ray task
-            per (planner, mission), see :mod:`ipp_toolkit.ray_backend`; results are stored
+            per (planner, mission), see :mod:`ipp_toolkit.runs.ray_backend`; results are stored
             in this process either way, and do not depend on the backend.
         address: with ``backend="ray"``, the cluster to use (``HOST:PORT`` as printed by
             ``ray start --head``, ``ray://HOST:PORT`` or ``auto``; its CPUs decide how many
             missions fly at once); None starts a local Ray with ``workers`` CPUs for this
             call (a process already connected to Ray uses that connection).
-        pool: worker processes started ahead (:class:`~ipp_toolkit.process_pool.WorkerPool`)
+        pool: worker processes started ahead (:class:`~ipp_toolkit.runs.process_pool.WorkerPool`)
             for ``workers > 1`` on the local backend; the evaluation shuts it down when its
             missions are done. The caller closes it where it goes unused (``finally``).
 
@@ -412,7 +413,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         ValueError: a bad input (the message names the value).
         EvaluationError: ``out_dir`` holds results of another configuration or another
             planner under one of the labels.
-        ipp_toolkit.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray installed
+        ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray installed
             (an ImportError; the message gives the install command).
         ConnectionError: no Ray cluster answers at ``address`` (within seconds).
     """

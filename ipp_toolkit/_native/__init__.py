@@ -1,0 +1,1 @@
+"""Compiled inner loops (Numba) with their NumPy reference code: internal, no public API."""
