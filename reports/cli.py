@@ -200,6 +200,10 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="distance between waypoints in metres (None: the config's, 5); "
                              "the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
                              "waypoints")
+    parser.add_argument("--reference", default=None, metavar="LABEL",
+                        help="the planner of the summary's paired column (final entropy "
+                             "minus its on the same missions; default ig), e.g. ig_spatial "
+                             "to see what a learned planner adds over the best heuristic")
     parser.add_argument("--namespace", choices=("test", "validation"), default="test",
                         help="fly the held-out test missions, or the validation missions to "
                              "select policies on (the default --out then starts with "
@@ -254,7 +258,7 @@ def compare_main(argv: list[str] | None = None) -> int:
             planners=args.planners, trials=args.trials, seed=args.seed, workers=args.workers,
             out=out_dir, config=env_config, progress=not args.no_progress,
             animate=args.animate, namespace=args.namespace, backend=args.backend,
-            address=args.address)
+            address=args.address, reference=args.reference)
     except (ValueError, OSError) as err:  # ConnectionError (no Ray at --address) included
         return error(err)
     except KeyboardInterrupt:
@@ -284,11 +288,12 @@ def interrupted(tool: str, out_dir: Path) -> int:
                             "run the same command again to continue")
 
 
-TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training", "sb3": "baselines.sb3_training"}
+TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training", "sb3": "baselines.sb3_training",
+            "prior": "baselines.prior_training"}
 
 
 def train_main(argv: list[str] | None = None) -> int:
-    """Entry point of ``ipp-train {coma,ppo,sb3} ...``: dispatch to the trainer's own ``main``.
+    """Entry point of ``ipp-train {coma,ppo,sb3,prior} ...``: run the trainer's ``main``.
 
     ``ipp-train sb3 --algo PPO|MaskablePPO|A2C|DQN|QRDQN|RecurrentPPO`` trains any supported
     SB3 algorithm; ``ipp-train ppo`` is the alias of its PPO case.

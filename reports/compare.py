@@ -341,7 +341,7 @@ def compare(agents: int | None = None, comm: float | None = None,
             progress: bool = True, area_size: float | None = None,
             grid_spacing: float | None = None,
             note: Callable[[str], None] | None = None, animate: bool = False,
-            reference: str = "ig", namespace: str = "test", backend: str = "local",
+            reference: str | None = None, namespace: str = "test", backend: str = "local",
             address: str | None = None) -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
@@ -361,8 +361,9 @@ def compare(agents: int | None = None, comm: float | None = None,
         progress: show a progress bar.
         note: receives notes about skipped default planners (default: stderr).
         animate: with ``out``, also write ``animations/<planner>.gif`` of mission 0.
-        reference: the planner of the summary's paired column (final entropy minus its on the
-            same missions, with its standard error and win rate); none when it is not flown.
+        reference: the label of the planner of the summary's paired column (final entropy
+            minus its on the same missions, with its standard error and win rate); refused
+            when it is not flown. None: ``ig``, and no column when ``ig`` is not flown.
         namespace: ``test`` (the held-out missions) or ``validation`` (the missions to select
             policies and settings on; never select on test missions).
         backend: ``"local"`` (processes on this machine) or ``"ray"`` (one Ray task per
@@ -417,6 +418,10 @@ def compare(agents: int | None = None, comm: float | None = None,
         else:
             specs, checkpoints, _ = _checked_planners(planners, env_config,
                                                       note or _print_note)
+        labels = [spec.effective_label for spec in specs]
+        if reference is not None and reference not in labels:
+            raise ValueError(f"the reference planner {reference!r} is not among the planners "
+                             f"flown ({', '.join(labels)})")
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
         from ipp_toolkit.runs.evaluation import evaluate
@@ -438,7 +443,7 @@ def compare(agents: int | None = None, comm: float | None = None,
                           backend=backend, address=address, pool=pool)
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=True)
-        summary = summarise(result.rows, reference=reference, checkpoints={
+        summary = summarise(result.rows, reference=reference or "ig", checkpoints={
             label: f"{record['checkpoint']} sha256:{record['sha256'][:16]}"
             for label, record in checkpoints.items()})
         comparison = Comparison(result=result, summary=summary)

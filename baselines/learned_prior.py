@@ -1,0 +1,91 @@
+"""Greedy information gain with a learned field prior (``ig_learned``).
+
+``ig_spatial`` values a cell by ``pi(c) * interesting_gain(c)`` with ``pi`` the Gaussian-
+smoothed local map: "near what was seen interesting". This planner keeps that objective and
+every rule of ``ig`` (index order, heard lower-index teammates' next footprints discounted,
+their targets avoided) and replaces ``pi`` by a learned field prior
+(:class:`ipp_toolkit.belief.field_prior.FieldPrior`): a small network that predicts, from the
+UAV's own local map, how likely each 2 m block is to be interesting, having learned the
+shapes fields take (straight boundaries continue, hotspots have sizes) from simulator ground
+truth (``ipp-train prior``). No policy is learned: the decision is still the greedy argmax.
+
+``ig_learned`` flies the shipped prior (``baselines/checkpoints/field_prior.pt``, its JSON
+record beside it); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
+unused. Cost: ``ig_spatial``'s work plus one batched forward pass of the prior per step.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ipp_toolkit.belief.field_prior import FieldPrior
+from ipp_toolkit.belief.interest import InterestSmoother, interest_smoother
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.planners import AgentView
+from ipp_toolkit.world.sensor import Camera
+
+from .spatial_gain import SpatialGainPlanner
+
+__all__ = ["DEFAULT_PRIOR", "LearnedPriorPlanner"]
+
+DEFAULT_PRIOR = Path(__file__).resolve().parent / "checkpoints" / "field_prior.pt"
+"""The shipped field prior."""
+
+
+class LearnedPriorPlanner(SpatialGainPlanner):
+    """``ig_spatial``'s objective with a learned probability of interest.
+
+    Args:
+        checkpoint: a field-prior file (``ipp-train prior`` writes ``RUN/best.pt``); None: the
+            shipped one.
+        overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
+    """
+
+    name = "ig_learned"
+    needs_observations = False
+
+    def __init__(self, checkpoint: str | Path | None = None,
+                 overlap_discount: float = 0.5) -> None:
+        import torch
+
+        super().__init__(overlap_discount=overlap_discount)
+        # A batch of N small maps: extra intra-op threads only spin on busy cores.
+        torch.set_num_threads(1)
+        path = Path(DEFAULT_PRIOR if checkpoint is None else checkpoint)
+        if checkpoint is None and not path.is_file():
+            raise CheckpointError(f"the shipped field prior {str(path)!r} does not exist; train "
+                                  "one with `ipp-train prior --out RUN` and pass "
+                                  "ig_learned=RUN/best.pt")
+        if path.is_dir():
+            raise CheckpointError(f"field prior {str(path)!r} is a folder; give the file "
+                                  f"(e.g. {str(path / 'best.pt')!r})")
+        self.checkpoint = path
+        self.prior = FieldPrior.load(path)
+        self._fine: np.ndarray | None = None  # (N, h, w) prior of this step's views
+        self._smoother: InterestSmoother | None = None
+
+    def reset(self, config: EnvConfig, seed: int) -> None:
+        super().reset(config, seed)
+        world = config.world
+        # Only its block grid and window are used: the prior is resampled onto its blocks.
+        self._smoother = interest_smoother(world.map_cells, world.resolution, self.sigma)
+        self._fine = None
+
+    def act(self, views: list[AgentView]) -> np.ndarray:
+        """(N,) int64 greedy actions (see ``ig``), after one batched prior prediction."""
+        if self._smoother is None or self._config is None:
+            raise RuntimeError("call reset(config, seed) before act()")
+        prob = np.stack([view.local_prob for view in views])
+        self._fine = self.prior.fine_values(prob, self._config.world.resolution,
+                                            self._smoother.block)
+        return super().act(views)
+
+    def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
+                    altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
+        assert self._fine is not None and self._smoother is not None
+        gain = super(SpatialGainPlanner, self)._cell_gains(view, camera, weights, altitude, cells)
+        gain *= self._smoother.window(self._fine[view.index], *cells)
+        return gain

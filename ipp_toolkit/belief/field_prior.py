@@ -1,0 +1,295 @@
+"""A learned field prior: how likely each part of the area is to be interesting, from a local map.
+
+The belief maps treat cells as independent, and the Gaussian smoothing of
+:mod:`ipp_toolkit.belief.interest` (``ig_spatial``'s prior) only says "near what was seen
+interesting". Real fields have shapes: a straight boundary continues, hotspots have typical
+sizes, textures repeat. A small convolutional network that has seen many ground truths
+predicts
+
+    pi(block) = P(a cell of the block is interesting | the UAV's local map)
+
+for every block of about :data:`BLOCK_METRES` metres, from what the UAV itself knows (its
+local map, which holds its own readings and those it heard). It is trained by supervised
+learning on simulator ground truth (``ipp-train prior``, :mod:`baselines.prior_training`);
+this module owns only what inference needs: the input planes, the network, the file format
+and the prediction, so a planner that flies a prior never imports the trainer.
+
+Input planes, per block of about 2 m (:func:`block_cells`; the map is padded to whole
+blocks, and a partial block averages over its part inside the area), taken over squares of
+about 0.5 m (the cells themselves at r_M >= 0.5 m):
+
+- ``prob``: mean probability minus 0.5;
+- ``certainty``: mean of ``|2 p - 1|`` (how much is known);
+- ``interesting`` / ``uninteresting``: the share of squares with p > 0.6 / p < 0.4 (read at
+  least once, either way);
+- ``inside``: the share of the block inside the area (0 for padding).
+
+Output: (N, h, w) probabilities per block, calibrated (trained with cross-entropy against the
+share of interesting cells of each block). :meth:`FieldPrior.fine_values` resamples them
+bilinearly onto a finer block grid (e.g. the 0.5 m blocks ``ig_spatial`` evaluates on).
+
+Cost: one forward pass per decision for the whole team (N maps batched); about 2 ms for four
+UAVs on one CPU thread at the defaults (docs/performance.md). torch is imported on first use.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from ..io import CheckpointError, load_torch, save_torch
+from .interest import block_means
+
+__all__ = ["BLOCK_METRES", "FORMAT", "INPUT_PLANES", "FieldPrior", "PriorNetConfig",
+           "block_cells", "block_labels", "build_network", "parameter_count", "prior_inputs",
+           "resample_matrix"]
+
+#: Side of the blocks the prior sees and predicts, in metres.
+BLOCK_METRES = 2.0
+#: Side of the squares the maps are averaged over before the planes are taken, in metres.
+SUB_BLOCK_METRES = 0.5
+#: The input planes, in order.
+INPUT_PLANES = ("prob", "certainty", "interesting", "uninteresting", "inside")
+#: The format tag of a field-prior file (:func:`ipp_toolkit.io.load_torch`).
+FORMAT = "ipp-toolkit/field-prior"
+#: Largest network a file may ask for (channels of the first level); the default is 8.
+MAX_WIDTH = 128
+
+
+def _sub_block(resolution: float, size: int) -> int:
+    """Cells per side of the ~0.5 m squares the maps are averaged over first (divides
+    ``size``; 1 at r_M >= 0.5 m)."""
+    target = max(1, int(round(SUB_BLOCK_METRES / resolution)))
+    return max(s for s in range(1, target + 1) if size % s == 0)
+
+
+def block_cells(resolution: float, size: int) -> int:
+    """Cells per block side at map resolution ``resolution`` metres for maps of ``size``
+    cells per side: a whole number of ~0.5 m squares, about :data:`BLOCK_METRES` in all."""
+    sub = _sub_block(resolution, size)
+    return sub * max(1, int(round(BLOCK_METRES / (sub * resolution))))
+
+
+def _block_sums(values: np.ndarray, b: int) -> np.ndarray:
+    """(N, h, w) float32 sums over b x b blocks of (N, H, W) ``values``, zero-padded."""
+    n, rows, cols = values.shape
+    h, w = -(-rows // b), -(-cols // b)
+    if (h * b, w * b) != (rows, cols):
+        padded = np.zeros((n, h * b, w * b), dtype=np.float32)
+        padded[:, :rows, :cols] = values
+        values = padded
+    # the contiguous axis first: two cheap reductions instead of one strided one
+    return values.reshape(n, h * b, w, b).sum(axis=3).reshape(n, h, b, w).sum(axis=2)
+
+
+def _inside_share(rows: int, cols: int, b: int) -> np.ndarray:
+    return _block_sums(np.ones((1, rows, cols), dtype=np.float32), b)[0] / np.float32(b * b)
+
+
+def prior_inputs(prob: np.ndarray, resolution: float) -> np.ndarray:
+    """The (N, 5, h, w) float32 input planes (:data:`INPUT_PLANES`) of (N, H, W) local maps.
+
+    The maps are first averaged over squares of about 0.5 m (:func:`~ipp_toolkit.belief.
+    interest.block_means`; the cells themselves at r_M >= 0.5 m), so the planes mean the same
+    at every resolution and cost little at fine ones: certainty and the two shares are
+    taken over those squares.
+
+    Args:
+        prob: (N, H, W) float32 probabilities of interest of N local maps (H = W).
+        resolution: the maps' cell side r_M in metres.
+    """
+    prob = np.ascontiguousarray(prob, dtype=np.float32)
+    if prob.ndim != 3 or prob.shape[1] != prob.shape[2]:
+        raise ValueError(f"expected (N, H, H) probability maps, got shape {prob.shape}")
+    sub = _sub_block(resolution, prob.shape[1])
+    squares = block_means(prob, sub) if sub > 1 else prob
+    b = block_cells(resolution, prob.shape[1]) // sub
+    n, rows, cols = squares.shape
+    inside = _inside_share(rows, cols, b)
+    count = np.maximum(inside * np.float32(b * b), np.float32(1.0))
+    planes = np.empty((n, len(INPUT_PLANES)) + inside.shape, dtype=np.float32)
+    planes[:, 0] = _block_sums(squares - np.float32(0.5), b) / count
+    planes[:, 1] = _block_sums(np.abs(squares * np.float32(2.0) - np.float32(1.0)), b) / count
+    planes[:, 2] = _block_sums((squares > 0.6).astype(np.float32), b) / count
+    planes[:, 3] = _block_sums((squares < 0.4).astype(np.float32), b) / count
+    planes[:, 4] = inside
+    return planes
+
+
+def block_labels(ground_truth: np.ndarray, resolution: float) -> np.ndarray:
+    """(h, w) float32 share of interesting cells of every block of an (H, W) ground truth
+    (the training target; padding blocks are 0)."""
+    truth = np.asarray(ground_truth, dtype=np.float32)[None]
+    b = block_cells(resolution, truth.shape[1])
+    count = np.maximum(_inside_share(*truth.shape[1:], b) * np.float32(b * b), np.float32(1.0))
+    return _block_sums(truth, b)[0] / count
+
+
+@functools.lru_cache(maxsize=32)
+def resample_matrix(n_fine: int, fine_cells: int, n_coarse: int, coarse_cells: int
+                    ) -> np.ndarray:
+    """(n_fine, n_coarse) float32 bilinear weights from coarse blocks to fine blocks.
+
+    Block i of side ``fine_cells`` cells has its centre at ``(i + 0.5) * fine_cells``; it
+    takes the linear interpolation of the two coarse blocks whose centres surround it (the
+    nearest one at the border). ``A @ coarse @ A.T`` resamples a (n_coarse, n_coarse) grid.
+    """
+    centre = (np.arange(n_fine) + 0.5) * fine_cells / coarse_cells - 0.5
+    centre = np.clip(centre, 0.0, n_coarse - 1)
+    low = np.floor(centre).astype(np.intp)
+    high = np.minimum(low + 1, n_coarse - 1)
+    frac = centre - low
+    weights = np.zeros((n_fine, n_coarse), dtype=np.float64)
+    weights[np.arange(n_fine), low] += 1.0 - frac
+    weights[np.arange(n_fine), high] += frac
+    return weights.astype(np.float32)
+
+
+@dataclass(frozen=True)
+class PriorNetConfig:
+    """The network's sizes.
+
+    Attributes:
+        width: channels of the first level (the second and the bottleneck have twice as many).
+    """
+
+    width: int = 8
+
+    def __post_init__(self) -> None:
+        if (isinstance(self.width, bool) or not isinstance(self.width, int)
+                or not 1 <= self.width <= MAX_WIDTH):
+            raise ValueError(f"width must be an integer in [1, {MAX_WIDTH}], got {self.width!r}")
+
+
+def build_network(config: PriorNetConfig) -> Any:
+    """A fresh :class:`torch.nn.Module` mapping (B, 5, h, w) planes to (B, h, w) logits.
+
+    A two-level U-Net (3 x 3 convolutions, average pooling, bilinear upsampling, skip
+    connections) whose bottleneck also sees the mean of its features over the area, so the
+    whole map (one straight boundary or many hotspots) informs every block.
+    """
+    import torch
+    from torch import nn
+    from torch.nn import functional as F
+
+    def pair(c_in: int, c_out: int) -> nn.Sequential:
+        return nn.Sequential(nn.Conv2d(c_in, c_out, 3, padding=1), nn.ReLU(),
+                             nn.Conv2d(c_out, c_out, 3, padding=1), nn.ReLU())
+
+    class FieldPriorNet(nn.Module):
+        def __init__(self, width: int) -> None:
+            super().__init__()
+            c1, c2 = width, 2 * width
+            self.enc1 = pair(len(INPUT_PLANES), c1)
+            self.enc2 = pair(c1, c2)
+            self.mid = pair(2 * c2, c2)
+            self.dec2 = pair(2 * c2, c2)
+            self.dec1 = pair(c2 + c1, c1)
+            self.head = nn.Conv2d(c1, 1, 1)
+
+        def forward(self, planes: torch.Tensor) -> torch.Tensor:
+            h, w = planes.shape[-2:]
+            ph, pw = -h % 4, -w % 4  # two halvings
+            x = F.pad(planes, (0, pw, 0, ph))
+            e1 = self.enc1(x)
+            e2 = self.enc2(F.avg_pool2d(e1, 2))
+            low = F.avg_pool2d(e2, 2)
+            context = low.mean(dim=(2, 3), keepdim=True).expand_as(low)
+            m = self.mid(torch.cat([low, context], dim=1))
+            d2 = self.dec2(torch.cat([F.interpolate(m, scale_factor=2.0, mode="bilinear",
+                                                    align_corners=False), e2], dim=1))
+            d1 = self.dec1(torch.cat([F.interpolate(d2, scale_factor=2.0, mode="bilinear",
+                                                    align_corners=False), e1], dim=1))
+            return self.head(d1)[:, 0, :h, :w]
+
+    return FieldPriorNet(config.width)
+
+
+class FieldPrior:
+    """A trained field prior, ready to predict (inference only: no gradients, one thread).
+
+    Args:
+        network: the module from :func:`build_network`, weights loaded.
+        config: its sizes.
+        record: what the file says of how it was trained (JSON-safe; may be empty).
+    """
+
+    def __init__(self, network: Any, config: PriorNetConfig,
+                 record: dict[str, Any] | None = None) -> None:
+        self.network = network.eval()
+        self.config = config
+        self.record = dict(record or {})
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> FieldPrior:
+        """Load a file written by :meth:`save`.
+
+        Raises:
+            CheckpointError: missing, corrupt, foreign, non-finite, or weights that do not
+                fit the network the file describes.
+        """
+        data = load_torch(path, FORMAT)
+        try:
+            config = PriorNetConfig(**dict(data["network"]))
+            record = dict(data.get("record", {}))
+            state = data["state_dict"]
+        except (KeyError, TypeError, ValueError) as error:
+            raise CheckpointError(f"field prior {str(path)!r} is malformed: {error}") from None
+        network = build_network(config)
+        try:
+            network.load_state_dict(state)
+        except (RuntimeError, TypeError, AttributeError) as error:
+            first = (str(error).splitlines() or [""])[0][:200]
+            raise CheckpointError(f"field prior {str(path)!r} does not fit its network "
+                                  f"(width {config.width}): {first}") from None
+        return cls(network, config, record)
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Atomically write the weights, sizes and record (plain data only)."""
+        save_torch(path, {"network": asdict(self.config), "record": self.record,
+                          "state_dict": self.network.state_dict()}, FORMAT)
+
+    def predict(self, prob: np.ndarray, resolution: float) -> np.ndarray:
+        """(N, h, w) float32 probability of interest of every block of N local maps.
+
+        Args:
+            prob: (N, H, W) float32 probabilities of the local maps.
+            resolution: their cell side r_M in metres.
+        """
+        import torch
+
+        planes = torch.from_numpy(prior_inputs(prob, resolution))
+        with torch.inference_mode():
+            return torch.sigmoid(self.network(planes)).numpy()
+
+    def fine_values(self, prob: np.ndarray, resolution: float, fine_cells: int) -> np.ndarray:
+        """(N, H / f, W / f) float32 prior on blocks of ``fine_cells`` = f cells per side.
+
+        The predicted 2 m blocks resampled bilinearly (:func:`resample_matrix`); ``H`` and
+        ``W`` must be multiples of ``f``.
+        """
+        coarse = self.predict(prob, resolution)
+        rows, cols = prob.shape[-2:]
+        if rows % fine_cells or cols % fine_cells:
+            raise ValueError(f"maps of {rows} x {cols} cells do not divide into blocks of "
+                             f"{fine_cells}")
+        b = block_cells(resolution, rows)
+        left = resample_matrix(rows // fine_cells, fine_cells, coarse.shape[1], b)
+        right = resample_matrix(cols // fine_cells, fine_cells, coarse.shape[2], b)
+        return left @ coarse @ right.T
+
+
+def parameter_count(config: PriorNetConfig) -> int:
+    """Number of weights of the network of ``config`` (without building it)."""
+    c1, c2, planes = config.width, 2 * config.width, len(INPUT_PLANES)
+
+    def pair(c_in: int, c_out: int) -> int:
+        return c_in * c_out * 9 + c_out + c_out * c_out * 9 + c_out
+
+    return (pair(planes, c1) + pair(c1, c2) + pair(2 * c2, c2) + pair(2 * c2, c2)
+            + pair(c2 + c1, c1) + c1 + 1)
+
