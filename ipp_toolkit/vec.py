@@ -21,7 +21,8 @@ termination/truncation split and per-env infos.
   ``info["invalid_action"] = True`` for its slot and subtracts ``invalid_penalty`` (default
   0) from that slot's reward; the action stored by the algorithm is the one executed (a hold
   is what that action does), so no sample is rewritten behind its back.
-  ``invalid_action="raise"`` keeps the simulator's own rule (an error), as the native API does;
+  ``invalid_action="raise"`` makes it an error (the native env's ``invalid_action``, which
+  holds by default too);
 * a failed UAV (``team.failures``) keeps its slot, inert until the mission ends: zero planes,
   an all-valid mask, reward 0, its actions ignored (black death);
 * the budget end is a true terminal: ``dones`` is True and
@@ -47,7 +48,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from .config.schema import EnvConfig, check_int
-from .env import IPPEnv
+from .env import INVALID_ACTION_POLICIES, IPPEnv
 from .sim.team import N_ACTIONS
 
 __all__ = ["IPPVecEnv", "INVALID_ACTION_POLICIES", "make_sb3_vec_env"]
@@ -258,9 +259,6 @@ class IPPVecEnv(VecEnv):
         raise TypeError("IPPVecEnv cannot be pickled (it may own worker processes)")
 
 
-INVALID_ACTION_POLICIES = ("hold", "raise")
-
-
 def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 0,
                      namespace: str = "train", invalid_action: str = "hold",
                      invalid_penalty: float = 0.0) -> IPPVecEnv:
@@ -304,10 +302,8 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
     if invalid_action not in INVALID_ACTION_POLICIES:
         raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
                          f"{invalid_action!r}")
-    if invalid_action == "hold":
-        config = config.replace(team={"invalid_action": "hold"})
     # Fixed slots: a failed UAV stays as an inert agent (black death) until the mission ends.
-    env = IPPEnv(config, namespace=namespace, keep_failed=True)
+    env = IPPEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action)
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),
