@@ -259,15 +259,17 @@ class IPPVecEnv(VecEnv):
         raise TypeError("IPPVecEnv cannot be pickled (it may own worker processes)")
 
 
-def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 0,
+def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus: int = 0,
                      namespace: str = "train", invalid_action: str = "hold",
-                     invalid_penalty: float = 0.0) -> IPPVecEnv:
+                     invalid_penalty: float = 0.0,
+                     render_mode: str | None = None) -> IPPVecEnv:
     """SB3 vector env over ``n_envs`` copies of the simulator, one slot per agent.
 
     Args:
         config: the mission configuration; every copy has its team of N agents.
-        n_envs: copies of the simulator (>= 1); SB3 sees ``n_envs * N`` envs.
-        seed: run seed (>= 0); copy c starts on run ``seed + c`` at the first reset.
+        n_envs: copies of the simulator (>= 1, default 1); SB3 sees ``n_envs * N`` envs.
+        seed: run seed (>= 0, default 0); copy c starts on run ``seed + c`` at the first
+            reset (an SB3 model's ``seed`` replaces it).
         num_cpus: worker processes (0 or 1: all copies in this process). More than
             ``n_envs`` is capped at ``n_envs``.
         namespace: random-stream namespace of the missions (``train`` for training).
@@ -276,6 +278,8 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
             trains as is) or ``raise`` (an error, the native API's rule). A config that
             already says ``team.invalid_action="hold"`` holds either way.
         invalid_penalty: reward subtracted from a slot whose action was masked (>= 0).
+        render_mode: ``None`` or ``"rgb_array"`` (``render()`` then returns the first
+            copy's frame, for SB3's ``VecVideoRecorder``).
 
     Returns:
         an :class:`IPPVecEnv` with observations (C, G, G) float32, ``Discrete(6)`` actions and
@@ -303,7 +307,8 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
         raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
                          f"{invalid_action!r}")
     # Fixed slots: a failed UAV stays as an inert agent (black death) until the mission ends.
-    env = IPPEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action)
+    env = IPPEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action,
+                 render_mode=render_mode)
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),
@@ -313,5 +318,6 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
     except BaseException:
         venv.close()
         raise
+    vec.render_mode = render_mode  # SuperSuit's worker processes lose it (None)
     vec.seed(seed)
     return vec
