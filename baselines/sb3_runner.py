@@ -217,7 +217,12 @@ def run_sb3_training(
         model = make_model(VecMonitor(venv), env_seed, str(out_dir / "tb"), done)
         if state is not None:
             model.policy.load_state_dict(state["policy"])
-            model.policy.optimizer.load_state_dict(state["optimizer"])
+            if "optimizer" in state:  # ARS has none: it perturbs the weights directly
+                model.policy.optimizer.load_state_dict(state["optimizer"])
+            if isinstance(getattr(model, "weights", None), torch.Tensor):
+                # ARS searches around its own flat copy of the weights: refresh it.
+                model.weights = torch.nn.utils.parameters_to_vector(
+                    model.policy.parameters()).detach()
             model.num_timesteps = done
             model._episode_num = int(state.get("episodes", 0))
         started = time.perf_counter()
@@ -228,7 +233,9 @@ def run_sb3_training(
 
         def save_checkpoint() -> None:
             data = payload(model)
-            data["optimizer"] = model.policy.optimizer.state_dict()
+            optimizer = getattr(model.policy, "optimizer", None)
+            if optimizer is not None:
+                data["optimizer"] = optimizer.state_dict()
             data["episodes"] = int(model._episode_num)
             data["train_seconds"] = seconds()
             save_torch(ckpt_path, data, run_format.training_kind)
