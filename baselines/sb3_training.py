@@ -36,6 +36,7 @@ from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.vec import make_sb3_vec_env
 
@@ -388,7 +389,9 @@ def _parser() -> argparse.ArgumentParser:
         prog="ipp-train sb3",
         description="Train a shared (parameter-sharing) policy of any supported SB3 algorithm "
                     "on the simulator. --algo PPO and --algo MaskablePPO run ipp-train ppo "
-                    "and take its options (ipp-train sb3 --algo PPO --help).")
+                    "and take its options (ipp-train sb3 --algo PPO --help).",
+        formatter_class=HelpFormatter)
+    add_version(parser)
     parser.add_argument("--algo", required=True, metavar="|".join(ALGORITHMS),
                         help="the algorithm (any case)")
     parser.add_argument("--out", default=None,
@@ -429,6 +432,9 @@ def main(argv: list[str] | None = None) -> int:
     pre.add_argument("--algo")
     known, rest = pre.parse_known_args(argv)
     if known.algo is None:
+        if "--version" in argv:
+            print(version_line("ipp-train sb3"))
+            return 0
         if "-h" in argv or "--help" in argv:
             _parser().print_help()
             return 0
