@@ -251,10 +251,12 @@ class IPPEnv(ParallelEnv):
                 for agent in agents}
 
     def state(self) -> np.ndarray:
-        """(C_state, G, G) float32 global planes for the centralised critic."""
+        """(C_state, G, G) float32 global planes for the centralised critic, within
+        ``state_space``."""
         if self.mission is None:
             raise RuntimeError("call reset() before state()")
-        return global_state(self.mission, self.config.features)
+        # The weighted-entropy plane can round to -6e-10; clip so state_space holds it.
+        return np.clip(global_state(self.mission, self.config.features), 0.0, 1.0)
 
     def critic_observations(self, joint_action: dict[str, int] | np.ndarray) -> np.ndarray:
         """(N, C_critic, G, G) per-agent critic inputs for a joint action chosen now."""

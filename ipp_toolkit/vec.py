@@ -26,7 +26,9 @@ termination/truncation split and per-env infos.
 * a failed UAV (``team.failures``) keeps its slot, inert until the mission ends: zero planes,
   an all-valid mask, reward 0, its actions ignored (black death);
 * the budget end is a true terminal: ``dones`` is True and
-  ``info["TimeLimit.truncated"]`` is False, so PPO does not bootstrap past it;
+  ``info["TimeLimit.truncated"]`` is False, so PPO does not bootstrap past it; the infos of
+  that step are the mission's last (``step`` = budget, its final ``entropy`` and ``f1``), the
+  next mission's start is in ``reset_infos``;
 * ``close()`` stops SuperSuit's worker processes; it also runs at interpreter exit, because
   those non-daemon workers otherwise make the interpreter hang there.
 """
@@ -205,6 +207,9 @@ class IPPVecEnv(VecEnv):
     def _clean_info(info: dict[str, Any]) -> dict[str, Any]:
         # Copy: ProcConcatVec hands out one shared object for every empty info dict.
         info = dict(info)
+        final = info.pop("terminal_info", None)
+        if isinstance(final, dict):  # the mission's last step, not the next one's reset
+            info.update(final)
         terminal = info.get("terminal_observation")
         if isinstance(terminal, dict):
             info["terminal_observation"] = np.array(terminal["observation"], dtype=np.float32)
@@ -259,6 +264,19 @@ class IPPVecEnv(VecEnv):
         raise TypeError("IPPVecEnv cannot be pickled (it may own worker processes)")
 
 
+class _SlotEnv(IPPEnv):
+    """IPPEnv whose last step of a mission also carries its infos under ``terminal_info``:
+    SuperSuit resets the copy inside the same step and overwrites the step's infos with the
+    next mission's reset infos (same keys), so the final entropy and F1 would be lost."""
+
+    def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
+        observations, rewards, terminations, truncations, infos = super().step(actions)
+        if not self.agents:
+            for info in infos.values():
+                info["terminal_info"] = dict(info)
+        return observations, rewards, terminations, truncations, infos
+
+
 def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus: int = 0,
                      namespace: str = "train", invalid_action: str = "hold",
                      invalid_penalty: float = 0.0,
@@ -307,8 +325,8 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus
         raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
                          f"{invalid_action!r}")
     # Fixed slots: a failed UAV stays as an inert agent (black death) until the mission ends.
-    env = IPPEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action,
-                 render_mode=render_mode)
+    env = _SlotEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action,
+                   render_mode=render_mode)
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),
