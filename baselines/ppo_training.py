@@ -26,6 +26,7 @@ from stable_baselines3 import PPO
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.sim.team import N_ACTIONS
 from ipp_toolkit.vec import make_sb3_vec_env
@@ -224,7 +225,9 @@ def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.Ar
     defaults = PPOTrainConfig()
     parser = argparse.ArgumentParser(
         prog=prog,
-        description="Train a shared (parameter-sharing) PPO policy on the simulator.")
+        description="Train a shared (parameter-sharing) PPO policy on the simulator.",
+        formatter_class=HelpFormatter)
+    add_version(parser)
     parser.add_argument("--preset", choices=sorted(PPO_PRESETS), default="default",
                         help="start from these flags: NAME retrains the shipped policy "
                              "ppo=shipped:NAME ('shipped' is 'split'; flags given explicitly "

@@ -2,7 +2,9 @@
 
 ``ipp-compare --planners ig,sb3=RUN/policy.pt`` (or ``mine:sb3=RUN/policy.pt``) flies the
 policy of an ``ipp-train sb3`` run of any algorithm (PPO, MaskablePPO, A2C, DQN, QRDQN,
-RecurrentPPO), and the ``ipp-train ppo`` files as well. Inference only: this module never
+RecurrentPPO, TRPO, ARS), the ``ipp-train ppo`` files, and SB3's own ``model.save`` zips of
+a model trained on :func:`ipp_toolkit.vec.make_sb3_vec_env` (``sb3=model.zip``; read without
+unpickling, :mod:`baselines.sb3_zip`). Inference only: this module never
 imports the training code (:mod:`baselines.sb3_training`, :mod:`baselines.sb3_runner`).
 """
 
@@ -39,8 +41,8 @@ class SB3Planner(Planner):
 
     Args:
         checkpoint: a ``policy.pt`` (or ``checkpoint.pt``) of ``ipp-train sb3`` or
-            ``ipp-train ppo``, or a shipped PPO policy by name (``shipped:NAME``,
-            :data:`baselines.ppo.SHIPPED_POLICIES`).
+            ``ipp-train ppo``, an SB3 ``model.save`` zip, or a shipped PPO policy by name
+            (``shipped:NAME``, :data:`baselines.ppo.SHIPPED_POLICIES`).
         device: torch device of the forward pass.
 
     Raises:
@@ -64,7 +66,9 @@ class SB3Planner(Planner):
         self.policy, self.meta = load_sb3_policy(self.checkpoint, device)
         self.algo: str = self.meta.algo
         self.obs_shape: tuple[int, int, int] = self.meta.obs_shape
-        self.observation_features = self.meta.env_config.features
+        # An SB3 zip records no feature switches: it observes with the mission's own.
+        self.observation_features = None if self.meta.env_config is None \
+            else self.meta.env_config.features
         self.transfer_notes: list[str] = []
         self._lstm_states: LSTMStates | None = None
 
@@ -85,8 +89,8 @@ class SB3Planner(Planner):
                 f"{self.algo} policy {str(self.checkpoint)!r} was trained on observations of "
                 f"shape {self.obs_shape}; missions of this config give {mission_shape} "
                 "(another planning grid)")
-        self.transfer_notes = check_policy_transfer(self.meta.env_config, config,
-                                                    str(self.checkpoint))
+        self.transfer_notes = [] if self.meta.env_config is None else \
+            check_policy_transfer(self.meta.env_config, config, str(self.checkpoint))
         self._lstm_states = None
 
     def act(self, views: list[AgentView]) -> np.ndarray:

@@ -5,20 +5,23 @@ The inference side of ``ipp-train sb3`` (:mod:`baselines.sb3_training` trains, t
 (:data:`ALGORITHMS`), all with one policy shared by every UAV (parameter sharing) and the
 :class:`~baselines.ppo.SmallCNN` features extractor on the (C, G, G) actor planes:
 
-* PPO, A2C: ``ActorCriticPolicy``; greedy = argmax of the valid logits;
+* PPO, A2C, TRPO: ``ActorCriticPolicy``; greedy = argmax of the valid logits;
 * MaskablePPO: ``MaskableActorCriticPolicy``; argmax of the valid logits;
 * RecurrentPPO: ``RecurrentActorCriticPolicy``; argmax of the valid logits, with the actor
   LSTM's state kept per agent across the steps of a mission;
 * DQN: ``DQNPolicy``; argmax of the valid Q-values;
-* QRDQN: ``QRDQNPolicy``; argmax of the valid mean quantiles.
+* QRDQN: ``QRDQNPolicy``; argmax of the valid mean quantiles;
+* ARS: ``ARSPolicy`` (an MLP on the flattened planes: ARS's policy takes no features
+  extractor); argmax of the valid action-net outputs.
 
 Files: a policy file is a plain state dict saved with :func:`ipp_toolkit.io.save_torch`
 (format ``ipp-toolkit/sb3``; ``ipp-toolkit/sb3-training`` for a resumable checkpoint) holding
 the weights, the algorithm, the observation shape, the action count, the architecture and the
 configs; a JSON record sits beside it. PPO and MaskablePPO runs are written by
 ``ipp-train ppo`` (the PPO case of ``ipp-train sb3``) in its ``ipp-toolkit/ppo`` format, which
-:func:`load_sb3_policy` reads as well. No SB3 model zip is ever unpickled: the policy is rebuilt
-from the records and the weights loaded with ``torch.load(weights_only=True)``.
+:func:`load_sb3_policy` reads as well, and SB3's own ``model.save`` zips too
+(:mod:`baselines.sb3_zip`). Nothing is ever unpickled: the policy is rebuilt from the records
+(or the zip's JSON) and the weights loaded with ``torch.load(weights_only=True)``.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from typing import Any
 import numpy as np
 import torch
 from gymnasium import spaces
+from sb3_contrib.ars.policies import ARSPolicy
 from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
 from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 from sb3_contrib.qrdqn.policies import QRDQNPolicy
@@ -50,6 +54,7 @@ from .ppo import load_policy as load_ppo_policy
 
 __all__ = [
     "ALGORITHMS",
+    "ACTOR_CRITIC_ALGORITHMS",
     "MASKED_ALGORITHMS",
     "RECURRENT_ALGORITHMS",
     "LSTMStates",
@@ -64,12 +69,17 @@ __all__ = [
     "expected_obs_shape",
     "sb3_policy_metadata",
     "load_sb3_policy",
+    "check_shapes",
+    "masked_argmax",
     "greedy_actions",
     "initial_lstm_states",
 ]
 
-ALGORITHMS = ("PPO", "MaskablePPO", "A2C", "DQN", "QRDQN", "RecurrentPPO")
-"""Algorithms ``ipp-train sb3 --algo`` trains and the ``sb3`` planner flies (SB3 spelling)."""
+ALGORITHMS = ("PPO", "MaskablePPO", "A2C", "DQN", "QRDQN", "RecurrentPPO", "TRPO", "ARS")
+"""Algorithms ``ipp-train sb3 --algo`` trains and the ``sb3`` planner flies (SB3 spelling):
+every SB3 and sb3-contrib algorithm that takes a discrete action space."""
+ACTOR_CRITIC_ALGORITHMS = ("PPO", "A2C", "MaskablePPO", "TRPO")
+"""Algorithms whose policy is an (optionally masked) ``ActorCriticPolicy``."""
 MASKED_ALGORITHMS = ("MaskablePPO",)
 """Algorithms that read the action masks while training; the others train with the view's
 ``invalid_action="hold"`` (a masked action holds the UAV for the step)."""
@@ -87,6 +97,8 @@ _POLICY_CLASSES: dict[str, type[BasePolicy]] = {
     "RecurrentPPO": RecurrentActorCriticPolicy,
     "DQN": DQNPolicy,
     "QRDQN": QRDQNPolicy,
+    "TRPO": ActorCriticPolicy,
+    "ARS": ARSPolicy,
 }
 #: ``algo`` values of ``ipp-toolkit/ppo`` files.
 _PPO_FILE_ALGOS = {"ppo": "PPO", "maskable_ppo": "MaskablePPO"}
@@ -159,6 +171,8 @@ class PolicyArchitecture:
 def sb3_policy_kwargs(algo: str, architecture: PolicyArchitecture) -> dict[str, Any]:
     """SB3 ``policy_kwargs`` of ``architecture`` for the policy class of ``algo``."""
     algo = canonical_algo(algo)
+    if algo == "ARS":  # ARSPolicy flattens the planes itself: no features extractor to set
+        return {"net_arch": [architecture.hidden]}
     kwargs: dict[str, Any] = {
         "features_extractor_class": SmallCNN,
         "features_extractor_kwargs": {"width": architecture.width,
@@ -184,9 +198,13 @@ def build_policy(algo: str, architecture: PolicyArchitecture, obs_shape: tuple[i
     costs seconds per process.
     """
     observation_space = spaces.Box(-1.0, 1.0, tuple(obs_shape), dtype=np.float32)
-    policy = policy_class(algo)(observation_space, spaces.Discrete(int(n_actions)),
-                                lambda _: 1e-4, optimizer_class=NoOptimizer,
-                                **sb3_policy_kwargs(algo, architecture))
+    action_space = spaces.Discrete(int(n_actions))
+    kwargs = sb3_policy_kwargs(algo, architecture)
+    if canonical_algo(algo) == "ARS":  # no optimiser: ARS perturbs the weights directly
+        policy = ARSPolicy(observation_space, action_space, **kwargs)
+    else:
+        policy = policy_class(algo)(observation_space, action_space, lambda _: 1e-4,
+                                    optimizer_class=NoOptimizer, **kwargs)
     policy = policy.to(device)
     policy.set_training_mode(False)
     return policy
@@ -213,7 +231,9 @@ class LoadedPolicy:
         obs_shape: (C, G, G) observation shape it was trained on.
         n_actions: action count it was trained for.
         architecture: its network sizes.
-        env_config: the training env config (its feature switches are the policy's planes).
+        env_config: the training env config (its feature switches are the policy's planes);
+            None for an SB3 zip, which does not record it (the planner then observes with
+            the mission's own feature switches).
         num_timesteps: agent-transitions it was trained for.
         format: the file's format tag.
         record: the file's other records (hyper-parameters, ...), JSON-safe.
@@ -223,7 +243,7 @@ class LoadedPolicy:
     obs_shape: tuple[int, int, int]
     n_actions: int
     architecture: PolicyArchitecture
-    env_config: EnvConfig
+    env_config: EnvConfig | None
     num_timesteps: int
     format: str
     record: dict[str, Any] = field(default_factory=dict)
@@ -249,7 +269,8 @@ def load_sb3_policy(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, 
     """Rebuild the policy of an ``ipp-train sb3`` (or ``ipp-train ppo``) file and load its weights.
 
     Reads ``policy.pt`` and ``checkpoint.pt`` files of the formats ``ipp-toolkit/sb3``,
-    ``ipp-toolkit/sb3-training``, ``ipp-toolkit/ppo`` and ``ipp-toolkit/ppo-training``.
+    ``ipp-toolkit/sb3-training``, ``ipp-toolkit/ppo`` and ``ipp-toolkit/ppo-training``, and
+    the zips of SB3's ``model.save`` (:func:`baselines.sb3_zip.load_sb3_zip`).
 
     Returns:
         (policy in eval mode, :class:`LoadedPolicy`).
@@ -261,14 +282,18 @@ def load_sb3_policy(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, 
             shapes, both values).
     """
     path = Path(path)
+    from .sb3_zip import is_sb3_zip, load_sb3_zip
+
+    if is_sb3_zip(path):
+        return load_sb3_zip(path, device)
     accepted = (SB3_POLICY_KIND, SB3_TRAINING_KIND, PPO_KIND, PPO_TRAINING_KIND)
     tag = _format_tag(path) if path.is_file() and path.stat().st_size > 0 else None
     if tag is None:
         load_torch(path, SB3_POLICY_KIND)  # raises: missing, empty or corrupt
     if tag not in accepted:
         raise CheckpointError(f"checkpoint {str(path)!r} is not a policy of ipp-train sb3 or "
-                              f"ipp-train ppo (format tag: {tag!r}; expected one of "
-                              f"{', '.join(accepted)})")
+                              f"ipp-train ppo, nor an SB3 model zip (format tag: {tag!r}; "
+                              f"expected one of {', '.join(accepted)})")
     if tag in (PPO_KIND, PPO_TRAINING_KIND):
         return _load_ppo_file(path, device)
     data = load_torch(path, tag)
@@ -289,7 +314,7 @@ def load_sb3_policy(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, 
                         architecture=architecture, env_config=env_config,
                         num_timesteps=int(data.get("num_timesteps", 0)), format=tag,
                         record={k: data[k] for k in ("sb3_config",) if k in data})
-    _check_shapes(path, meta)
+    check_shapes(path, meta)
     policy = build_policy(algo, architecture, obs_shape, n_actions, device)
     try:
         policy.load_state_dict(data["policy"])
@@ -311,18 +336,20 @@ def _load_ppo_file(path: Path, device: str) -> tuple[BasePolicy, LoadedPolicy]:
                                         hidden=config.hidden),
         env_config=ppo_meta["env_config"], num_timesteps=ppo_meta["num_timesteps"],
         format=PPO_KIND, record={"ppo_config": config.to_dict()})
-    _check_shapes(path, meta)
+    check_shapes(path, meta)
     return policy, meta
 
 
-def _check_shapes(path: Path, meta: LoadedPolicy) -> None:
+def check_shapes(path: Path, meta: LoadedPolicy) -> None:
+    """CheckpointError unless ``meta`` records 6 actions and (C, G, G) planes its env config
+    (if recorded) gives."""
     if meta.n_actions != N_ACTIONS:
         raise CheckpointError(f"checkpoint {str(path)!r} was trained for {meta.n_actions} "
                               f"actions; the simulator has {N_ACTIONS}")
     if len(meta.obs_shape) != 3:
         raise CheckpointError(f"checkpoint {str(path)!r}: observation shape {meta.obs_shape} "
                               "is not (C, G, G)")
-    own = expected_obs_shape(meta.env_config)
+    own = meta.obs_shape if meta.env_config is None else expected_obs_shape(meta.env_config)
     if meta.obs_shape != own:
         raise CheckpointError(f"checkpoint {str(path)!r} records observations of shape "
                               f"{meta.obs_shape}, but its env config gives {own}")
@@ -343,7 +370,7 @@ def initial_lstm_states(policy: BasePolicy, batch: int) -> LSTMStates:
     return zeros, zeros.clone()
 
 
-def _masked_argmax(scores: torch.Tensor, masks: np.ndarray) -> np.ndarray:
+def masked_argmax(scores: torch.Tensor, masks: np.ndarray) -> np.ndarray:
     valid = torch.as_tensor(np.asarray(masks) != 0, device=scores.device)
     if valid.shape != scores.shape:
         raise ValueError(f"masks of shape {tuple(valid.shape)} do not fit scores of shape "
@@ -367,17 +394,20 @@ def greedy_actions(policy: BasePolicy, algo: str, observations: np.ndarray, mask
         ((B,) int64 actions, the new LSTM states or None for non-recurrent policies).
     """
     algo = canonical_algo(algo)
-    if algo in ("PPO", "A2C", "MaskablePPO"):
+    if algo in ACTOR_CRITIC_ALGORITHMS:
         return masked_greedy_actions(policy, observations, masks), None
     with torch.no_grad():
         obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=policy.device)
         if algo == "DQN":
-            return _masked_argmax(policy.q_net(obs), masks), None
+            return masked_argmax(policy.q_net(obs), masks), None
         if algo == "QRDQN":
-            return _masked_argmax(policy.quantile_net(obs).mean(dim=1), masks), None
+            return masked_argmax(policy.quantile_net(obs).mean(dim=1), masks), None
+        if algo == "ARS":
+            features = policy.extract_features(obs, policy.features_extractor)
+            return masked_argmax(policy.action_net(features), masks), None
         if lstm_states is None:
             lstm_states = initial_lstm_states(policy, obs.shape[0])
         starts = torch.zeros(obs.shape[0], device=policy.device)
         distribution, new_states = policy.get_distribution(obs, lstm_states, starts)
         logits = distribution.distribution.logits
-        return _masked_argmax(logits, masks), (new_states[0], new_states[1])
+        return masked_argmax(logits, masks), (new_states[0], new_states[1])

@@ -10,8 +10,11 @@ algorithm:
   ``checkpoint_every`` agent-transitions and at the end; ``resume=True`` carries on from it
   (its configs must match the given ones);
 * ``OUT/policy.pt`` (+ ``.json``): the final policy (state dict + records), written atomically;
-* ``OUT/tb/``: TensorBoard logs;
-* a tqdm progress bar, and a time limit that stops training and saves what was learnt.
+* ``OUT/tb/``: TensorBoard logs: SB3's own (``rollout/ep_rew_mean`` counts one episode per
+  UAV slot) and the task's, ``rollout/final_entropy`` and ``rollout/final_f1`` of the
+  missions flown;
+* progress (tqdm on a terminal, a short line every few percent in a log), and a time limit
+  that stops training and saves what was learnt.
 
 Seeds: a fresh run starts copy c of the simulator on run ``seed + c``; a run resumed after
 ``done`` transitions uses ``seed + done`` (new missions, reproducible). Nothing here is
@@ -31,14 +34,15 @@ from typing import Any
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
-from tqdm.auto import tqdm
 
 from ipp_toolkit.config.files import config_from_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import load_torch, save_torch, write_json
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
+from ipp_toolkit.runs.progress import progress_bar
 
-__all__ = ["RunFormat", "run_sb3_training", "progress_callback", "time_limit_callback",
+__all__ = ["RunFormat", "run_sb3_training", "progress_callback", "task_metrics_callback",
+           "time_limit_callback",
            "checkpoint_callback"]
 
 
@@ -47,12 +51,13 @@ __all__ = ["RunFormat", "run_sb3_training", "progress_callback", "time_limit_cal
 
 
 def progress_callback(total: int, initial: int, desc: str = "ppo") -> BaseCallback:
-    """A tqdm bar over agent-transitions (SB3's own bar needs ``rich``)."""
+    """Progress over agent-transitions: a tqdm bar on a terminal, a short line every few
+    percent in a log (:func:`ipp_toolkit.runs.progress.progress_bar`; SB3's own bar needs
+    ``rich``)."""
 
     class TqdmCallback(BaseCallback):
         def _on_training_start(self) -> None:
-            self.bar = tqdm(total=total, initial=initial, unit="step", desc=desc,
-                            dynamic_ncols=True)
+            self.bar = progress_bar(total, desc, "steps", initial=initial)
 
         def _on_step(self) -> bool:
             self.bar.update(self.model.num_timesteps - self.bar.n)
@@ -62,6 +67,27 @@ def progress_callback(total: int, initial: int, desc: str = "ppo") -> BaseCallba
             self.bar.close()
 
     return TqdmCallback()
+
+
+def task_metrics_callback() -> BaseCallback:
+    """Logs the task's own scores of every finished training mission to TensorBoard (as COMA
+    does): ``rollout/final_entropy`` and ``rollout/final_f1``, means over the missions that
+    ended since the last dump. SB3's ``rollout/ep_rew_mean`` counts one episode per UAV slot
+    (each slot gets the team reward); these count each mission's global map once per slot as
+    well, which leaves the mean unchanged."""
+
+    class TaskMetrics(BaseCallback):
+        def _on_step(self) -> bool:
+            infos, dones = self.locals.get("infos"), self.locals.get("dones")
+            if infos is None or dones is None:  # ARS steps its candidates on its own
+                return True
+            for info, done in zip(infos, dones, strict=False):
+                if done and "entropy" in info:
+                    self.logger.record_mean("rollout/final_entropy", float(info["entropy"]))
+                    self.logger.record_mean("rollout/final_f1", float(info["f1"]))
+            return True
+
+    return TaskMetrics()
 
 
 def time_limit_callback(deadline: float) -> BaseCallback:
@@ -217,7 +243,12 @@ def run_sb3_training(
         model = make_model(VecMonitor(venv), env_seed, str(out_dir / "tb"), done)
         if state is not None:
             model.policy.load_state_dict(state["policy"])
-            model.policy.optimizer.load_state_dict(state["optimizer"])
+            if "optimizer" in state:  # ARS has none: it perturbs the weights directly
+                model.policy.optimizer.load_state_dict(state["optimizer"])
+            if isinstance(getattr(model, "weights", None), torch.Tensor):
+                # ARS searches around its own flat copy of the weights: refresh it.
+                model.weights = torch.nn.utils.parameters_to_vector(
+                    model.policy.parameters()).detach()
             model.num_timesteps = done
             model._episode_num = int(state.get("episodes", 0))
         started = time.perf_counter()
@@ -228,7 +259,9 @@ def run_sb3_training(
 
         def save_checkpoint() -> None:
             data = payload(model)
-            data["optimizer"] = model.policy.optimizer.state_dict()
+            optimizer = getattr(model.policy, "optimizer", None)
+            if optimizer is not None:
+                data["optimizer"] = optimizer.state_dict()
             data["episodes"] = int(model._episode_num)
             data["train_seconds"] = seconds()
             save_torch(ckpt_path, data, run_format.training_kind)
@@ -236,7 +269,8 @@ def run_sb3_training(
                        run_format.metadata(data, train_seconds=data["train_seconds"],
                                            **extra_record))
 
-        callbacks = [checkpoint_callback(checkpoint_every, save_checkpoint)]
+        callbacks = [checkpoint_callback(checkpoint_every, save_checkpoint),
+                     task_metrics_callback()]
         if progress:
             callbacks.append(progress_callback(total_timesteps, done,
                                                run_format.tb_log_name))

@@ -11,10 +11,11 @@ one.
 * ``--algo PPO`` / ``--algo MaskablePPO`` are ``ipp-train ppo`` (``--no-masked`` /
   ``--masked``): the same code, flags, presets (``--preset shipped``) and files
   (``ipp-toolkit/ppo``).
-* ``--algo A2C|DQN|QRDQN|RecurrentPPO`` write ``OUT/policy.pt`` in the ``ipp-toolkit/sb3``
+* ``--algo A2C|DQN|QRDQN|RecurrentPPO|TRPO|ARS`` write ``OUT/policy.pt`` in the ``ipp-toolkit/sb3``
   format (:mod:`baselines.sb3_policies`): the policy's state dict with the algorithm, its
   hyper-parameters, the observation shape, the action count, the architecture and the env
-  config; ``policy.json`` adds the exact command. Never a pickled SB3 zip.
+  config; ``policy.json`` adds the exact command. Never a pickled SB3 zip (the ``sb3``
+  planner flies SB3's own zips as well, without unpickling them).
 
 Off-policy runs (DQN, QRDQN) resume without their replay buffer (it is not saved): a resumed
 run collects ``learning_starts`` transitions again before it trains.
@@ -35,6 +36,7 @@ from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.vec import make_sb3_vec_env
 
@@ -85,6 +87,12 @@ ALGORITHM_DEFAULTS: dict[str, dict[str, int | float]] = {
             "ent_coef": 0.01, "vf_coef": 0.5, "max_grad_norm": 0.5},
     "DQN": dict(_DQN_HYPER),
     "QRDQN": {**_DQN_HYPER, "n_quantiles": 25},
+    "TRPO": {"learning_rate": 1e-3, "gamma": 0.99, "n_steps": _PPO.n_steps,
+             "batch_size": _PPO.batch_size, "gae_lambda": 0.95, "cg_max_steps": 15,
+             "cg_damping": 0.1, "line_search_shrinking_factor": 0.8,
+             "line_search_max_iter": 10, "n_critic_updates": 10, "target_kl": 0.01,
+             "sub_sampling_factor": 1},
+    "ARS": {"learning_rate": 0.02, "n_delta": 8, "delta_std": 0.05, "n_eval_episodes": 1},
 }
 """Every hyper-parameter ``--set NAME=VALUE`` accepts per algorithm, with its default (the
 SB3 constructor argument of that name; ``lstm_hidden_size`` and ``n_quantiles`` size the
@@ -92,16 +100,20 @@ policy). Sized for CPU training on the 11 x 11 planes."""
 _POLICY_OPTIONS = ("lstm_hidden_size", "n_quantiles")
 _INT_MIN = {"n_steps": 1, "batch_size": 2, "n_epochs": 1, "buffer_size": 1,
             "learning_starts": 0, "train_freq": 1, "gradient_steps": 1,
-            "target_update_interval": 1, "lstm_hidden_size": 1, "n_quantiles": 1}
+            "target_update_interval": 1, "lstm_hidden_size": 1, "n_quantiles": 1,
+            "cg_max_steps": 1, "line_search_max_iter": 1, "n_critic_updates": 1,
+            "sub_sampling_factor": 1, "n_delta": 1, "n_eval_episodes": 1}
 _UNIT_INTERVAL = ("gamma", "gae_lambda", "tau", "exploration_fraction",
-                  "exploration_initial_eps", "exploration_final_eps")
-_POSITIVE = ("learning_rate", "clip_range", "max_grad_norm")
+                  "exploration_initial_eps", "exploration_final_eps",
+                  "line_search_shrinking_factor")
+_POSITIVE = ("learning_rate", "clip_range", "max_grad_norm", "cg_damping", "target_kl",
+             "delta_std")
 
 
 def algorithm_class(algo: str) -> type:
     """The SB3 / sb3-contrib algorithm class of ``algo`` (any case)."""
     algo = canonical_algo(algo)
-    if algo in ("MaskablePPO", "QRDQN", "RecurrentPPO"):
+    if algo in ("MaskablePPO", "QRDQN", "RecurrentPPO", "TRPO", "ARS"):
         import sb3_contrib
 
         return getattr(sb3_contrib, algo)
@@ -227,7 +239,7 @@ def sb3_model_payload(model: Any, config: SB3TrainConfig,
         "policy": model.policy.state_dict(),
         "algo": config.algo,
         "obs_shape": [int(d) for d in model.observation_space.shape],
-        "n_actions": int(model.action_space.n),
+        "n_actions": int(model.action_space.n),  # type: ignore[union-attr]
         "architecture": config.architecture().to_dict(),
         "hyperparameters": dict(config.hyperparameters),
         "sb3_config": config.to_dict(),
@@ -268,6 +280,7 @@ def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
         config: its configuration.
         env_config: the env config it trained on (its features are the policy's planes).
     """
+    _check_rebuildable(model, config)
     if config.algo in PPO_ALGORITHMS:
         return save_policy(path, model, config.to_ppo_config(), env_config, **extra)
     path = Path(path)
@@ -275,6 +288,29 @@ def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
     save_torch(path, payload, SB3_POLICY_KIND)
     write_json(path.with_suffix(".json"), sb3_policy_metadata(payload, **extra))
     return path
+
+
+def _check_rebuildable(model: Any, config: SB3TrainConfig) -> None:
+    """ValueError unless ``model``'s policy is the one the planner rebuilds from ``config``
+    (same class, parameter names and shapes): a file of another policy would not load."""
+    from .sb3_policies import build_policy
+
+    policy = getattr(model, "policy", None)
+    shape = tuple(getattr(getattr(model, "observation_space", None), "shape", ()) or ())
+    if policy is None or len(shape) != 3:
+        raise ValueError(f"save_sb3_policy needs an SB3 model on the (C, G, G) planes of "
+                         f"make_sb3_vec_env, got {type(model).__name__} with observations "
+                         f"{shape or '?'}; save it with model.save(PATH) and fly sb3=PATH.zip")
+    expected = build_policy(config.algo, config.architecture(), shape).state_dict()
+    own = policy.state_dict()
+    fits = (type(policy) is policy_class(config.algo) and own.keys() == expected.keys()
+            and all(own[k].shape == expected[k].shape for k in own))
+    if not fits:
+        raise ValueError(f"the model's {type(policy).__name__} is not the {config.algo} policy "
+                         f"make_sb3_model builds for this config (width {config.width}, "
+                         f"features_dim {config.features_dim}, hidden {config.hidden}), so "
+                         "its file could not be loaded; build the model with make_sb3_model, "
+                         "or save it with model.save(PATH) and fly sb3=PATH.zip")
 
 
 def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path,
@@ -353,7 +389,9 @@ def _parser() -> argparse.ArgumentParser:
         prog="ipp-train sb3",
         description="Train a shared (parameter-sharing) policy of any supported SB3 algorithm "
                     "on the simulator. --algo PPO and --algo MaskablePPO run ipp-train ppo "
-                    "and take its options (ipp-train sb3 --algo PPO --help).")
+                    "and take its options (ipp-train sb3 --algo PPO --help).",
+        formatter_class=HelpFormatter)
+    add_version(parser)
     parser.add_argument("--algo", required=True, metavar="|".join(ALGORITHMS),
                         help="the algorithm (any case)")
     parser.add_argument("--out", default=None,
@@ -394,6 +432,9 @@ def main(argv: list[str] | None = None) -> int:
     pre.add_argument("--algo")
     known, rest = pre.parse_known_args(argv)
     if known.algo is None:
+        if "--version" in argv:
+            print(version_line("ipp-train sb3"))
+            return 0
         if "-h" in argv or "--help" in argv:
             _parser().print_help()
             return 0

@@ -36,6 +36,7 @@ from ipp_toolkit.config.settings import (
 )
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import REMOVED_NAMES
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import add_backend_flags, check_backend_flags, probe
 
@@ -80,7 +81,9 @@ def _preset_name(value: str) -> str:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-train coma",
-        description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.")
+        description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.",
+        formatter_class=HelpFormatter)
+    add_version(parser)
     parser.add_argument("--preset", type=_preset_name,
                         choices=sorted(PRESETS) + sorted(RECIPES), default="cpu",
                         help="hyper-parameter preset (default: cpu), or the recipe of a "

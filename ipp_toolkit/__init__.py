@@ -8,7 +8,9 @@ subpackages are its layers, and imports flow down this list only:
 - :mod:`ipp_toolkit.belief`: occupancy maps, entropy, expected gain, the prior of interest;
 - :mod:`ipp_toolkit.sim`: the mission core (team rules, reset, step, driver), feature planes,
   rendering;
-- :mod:`ipp_toolkit.env` and :mod:`ipp_toolkit.vec`: the PettingZoo view and its SB3 view;
+- :mod:`ipp_toolkit.env`, :mod:`ipp_toolkit.vec` and :mod:`ipp_toolkit.team_env`: the
+  PettingZoo view, its SB3 view and the team as one Gymnasium agent (registered on import as
+  ``ipp_toolkit/UAVTeam-v0``);
 - :mod:`ipp_toolkit.planners`: the planner interface, the per-UAV view and the registry;
 - :mod:`ipp_toolkit.runs`: the evaluation runner, result store, process pool and Ray backend.
 
@@ -22,12 +24,16 @@ from .config.files import load_config, save_config
 from .config.schema import EnvConfig
 from .env import IPPEnv, parallel_env
 from .sim.mission import InvalidActionError, MissionState, reset_mission, step_mission
+from .team_env import IPPTeamEnv, register_envs
+
+register_envs()  # gymnasium.make("ipp_toolkit/UAVTeam-v0") after `import ipp_toolkit`
 
 __version__ = "0.1.0"
 
 __all__ = [
     "EnvConfig",
     "IPPEnv",
+    "IPPTeamEnv",
     "InvalidActionError",
     "MissionState",
     "load_config",

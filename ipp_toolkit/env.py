@@ -7,9 +7,15 @@ default):
   action_mask=Box(0, 1, (6,), int8))``; the mask is there only, not in the infos.
 * infos: flat, numeric and with the same keys at reset and at every step (so TorchRL's
   ``PettingZooWrapper`` and BenchMARL can turn them into tensors): ``step`` (int),
-  ``blocked`` (bool, held back by the same-target rule this step) and ``entropy``, ``f1``,
-  ``rmse`` (float, of the global map; the same for every agent).
+  ``blocked`` (bool, held back by the same-target rule this step), ``invalid_action`` (bool,
+  held in place this step because its action was masked) and ``entropy``, ``f1``, ``rmse``
+  (float, of the global map; the same for every agent).
 * action: ``Discrete(6)``: 0 up, 1 north (+y), 2 east (+x), 3 south, 4 west, 5 down.
+* invalid actions: by default (``invalid_action="hold"``) a masked action holds the UAV in
+  place for the step (it still measures) and flags ``info["invalid_action"]``, so tools that
+  sample without the mask (``action_space.sample()``, RLlib's pre-check, TorchRL transforms and
+  batched envs, SuperSuit) run; ``invalid_action="raise"`` makes it an error, as the mission
+  core does unless ``team.invalid_action="hold"``.
 * ``state()``: ``Box(0, 1, (C_state, G, G), float32)``, the centralised critic's global planes.
 
 Every agent gets the same team reward. After ``budget`` steps every agent is terminated (a
@@ -50,7 +56,9 @@ from .sim.mission import (
 )
 from .sim.team import N_ACTIONS
 
-__all__ = ["IPPEnv", "parallel_env"]
+__all__ = ["INVALID_ACTION_POLICIES", "IPPEnv", "parallel_env"]
+
+INVALID_ACTION_POLICIES = ("hold", "raise")
 
 
 class IPPEnv(ParallelEnv):
@@ -64,6 +72,9 @@ class IPPEnv(ParallelEnv):
         raster: (h, w) array for ``terrain.kind = "raster"`` instead of the file.
         keep_failed: keep failed UAVs as inert agents instead of terminating them (see the
             module docstring).
+        invalid_action: what a masked action does: ``hold`` (default: the UAV stays for the
+            step, ``info["invalid_action"]`` is True) or ``raise`` (an ``InvalidActionError``,
+            for strict use). A config that says ``team.invalid_action="hold"`` holds either way.
     """
 
     metadata = {"name": "ipp_v0", "render_modes": ["rgb_array"], "is_parallelizable": True,
@@ -71,17 +82,26 @@ class IPPEnv(ParallelEnv):
 
     def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
                  namespace: str = "train", ground_truth: np.ndarray | None = None,
-                 raster: np.ndarray | None = None, keep_failed: bool = False):
+                 raster: np.ndarray | None = None, keep_failed: bool = False,
+                 invalid_action: str = "hold"):
         self.config = config if config is not None else EnvConfig()
         if not isinstance(self.config, EnvConfig):
             raise ValueError(f"config must be an EnvConfig, got {type(self.config).__name__}")
+        if invalid_action not in INVALID_ACTION_POLICIES:
+            raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
+                             f"{invalid_action!r}")
+        self.invalid_action = invalid_action
+        # self.config stays the caller's (COMA reads team.invalid_action="hold" as its no-mask
+        # ablation); the missions run under the env's own rule for masked actions.
+        self._mission_config = self.config.replace(team={"invalid_action": "hold"}) \
+            if invalid_action == "hold" else self.config
         self.keep_failed = bool(keep_failed)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode {render_mode!r} is not supported; "
                              f"choose from {self.metadata['render_modes']}")
         self.render_mode = render_mode
         self.namespace = namespace
-        self.geometry = MissionGeometry(self.config)
+        self.geometry = MissionGeometry(self._mission_config)
         self._ground_truth = ground_truth
         self._raster = raster
         n = self.config.team.n_agents
@@ -150,7 +170,7 @@ class IPPEnv(ParallelEnv):
                 raise ValueError(f"options['mission'] must be a non-negative integer, "
                                  f"got {mission!r}")
             self._mission_index = int(mission)
-        self.mission = reset_mission(self.config, self._seed, self._mission_index,
+        self.mission = reset_mission(self._mission_config, self._seed, self._mission_index,
                                      self.namespace, self.geometry, self._ground_truth,
                                      self._raster)
         self.agents = list(self.possible_agents)
@@ -167,7 +187,8 @@ class IPPEnv(ParallelEnv):
             observations, rewards, terminations, truncations and infos per agent.
 
         Raises:
-            ValueError: an agent is missing or unknown, or an action is masked or out of range.
+            ValueError: an agent is missing or unknown, an action is out of range, or (with
+                ``invalid_action="raise"``) masked.
         """
         if self.mission is None:
             raise RuntimeError("call reset() before step()")
@@ -224,14 +245,18 @@ class IPPEnv(ParallelEnv):
         # writes every step's values into it (a nested dict or a key missing at reset breaks it).
         metrics = {key: float(value) for key, value in self.mission.history[-1].as_dict().items()}
         return {agent: {"step": int(self.mission.step),
-                        "blocked": bool(self.mission.blocked[self._index[agent]]), **metrics}
+                        "blocked": bool(self.mission.blocked[self._index[agent]]),
+                        "invalid_action": bool(self.mission.held_invalid[self._index[agent]]),
+                        **metrics}
                 for agent in agents}
 
     def state(self) -> np.ndarray:
-        """(C_state, G, G) float32 global planes for the centralised critic."""
+        """(C_state, G, G) float32 global planes for the centralised critic, within
+        ``state_space``."""
         if self.mission is None:
             raise RuntimeError("call reset() before state()")
-        return global_state(self.mission, self.config.features)
+        # The weighted-entropy plane can round to -6e-10; clip so state_space holds it.
+        return np.clip(global_state(self.mission, self.config.features), 0.0, 1.0)
 
     def critic_observations(self, joint_action: dict[str, int] | np.ndarray) -> np.ndarray:
         """(N, C_critic, G, G) per-agent critic inputs for a joint action chosen now."""

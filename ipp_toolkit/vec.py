@@ -21,11 +21,14 @@ termination/truncation split and per-env infos.
   ``info["invalid_action"] = True`` for its slot and subtracts ``invalid_penalty`` (default
   0) from that slot's reward; the action stored by the algorithm is the one executed (a hold
   is what that action does), so no sample is rewritten behind its back.
-  ``invalid_action="raise"`` keeps the simulator's own rule (an error), as the native API does;
+  ``invalid_action="raise"`` makes it an error (the native env's ``invalid_action``, which
+  holds by default too);
 * a failed UAV (``team.failures``) keeps its slot, inert until the mission ends: zero planes,
   an all-valid mask, reward 0, its actions ignored (black death);
 * the budget end is a true terminal: ``dones`` is True and
-  ``info["TimeLimit.truncated"]`` is False, so PPO does not bootstrap past it;
+  ``info["TimeLimit.truncated"]`` is False, so PPO does not bootstrap past it; the infos of
+  that step are the mission's last (``step`` = budget, its final ``entropy`` and ``f1``), the
+  next mission's start is in ``reset_infos``;
 * ``close()`` stops SuperSuit's worker processes; it also runs at interpreter exit, because
   those non-daemon workers otherwise make the interpreter hang there.
 """
@@ -47,7 +50,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from .config.schema import EnvConfig, check_int
-from .env import IPPEnv
+from .env import INVALID_ACTION_POLICIES, IPPEnv
 from .sim.team import N_ACTIONS
 
 __all__ = ["IPPVecEnv", "INVALID_ACTION_POLICIES", "make_sb3_vec_env"]
@@ -204,6 +207,9 @@ class IPPVecEnv(VecEnv):
     def _clean_info(info: dict[str, Any]) -> dict[str, Any]:
         # Copy: ProcConcatVec hands out one shared object for every empty info dict.
         info = dict(info)
+        final = info.pop("terminal_info", None)
+        if isinstance(final, dict):  # the mission's last step, not the next one's reset
+            info.update(final)
         terminal = info.get("terminal_observation")
         if isinstance(terminal, dict):
             info["terminal_observation"] = np.array(terminal["observation"], dtype=np.float32)
@@ -258,18 +264,30 @@ class IPPVecEnv(VecEnv):
         raise TypeError("IPPVecEnv cannot be pickled (it may own worker processes)")
 
 
-INVALID_ACTION_POLICIES = ("hold", "raise")
+class _SlotEnv(IPPEnv):
+    """IPPEnv whose last step of a mission also carries its infos under ``terminal_info``:
+    SuperSuit resets the copy inside the same step and overwrites the step's infos with the
+    next mission's reset infos (same keys), so the final entropy and F1 would be lost."""
+
+    def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
+        observations, rewards, terminations, truncations, infos = super().step(actions)
+        if not self.agents:
+            for info in infos.values():
+                info["terminal_info"] = dict(info)
+        return observations, rewards, terminations, truncations, infos
 
 
-def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 0,
+def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus: int = 0,
                      namespace: str = "train", invalid_action: str = "hold",
-                     invalid_penalty: float = 0.0) -> IPPVecEnv:
+                     invalid_penalty: float = 0.0,
+                     render_mode: str | None = None) -> IPPVecEnv:
     """SB3 vector env over ``n_envs`` copies of the simulator, one slot per agent.
 
     Args:
         config: the mission configuration; every copy has its team of N agents.
-        n_envs: copies of the simulator (>= 1); SB3 sees ``n_envs * N`` envs.
-        seed: run seed (>= 0); copy c starts on run ``seed + c`` at the first reset.
+        n_envs: copies of the simulator (>= 1, default 1); SB3 sees ``n_envs * N`` envs.
+        seed: run seed (>= 0, default 0); copy c starts on run ``seed + c`` at the first
+            reset (an SB3 model's ``seed`` replaces it).
         num_cpus: worker processes (0 or 1: all copies in this process). More than
             ``n_envs`` is capped at ``n_envs``.
         namespace: random-stream namespace of the missions (``train`` for training).
@@ -278,6 +296,8 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
             trains as is) or ``raise`` (an error, the native API's rule). A config that
             already says ``team.invalid_action="hold"`` holds either way.
         invalid_penalty: reward subtracted from a slot whose action was masked (>= 0).
+        render_mode: ``None`` or ``"rgb_array"`` (``render()`` then returns the first
+            copy's frame, for SB3's ``VecVideoRecorder``).
 
     Returns:
         an :class:`IPPVecEnv` with observations (C, G, G) float32, ``Discrete(6)`` actions and
@@ -304,10 +324,9 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
     if invalid_action not in INVALID_ACTION_POLICIES:
         raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
                          f"{invalid_action!r}")
-    if invalid_action == "hold":
-        config = config.replace(team={"invalid_action": "hold"})
     # Fixed slots: a failed UAV stays as an inert agent (black death) until the mission ends.
-    env = IPPEnv(config, namespace=namespace, keep_failed=True)
+    env = _SlotEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action,
+                   render_mode=render_mode)
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),
@@ -317,5 +336,6 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int, seed: int, num_cpus: int = 
     except BaseException:
         venv.close()
         raise
+    vec.render_mode = render_mode  # SuperSuit's worker processes lose it (None)
     vec.seed(seed)
     return vec

@@ -26,6 +26,7 @@ import numpy as np
 
 from ipp_toolkit.config.settings import build_env_config, comm_label, parse_comm, setting_line
 from ipp_toolkit.env import IPPEnv
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
 
@@ -41,8 +42,9 @@ def _simulate_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-simulate",
         description="Fly one mission with random valid actions and report its metrics.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
+    add_version(parser)
     parser.add_argument("--config", type=Path, help="YAML config (defaults: the paper's)")
     parser.add_argument("--agents", type=_positive_int("agents"),
                         help="team size (overrides the config)")
@@ -149,8 +151,9 @@ def _compare_parser() -> argparse.ArgumentParser:
                     "best in bold) and the planning time per step; write summary.md/.csv/.tex, "
                     "curves.png/.pdf, trajectories/<planner>_mission0.png/.pdf and the raw "
                     "results (results.csv, config.json, shards/) to --out.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
+    add_version(parser)
     parser.add_argument("--agents", type=_positive_int("agents"), default=None, metavar="N",
                         help="team size N (default: the --config file's, else 4; teams "
                              "without fixed starts start at random cells)")
@@ -308,6 +311,9 @@ def train_main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] in ("-h", "--help"):
         print(usage)
         return 0 if argv else 2
+    if argv[0] == "--version":
+        print(version_line("ipp-train"))
+        return 0
     if argv[0] not in TRAINERS:
         print(f"ipp-train: error: unknown trainer {argv[0]!r}; choose from {sorted(TRAINERS)}\n"
               f"{usage}", file=sys.stderr)
@@ -345,7 +351,9 @@ def study_main(argv: list[str] | None = None) -> int:
     (:mod:`reports.sweep`) its run folders, ``validation/``, ``sweep.md`` and ``sweep.csv``.
     """
     parser = argparse.ArgumentParser(
-        prog="ipp-study", description="Regenerate the paper's studies into a folder.")
+        prog="ipp-study", description="Regenerate the paper's studies into a folder.",
+        formatter_class=HelpFormatter)
+    add_version(parser)
     parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation",
                                           "sweep"],
                         help="generalisation: planners x terrain families (real test rasters "

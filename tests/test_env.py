@@ -24,9 +24,8 @@ def test_pettingzoo_conformance(n_agents, comm_range):
         warnings.simplefilter("ignore", UserWarning)
         parallel_api_test(IPPEnv(config), num_cycles=100)
         api_test(parallel_to_aec(IPPEnv(config)), num_cycles=100)
-    # The seed test samples actions without masks, so it runs the no-mask ablation mode.
-    hold = config.replace(team={"invalid_action": "hold"})
-    parallel_seed_test(lambda: IPPEnv(hold), num_cycles=100)
+    # The seed test samples actions without masks: a masked one holds (the default).
+    parallel_seed_test(lambda: IPPEnv(config), num_cycles=100)
 
 
 def test_spaces_and_observation_contents():
@@ -84,7 +83,8 @@ def test_budget_end_is_terminal_not_truncation():
     assert infos["uav_0"]["entropy"] < 1.0
 
 
-INFO_KEYS = {"step": int, "blocked": bool, "entropy": float, "f1": float, "rmse": float}
+INFO_KEYS = {"step": int, "blocked": bool, "invalid_action": bool, "entropy": float, "f1": float,
+             "rmse": float}
 
 
 def test_infos_are_flat_scalars_with_the_same_keys_at_reset_and_step():
@@ -110,8 +110,37 @@ def test_infos_are_flat_scalars_with_the_same_keys_at_reset_and_step():
     assert steps == env.config.team.budget
 
 
+def test_masked_actions_hold_by_default_and_raise_when_strict():
+    config = small_config()
+    env = IPPEnv(config)
+    obs, infos = env.reset(seed=0)
+    assert not any(info["invalid_action"] for info in infos.values())
+    held = 0
+    env.action_space("uav_0").seed(0)
+    while env.agents:  # action_space.sample() ignores the masks, as many tools do
+        positions = env.mission.positions.copy()
+        masks = {agent: obs[agent]["action_mask"] for agent in env.agents}
+        actions = {agent: env.action_space(agent).sample() for agent in env.agents}
+        obs, _, _, _, infos = env.step(actions)
+        for k, agent in enumerate(env.possible_agents):
+            invalid = not masks[agent][actions[agent]]
+            assert infos[agent]["invalid_action"] == invalid
+            if invalid:
+                held += 1
+                assert (env.mission.positions[k] == positions[k]).all()
+            assert obs[agent]["action_mask"].dtype == np.int8  # masks stay observed
+    assert held > 0
+    assert env.config == config  # the caller's config (COMA reads its invalid_action) is kept
+    strict = IPPEnv(config, invalid_action="raise")
+    strict.reset(seed=0)
+    with pytest.raises(InvalidActionError, match=r"uav_1.*action 0 \(up\) is masked"):
+        strict.step({"uav_0": 1, "uav_1": 0, "uav_2": 1, "uav_3": 1})
+    with pytest.raises(ValueError, match="invalid_action must be one of .* got 'skip'"):
+        IPPEnv(config, invalid_action="skip")
+
+
 def test_step_errors_name_agent_and_action():
-    env = IPPEnv(small_config())
+    env = IPPEnv(small_config(), invalid_action="raise")
     env.reset(seed=0)
     with pytest.raises(InvalidActionError, match=r"uav_1.*action 0 \(up\) is masked"):
         env.step({"uav_0": 1, "uav_1": 0, "uav_2": 1, "uav_3": 1})

@@ -62,3 +62,14 @@ def test_real_terrain_example(tmp_path, monkeypatch, capsys):
     assert "of the area lies above 550 m" in out
     assert "| ig |" in out and "| coverage |" in out
     assert (tmp_path / "compare" / "summary.md").exists()
+
+
+def test_torchrl_mappo_trains_with_masks_and_a_failure(monkeypatch, capsys):
+    pytest.importorskip("torchrl", reason="torchrl is not installed (optional extra 'torchrl')")
+    # The example flies with invalid_action="raise": a masked action would stop it.
+    out = run_example("05_torchrl_mappo.py", ["--quick"], monkeypatch, capsys)
+    lines = [line for line in out.splitlines() if line.startswith("iteration ")]
+    assert len(lines) == 2
+    for line in lines:
+        entropy = float(line.split("final entropy ")[1].split(",")[0])
+        assert 0 < entropy < 1

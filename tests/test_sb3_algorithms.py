@@ -48,6 +48,8 @@ TINY_HYPER = {
     "QRDQN": {"buffer_size": 500, "learning_starts": 64, "batch_size": 32,
               "target_update_interval": 64, "n_quantiles": 5},
     "RecurrentPPO": {"n_steps": 32, "batch_size": 64, "n_epochs": 1, "lstm_hidden_size": 8},
+    "TRPO": {"n_steps": 32, "batch_size": 64, "n_critic_updates": 1, "cg_max_steps": 3},
+    "ARS": {"n_delta": 2},
 }
 TINY_NET = dict(n_envs=1, n_agents=2, width=8, features_dim=16, hidden=16,
                 checkpoint_every=128)
@@ -374,7 +376,7 @@ def test_time_limit_stops_and_saves(tmp_path):
 @pytest.mark.parametrize("argv, message", [
     (["--algo", "SAC"], "SAC needs continuous actions; the UAVs have 6 discrete ones); "
                         "supported: PPO, MaskablePPO, A2C, DQN, QRDQN, RecurrentPPO"),
-    (["--algo", "TRPO"], "unsupported algorithm 'TRPO'; supported: PPO, MaskablePPO"),
+    (["--algo", "CrossQ"], "CrossQ needs continuous actions"),
     ([], "--algo is required; supported: PPO"),
     (["--algo", "a2c", "--set", "buffer_size=10"], "unknown hyper-parameter 'buffer_size' for "
                                                     "A2C"),

@@ -144,6 +144,8 @@ class MissionState:
         measurement_planes: (N, G, G) block-mean weighted entropy of each latest reading.
         last_actions: (N,) int, actions of the last step (-1 before the first step).
         blocked: (N,) bool, held back by the same-target rule at the last step.
+        held_invalid: (N,) bool, held in place at the last step because its action was
+            masked (only under ``team.invalid_action="hold"``).
         reward: team reward of the last step (0 after reset).
         alive: (N,) bool, UAVs still flying (``team.failures``): a failed one neither moves,
             senses nor communicates.
@@ -169,6 +171,7 @@ class MissionState:
     measurement_planes: np.ndarray = field(default_factory=lambda: np.zeros(0))
     last_actions: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     blocked: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    held_invalid: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     reward: float = 0.0
     alive: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     failure_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -343,6 +346,7 @@ def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str
         stats=_prior_stats(truth, maps),
         last_actions=np.full(n, -1, dtype=np.int64),
         blocked=np.zeros(n, dtype=bool),
+        held_invalid=np.zeros(n, dtype=bool),
         measurement_planes=np.zeros((n,) + geometry.blocks.block_area.shape),
         alive=np.ones(n, dtype=bool),
         failure_step=_failure_steps(config, streams),
@@ -413,6 +417,7 @@ def step_mission(state: MissionState, actions: np.ndarray | list[int]) -> float:
     alive = state.failure_step > state.step + 1  # a UAV failing at this step is out already
     moving = _check_actions(state, actions.astype(np.int64), alive)
     state.alive = alive
+    state.held_invalid = alive & ~moving  # only a masked action under "hold" stops a live UAV
     state.positions, state.blocked = resolve_moves(state.positions, actions, moving, alive)
     state.last_actions = actions.astype(np.int64)
     state.step += 1

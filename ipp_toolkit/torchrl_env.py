@@ -1,0 +1,94 @@
+"""The simulator as a TorchRL env whose masks survive transforms and batching.
+
+TorchRL's ``PettingZooWrapper`` masks the action spec of the env it wraps, but a
+``TransformedEnv`` or a batched env (``SerialEnv`` / ``ParallelEnv``) keeps its own copy of
+that spec, so ``rand_action`` and collectors there draw unmasked actions. And a UAV that fails
+(``team.failures``) leaves PettingZoo's ``agents``, which ends the whole TorchRL episode
+(``done_on_any``) or, with ``done_on_any=False``, makes the wrapper send it actions it no
+longer takes. :func:`make_torchrl_env` builds the env so that neither happens:
+
+* every copy is an :class:`~ipp_toolkit.env.IPPEnv` with ``keep_failed=True``: a failed UAV
+  keeps its slot until the mission ends (zero planes, an all-valid mask, reward 0, its
+  actions ignored), so every agent is done together after ``budget`` steps and the group
+  ``uav`` keeps N agents;
+* TorchRL's ``ActionMask`` transform comes first on top of everything (the batched env
+  included), so the action spec seen by policies, collectors and ``rand_action`` follows
+  ``("uav", "action_mask")`` at every step; the caller's transforms follow it.
+
+Keys (group ``uav``, N agents): ``("uav", "observation", "observation")`` (C, G, G) planes,
+``("uav", "action_mask")`` (6,) bool, ``("uav", "action")``, ``("uav", "reward")``,
+``("uav", "info", KEY)`` and the critic's global planes at ``"state"``.
+Needs the optional extra ``torchrl`` (``pip install -c constraints.txt -e ".[torchrl]"``).
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+from collections.abc import Sequence
+from typing import Any
+
+from .config.schema import EnvConfig, check_int
+from .env import IPPEnv
+
+__all__ = ["GROUP", "make_torchrl_env"]
+
+GROUP = "uav"
+"""The TorchRL group of every UAV."""
+
+
+def _one_copy(config: EnvConfig, seed: int, namespace: str, invalid_action: str,
+              device: str) -> Any:
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    with warnings.catch_warnings():
+        # TorchRL warns that it was tested on another PettingZoo version.
+        warnings.filterwarnings("ignore", message="PettingZoo in TorchRL", category=UserWarning)
+        return PettingZooWrapper(
+            env=IPPEnv(config, namespace=namespace, keep_failed=True,
+                       invalid_action=invalid_action),
+            return_state=True, categorical_actions=True, seed=seed, device=device)
+
+
+def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed: int = 0,
+                     parallel: bool = False, transforms: Sequence[Any] = (),
+                     namespace: str = "train", invalid_action: str = "hold",
+                     device: str = "cpu") -> Any:
+    """A ``TransformedEnv`` over one or ``num_envs`` copies of the simulator, masks kept.
+
+    Args:
+        config: the mission configuration (default: the paper's).
+        num_envs: copies; more than one are batched (batch size ``(num_envs,)``).
+        seed: run seed; copy c flies missions 0, 1, ... of run ``seed + c``.
+        parallel: batch the copies in worker processes (``ParallelEnv``) instead of in this
+            one (``SerialEnv``).
+        transforms: TorchRL transforms applied after ``ActionMask`` (e.g.
+            ``FlattenObservation``, ``RewardSum``).
+        namespace: random-stream namespace (``train``, ``validation`` or ``test``).
+        invalid_action: what a masked action does if one still gets through (``hold``, the
+            env's default, or ``raise``).
+        device: TorchRL device of the env.
+
+    Returns:
+        a ``torchrl.envs.TransformedEnv``; close it when done.
+
+    Raises:
+        ImportError: torchrl is not installed (one line saying how to install it).
+        ValueError: a bad ``num_envs`` or ``seed``.
+    """
+    try:
+        from torchrl.envs import ActionMask, Compose, ParallelEnv, SerialEnv, TransformedEnv
+    except ImportError:
+        raise ImportError('make_torchrl_env needs torchrl: pip install -c constraints.txt '
+                          '-e ".[torchrl]"') from None
+    config = config if config is not None else EnvConfig()
+    num_envs = check_int("num_envs", num_envs, 1)
+    seed = check_int("seed", seed, 0)
+    makers = [functools.partial(_one_copy, config, seed + copy, namespace, invalid_action,
+                                device) for copy in range(num_envs)]
+    if num_envs == 1:
+        base = makers[0]()
+    else:
+        base = (ParallelEnv if parallel else SerialEnv)(num_envs, makers, device=device)
+    mask = ActionMask(action_key=(GROUP, "action"), mask_key=(GROUP, "action_mask"))
+    return TransformedEnv(base, Compose(mask, *transforms))
