@@ -54,6 +54,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch, write_json
 from ipp_toolkit.planners import Planner, planner_views
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import progress_bar, report_interrupt
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.world.seeding import planner_seed
@@ -409,24 +410,38 @@ def _append_progress(out: Path, row: list[float]) -> None:
 
 # -- Command line ----------------------------------------------------------------------------
 
+FLAG_HELP = {
+    "rounds": "data-collection rounds (round 0 flies ig_spatial, later ones ig_learned)",
+    "missions": "training missions flown per round",
+    "validation_missions": "validation missions flown per round",
+    "agents_per_step": "UAVs whose local maps are recorded per step",
+    "epochs": "passes over the recorded states after each round",
+    "batch_size": "minibatch of states",
+    "learning_rate": "Adam's step size",
+    "width": "channels of the network's first level",
+    "seed": "run seed (missions, recorded UAVs, shuffling, initial weights)",
+}
+
+
 def _parser() -> argparse.ArgumentParser:
     defaults = PriorTrainingConfig()
     parser = argparse.ArgumentParser(
         prog="ipp-train prior",
         description="Train a field prior (P(interesting | local map)) on simulator ground "
                     "truth, in DAgger-style rounds; fly it as ig_learned=OUT/best.pt.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=HelpFormatter)
+    add_version(parser)
     parser.add_argument("--out", required=True, help="run folder")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
     for field in fields(PriorTrainingConfig):
-        if field.name in ("team_sizes", "comm_ranges"):
-            continue
-        parser.add_argument(f"--{field.name.replace('_', '-')}", type=type(field.default),
-                            default=field.default)
+        if field.name in FLAG_HELP:
+            parser.add_argument(f"--{field.name.replace('_', '-')}", type=type(field.default),
+                                default=field.default, help=FLAG_HELP[field.name])
     parser.add_argument("--team-sizes", default=",".join(map(str, defaults.team_sizes)),
                         metavar="N,N,...", help="team sizes missions cycle over")
     parser.add_argument("--comm-ranges", default="0,25,inf", metavar="D,D,...",
-                        help="communication ranges (metres, inf) missions cycle over")
+                        help="communication ranges (metres, inf) missions cycle over "
+                             "(default: 0,25,inf)")
     parser.add_argument("--config", help="YAML mission config (world, terrain, sensor, ...)")
     parser.add_argument("--terrain", default=None, metavar="KIND",
                         help="terrain of the missions (default: mixture)")
