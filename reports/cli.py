@@ -419,6 +419,9 @@ def study_main(argv: list[str] | None = None) -> int:
                         help="generalisation: families flown in every --agents x --comm setting")
     parser.add_argument("--budget", type=_positive_int("--budget"), default=None,
                         help="generalisation: steps B (default: the protocol's 15)")
+    parser.add_argument("--reference", default="ig", metavar="LABEL",
+                        help="generalisation: the planner every other is compared with, "
+                             "paired, on the same missions")
     parser.add_argument("--no-progress", action="store_true")
     try:
         args = parser.parse_args(argv)
@@ -458,6 +461,7 @@ def study_main(argv: list[str] | None = None) -> int:
             study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
                                          out=out, workers=args.workers,
                                          resolution=args.resolution, budget=args.budget,
+                                         reference=args.reference,
                                          progress=not args.no_progress, **backend)
             print(study.table)
             print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")

@@ -1,4 +1,5 @@
-"""ipp-compare's --reference: the paired column against any planner flown, refused otherwise."""
+"""--reference of ipp-compare and ipp-study generalisation: the paired column against any
+planner flown, refused otherwise."""
 
 from __future__ import annotations
 
@@ -23,4 +24,15 @@ def test_a_reference_not_flown_is_refused_before_anything_is_written(tmp_path, c
                          "--out", str(out), *SMALL]) == 2
     err = capsys.readouterr().err
     assert "reference planner 'ig_spatial' is not among the planners flown" in err
+    assert not out.exists()
+
+
+def test_the_generalisation_study_refuses_a_reference_it_does_not_fly(tmp_path, capsys):
+    from reports.cli import study_main
+
+    out = tmp_path / "study"
+    assert study_main(["generalisation", "--planners", "ig,random", "--reference", "ig_spatial",
+                       "--families", "split", "--team-families", "", "--trials", "1",
+                       "--out", str(out), "--no-progress"]) == 2
+    assert "reference planner 'ig_spatial' is not among the planners" in capsys.readouterr().err
     assert not out.exists()
