@@ -21,11 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from ipp_toolkit.belief.field_prior import FieldPrior
-from ipp_toolkit.belief.interest import InterestSmoother, interest_smoother
-from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import AgentView
-from ipp_toolkit.world.sensor import Camera
 
 from .spatial_gain import SpatialGainPlanner
 
@@ -64,28 +61,19 @@ class LearnedPriorPlanner(SpatialGainPlanner):
                                   f"(e.g. {str(path / 'best.pt')!r})")
         self.checkpoint = path
         self.prior = FieldPrior.load(path)
-        self._fine: np.ndarray | None = None  # (N, h, w) prior of this step's views
-        self._smoother: InterestSmoother | None = None
-
-    def reset(self, config: EnvConfig, seed: int) -> None:
-        super().reset(config, seed)
-        world = config.world
-        # Only its block grid and window are used: the prior is resampled onto its blocks.
-        self._smoother = interest_smoother(world.map_cells, world.resolution, self.sigma)
-        self._fine = None
+        self._fine: np.ndarray | None = None  # (N, H / b, W / b) prior of this step's views
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) int64 greedy actions (see ``ig``), after one batched prior prediction."""
-        if self._smoother is None or self._config is None:
+        if self._config is None:
             raise RuntimeError("call reset(config, seed) before act()")
         prob = np.stack([view.local_prob for view in views])
         self._fine = self.prior.fine_values(prob, self._config.world.resolution,
-                                            self._smoother.block)
+                                            self.block_cells)
         return super().act(views)
 
-    def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
-                    altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
-        assert self._fine is not None and self._smoother is not None
-        gain = super(SpatialGainPlanner, self)._cell_gains(view, camera, weights, altitude, cells)
-        gain *= self._smoother.window(self._fine[view.index], *cells)
-        return gain
+    def interest_blocks(self, view: AgentView) -> np.ndarray:
+        """The learned prior of ``view``'s blocks (predicted for the whole team in
+        :meth:`act`)."""
+        assert self._fine is not None
+        return self._fine[view.index]

@@ -67,24 +67,39 @@ class SpatialGainPlanner(InformationGainPlanner):
             raise ValueError(f"sigma must be a positive number of metres, got {sigma!r}")
         super().__init__(overlap_discount)
         self.sigma = float(sigma)
-        self._interest: tuple[AgentView, np.ndarray, InterestSmoother] | None = None
+        self._smoother: InterestSmoother | None = None
+        self._interest: tuple[AgentView, np.ndarray] | None = None
 
     def reset(self, config: EnvConfig, seed: int) -> None:
         super().reset(config, seed)
+        world = config.world
+        self._smoother = interest_smoother(world.map_cells, world.resolution, self.sigma)
         self._interest = None
+
+    @property
+    def block_cells(self) -> int:
+        """Cells per side of the blocks the probability of interest is given on."""
+        if self._smoother is None:
+            raise RuntimeError("call reset(config, seed) first")
+        return self._smoother.block
+
+    def interest_blocks(self, view: AgentView) -> np.ndarray:
+        """(H / b, W / b) float32 probability that each block of :attr:`block_cells` cells of
+        ``view``'s area is interesting: here its local map smoothed by a Gaussian of ``sigma``
+        metres. The extension point of this family: a planner that knows better (a learned
+        prior, ``ig_learned``) overrides it and keeps the rest."""
+        assert self._smoother is not None
+        return self._smoother.block_values(view.local_prob)
 
     def _cell_objective(self, weights: tuple[float, float]) -> CellGain:
         return interesting_gain
 
     def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
                     altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
-        # One smoothing per agent and decision: the up, down and level boxes share it.
+        # One estimate per agent and decision: the up, down and level boxes share it.
         if self._interest is None or self._interest[0] is not view:
-            assert self._config is not None
-            world = self._config.world
-            smoother = interest_smoother(world.map_cells, world.resolution, self.sigma)
-            self._interest = (view, smoother.block_values(view.local_prob), smoother)
-        _, blocks, smoother = self._interest
+            self._interest = (view, self.interest_blocks(view))
+        assert self._smoother is not None
         gain = super()._cell_gains(view, camera, weights, altitude, cells)
-        gain *= smoother.window(blocks, *cells)
+        gain *= self._smoother.window(self._interest[1], *cells)
         return gain
