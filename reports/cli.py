@@ -30,6 +30,8 @@ from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
 
+from .compare import DEFAULT_PLANNERS
+
 
 def _comm_range(text: str) -> float:
     try:
@@ -164,7 +166,7 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="comma-separated planners: registered names (ig, coverage, "
                              "random, ...) or NAME=CHECKPOINT items (coma=PATH, "
                              "coma=shipped:NAME), each with an optional LABEL: prefix "
-                             "(mine:coma=PATH); 'default' = ig,coverage,random,coma,ppo; "
+                             f"(mine:coma=PATH); 'default' = {','.join(DEFAULT_PLANNERS)}; "
                              "'all' = every registered planner that can be built")
     parser.add_argument("--trials", type=_positive_int("trials"), default=50, metavar="N",
                         help="number of test missions (the same missions for every planner)")
@@ -367,7 +369,7 @@ def study_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--planners", default=None,
                         help="planners, comma-separated (coma=PATH for your own policy, "
                              "LABEL:coma=PATH to name it); default: coma,ig,coverage, and "
-                             "for generalisation ig,coverage,random,coma,ppo")
+                             f"for generalisation {','.join(DEFAULT_PLANNERS)}")
     parser.add_argument("--agents", default=None,
                         help="team sizes, comma-separated (default 2,4,8); sweep: the one "
                              "team size of training and validation (default 4)")
@@ -450,7 +452,6 @@ def study_main(argv: list[str] | None = None) -> int:
     comm = args.comm or "0,25,inf"
     try:
         if args.study == "generalisation":
-            from .compare import DEFAULT_PLANNERS
             from .generalisation import generalisation_study, study_cells
 
             planners = args.planners or ",".join(DEFAULT_PLANNERS)

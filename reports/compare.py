@@ -148,7 +148,7 @@ class Comparison:
                 for r in self.result.rows if int(r["step"]) == budget}
 
 
-DEFAULT_PLANNERS = ("ig", "coverage", "random", "coma", "ppo")
+DEFAULT_PLANNERS = ("ig", "ig_spatial", "ig_learned", "coverage", "random", "coma", "ppo")
 """What ``ipp-compare`` flies without ``--planners``."""
 
 
