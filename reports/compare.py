@@ -40,6 +40,7 @@ from ipp_toolkit.planners import (
 from ipp_toolkit.runs.process_pool import WorkerPool
 from ipp_toolkit.runs.ray_backend import check_backend
 from ipp_toolkit.runs.result_store import shard_path, trajectory_path
+from ipp_toolkit.runs.run_folder import EVALUATION_COMMAND, claim
 
 from .tables import Summary, summarise, to_markdown, write_tables
 
@@ -393,6 +394,10 @@ def compare(agents: int | None = None, comm: float | None = None,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)
     with contextlib.ExitStack() as stack:
+        if out is not None:
+            # Held until the tables and figures are written: a second run into the folder
+            # (another seed, say) is refused instead of mixing its missions in.
+            stack.enter_context(claim(out, EVALUATION_COMMAND))
         pool = None
         requested = _requested_specs(planners)
         names = [spec.name for spec in requested]

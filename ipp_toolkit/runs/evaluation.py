@@ -27,6 +27,7 @@ folder layout (:mod:`ipp_toolkit.runs.result_store`).
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import math
 import os
@@ -79,6 +80,7 @@ from .result_store import (
     write_shard,
     write_trajectory,
 )
+from .run_folder import EVALUATION_COMMAND, claim
 
 __all__ = [
     "RESULT_COLUMNS",
@@ -443,7 +445,24 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                              f"name {safe_name(label)!r}; rename one")
         stems[safe_name(label)] = label
     folder = Path(out_dir) if out_dir is not None else None
+    with contextlib.ExitStack() as stack:
+        if folder is not None:
+            # Held until the results are written: a second run into the folder is refused.
+            stack.enter_context(claim(folder, EVALUATION_COMMAND, "out_dir"))
+        return _evaluate_claimed(config, specs, labels, missions, seed, workers, folder,
+                                 progress, namespace, record, on_recorded, backend, address,
+                                 pool)
+
+
+def _evaluate_claimed(config: EnvConfig, specs: list[PlannerSpec], labels: list[str],
+                      missions: int, seed: int, workers: int, folder: Path | None,
+                      progress: bool, namespace: str, record: frozenset[int],
+                      on_recorded: Callable[[str, int, dict[str, Any], list[dict[str, Any]]],
+                                            None] | None, backend: str,
+                      address: str | None, pool: WorkerPool | None) -> EvaluationResult:
+    """:func:`evaluate` once its inputs are checked and ``folder`` (if any) is claimed."""
     identity = folder_identity(config, seed, namespace)
+    # The folder's config.json matches identity (else refused); shards are checked against it.
     has_identity = check_folder(folder, identity, specs) if folder is not None else False
 
     spec_of = dict(zip(labels, specs, strict=True))
@@ -456,10 +475,12 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                 if not path.exists():
                     continue
                 try:
-                    rows = read_shard(path, label, mission, config.team.budget)
+                    rows = read_shard(path, label, mission, config.team.budget,
+                                      identity)
                 except (OSError, UnicodeDecodeError, ValueError, KeyError) as err:
-                    warnings.warn(f"shard {str(path)!r} is corrupt ({err}); flying mission "
-                                  f"{mission} of planner {label!r} again", stacklevel=2)
+                    warnings.warn(f"shard {str(path)!r} is corrupt or of another run ({err}); "
+                                  f"flying mission {mission} of planner {label!r} again",
+                                  stacklevel=2)
                     continue
                 if mission in record:
                     npz = trajectory_path(folder, label, mission)
@@ -496,7 +517,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         if folder is not None:
             if result["trajectory"] is not None:
                 write_trajectory(trajectory_path(folder, label, mission), result["trajectory"])
-            write_shard(folder, spec_of[label], mission, result)
+            write_shard(folder, spec_of[label], mission, result, identity)
         done[(label, mission)] = result["rows"]
         if result["trajectory"] is not None:
             trajectories[(label, mission)] = result["trajectory"]
@@ -536,7 +557,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             for row in done[(label, mission)]]
     if folder is not None:
         # A result folder is a growing set: planners flown into it before keep their rows.
-        stored = stored_planners(folder, labels, missions, config.team.budget)
+        stored = stored_planners(folder, labels, missions, config.team.budget, identity)
         labels = labels + list(stored)
         rows += [row for label_rows in stored.values() for row in label_rows]
         write_results_csv(folder / "results.csv", rows)
