@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ipp_toolkit.config.limits import check_mission, check_result_rows
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import build_env_config, format_comm, safe_name
 from ipp_toolkit.io import write_json
@@ -393,6 +394,9 @@ def compare(agents: int | None = None, comm: float | None = None,
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)
+    # Before any worker starts or planner loads (the evaluation checks the same, later).
+    check_result_rows(env_config.team.budget, int(trials), max(1, len(_requested_specs(planners))))
+    check_mission(env_config, at_once=min(int(workers), int(trials)))
     with contextlib.ExitStack() as stack:
         if out is not None:
             # Held until the tables and figures are written: a second run into the folder

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..config.files import config_from_dict
+from ..config.limits import check_mission, check_result_rows
 from ..config.schema import EnvConfig, check_int
 from ..config.settings import safe_name
 from ..io import write_json
@@ -444,6 +445,9 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             raise ValueError(f"planner labels {other!r} and {label!r} map to the same file "
                              f"name {safe_name(label)!r}; rename one")
         stems[safe_name(label)] = label
+    # Sizes that cannot fit are refused before any folder is touched.
+    check_result_rows(config.team.budget, missions, len(specs))
+    check_mission(config, at_once=min(workers, missions * len(specs)))
     folder = Path(out_dir) if out_dir is not None else None
     with contextlib.ExitStack() as stack:
         if folder is not None:

@@ -25,6 +25,7 @@ import numpy as np
 from .._native import kernels
 from ..belief.block_grid import BlockGrid, Rect
 from ..belief.mapping import BeliefMaps
+from ..config.limits import check_mission
 from ..config.schema import EnvConfig, fixed_start_waypoints
 from ..world.seeding import MissionStreams, mission_streams
 from ..world.sensor import Camera
@@ -71,6 +72,7 @@ class MissionGeometry:
     """
 
     def __init__(self, config: EnvConfig):
+        check_mission(config)  # an absurd size is refused before its tables are built
         world = config.world
         self.config = config
         self.camera = Camera(world, config.sensor)
