@@ -199,10 +199,9 @@ def run_sb3_training(
     torch.set_num_threads(1)  # two shared cores: more intra-op threads collapse throughput
     limit_blas_threads()
     retain_freed_memory()  # large freed buffers are reused, not faulted in anew
-    out_dir = Path(out_dir)
     # Held for the whole run: a second run into the folder is refused, naming this process.
-    with claim(out_dir, run_format.command):
-        return _run_claimed(out_dir, run_format, seed, total_timesteps, checkpoint_every,
+    with claim(out_dir, run_format.command) as run:
+        return _run_claimed(run.path, run_format, seed, total_timesteps, checkpoint_every,
                             make_env, make_model, payload, check_resume, extra_record,
                             progress, resume, time_limit_s, announce)
 

@@ -38,6 +38,7 @@ from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import REMOVED_NAMES
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import add_backend_flags, check_backend_flags, probe
+from ipp_toolkit.runs.run_folder import check_out_path
 
 from .config import (
     PRECISIONS,
@@ -276,6 +277,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
                 planner_factory(coma_config.warm_start.planner)  # an unknown name fails here
         _check_compute(args)
+        check_out_path(args.out)  # an empty --out is not the current folder
     except (ValueError, ImportError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2

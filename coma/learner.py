@@ -418,7 +418,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     check_geometries = geometries if checks == settings else [
         MissionGeometry(config) for config in checks]
     # Held for the whole run: a second run into the folder is refused, naming this process.
-    with claim(out, COMA_COMMAND):
+    with claim(out_dir, COMA_COMMAND):  # the given path: an empty one is refused
         if resume and not last_path.exists():
             raise CheckpointError(f"nothing to resume: {str(last_path)!r} does not exist "
                                   "(drop --resume to start a new run)")

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import csv
 import gc
+import io
 import math
 import os
 import sys
@@ -26,8 +27,10 @@ import numpy as np
 
 from ipp_toolkit.config.settings import build_env_config, comm_label, parse_comm, setting_line
 from ipp_toolkit.env import IPPEnv
+from ipp_toolkit.io import atomic_write
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
+from ipp_toolkit.runs.run_folder import check_out_path
 
 
 def _comm_range(text: str) -> float:
@@ -51,7 +54,7 @@ def _simulate_parser() -> argparse.ArgumentParser:
     parser.add_argument("--resolution", type=_positive_float, help="map resolution r_M in metres")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED", help="run seed")
     parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
-    parser.add_argument("--out", type=Path, default=Path("results/simulate"),
+    parser.add_argument("--out", default="results/simulate",
                         help="folder for metrics.csv and final.png")
     return parser
 
@@ -61,11 +64,17 @@ def simulate_main(argv: list[str] | None = None) -> int:
     parser = _simulate_parser()
     args = parser.parse_args(argv)
     try:
+        args.out = check_out_path(args.out)  # before Path("") turns into the current folder
+        targets = (args.out / "final.png", args.out / "metrics.csv")
         config = build_env_config(args.config, agents=args.agents, comm=args.comm,
                                   resolution=args.resolution)
-        args.out.mkdir(parents=True, exist_ok=True)
+        for target in targets:
+            if target.exists() and not target.is_file():
+                raise ValueError(f"{str(target)!r} exists and is not a file; it would be "
+                                 "written after the mission")
         env = IPPEnv(config, render_mode="rgb_array", namespace="test")
         observations, infos = env.reset(seed=args.seed, options={"mission": args.mission})
+        args.out.mkdir(parents=True, exist_ok=True)  # after the mission is built: no litter
     except ValueError as err:
         print(f"ipp-simulate: error: {err}", file=sys.stderr)
         return 2
@@ -93,13 +102,19 @@ def simulate_main(argv: list[str] | None = None) -> int:
               f"{metrics['f1']:6.3f} {metrics['rmse']:6.3f}")
     from ipp_toolkit.sim.rendering import save_png
 
-    save_png(env.render(), args.out / "final.png")
-    tmp = args.out / "metrics.csv.tmp"
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=["step", "reward", "entropy", "f1", "rmse"])
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, args.out / "metrics.csv")
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=["step", "reward", "entropy", "f1", "rmse"],
+                            lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    data = text.getvalue().encode("utf-8")
+    try:
+        save_png(env.render(), targets[0])
+        atomic_write(targets[1], lambda handle: handle.write(data))
+    except OSError as err:
+        print(f"ipp-simulate: error: cannot write into {str(args.out)!r}: {err.strerror}",
+              file=sys.stderr)
+        return 2
     print(f"wrote {args.out / 'metrics.csv'} and {args.out / 'final.png'}")
     return 0
 
@@ -247,7 +262,10 @@ def compare_main(argv: list[str] | None = None) -> int:
                          comm=comm_label(env_config.team.comm_range))
         if args.namespace == "validation":
             out = out.replace("compare-", "validate-")
-    out_dir = Path(out)
+    try:
+        out_dir = check_out_path(out)  # before Path("") turns into the current folder
+    except ValueError as err:
+        return error(err)
     print(setting_line(env_config, args.config), file=sys.stderr)
     try:
         comparison = compare(

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from .field_types import check_field_types, short_repr
+
 __all__ = [
     "WorldConfig",
     "SensorConfig",
@@ -48,7 +50,7 @@ def check_int(name: str, value: Any, minimum: int) -> int:
 
 
 def _fail(section: str, name: str, value: Any, why: str) -> None:
-    raise ValueError(f"invalid config: {section}.{name} = {value!r}: {why}")
+    raise ValueError(f"invalid config: {section}.{name} = {short_repr(value)}: {why}")
 
 
 def _positive(section: str, name: str, value: float) -> None:
@@ -78,6 +80,7 @@ class WorldConfig:
     prior: float = 0.5
 
     def __post_init__(self) -> None:
+        check_field_types(self, "world")
         object.__setattr__(self, "altitudes", tuple(float(a) for a in self.altitudes))
         _positive("world", "area_size", self.area_size)
         _positive("world", "resolution", self.resolution)
@@ -123,6 +126,7 @@ class SensorConfig:
     accuracy: tuple[float, ...] = (0.99, 0.735, 0.625)
 
     def __post_init__(self) -> None:
+        check_field_types(self, "sensor")
         object.__setattr__(self, "accuracy", tuple(float(a) for a in self.accuracy))
         if not 0.0 < self.fov_deg < 180.0:
             _fail("sensor", "fov_deg", self.fov_deg, "must lie in (0, 180)")
@@ -187,6 +191,7 @@ class TerrainConfig:
     mixture: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
+        check_field_types(self, "terrain")
         kinds = terrain_kinds()
         if self.kind not in kinds:
             _fail("terrain", "kind", self.kind, f"unknown terrain kind; choose one of {kinds}")
@@ -348,6 +353,7 @@ class TeamConfig:
                 object.__setattr__(self, "comm_range", float(self.comm_range))
             except ValueError:
                 _fail("team", "comm_range", self.comm_range, "must be a number of metres or 'inf'")
+        check_field_types(self, "team")
         if not isinstance(self.n_agents, int | np.integer) or isinstance(self.n_agents, bool) \
                 or self.n_agents < 1:
             _fail("team", "n_agents", self.n_agents, "must be an integer >= 1")
@@ -413,6 +419,7 @@ class RewardConfig:
     weight_uninteresting: float = 0.0
 
     def __post_init__(self) -> None:
+        check_field_types(self, "reward")
         _positive("reward", "alpha", self.alpha)
         if not math.isfinite(self.beta):
             _fail("reward", "beta", self.beta, "must be finite")
@@ -479,6 +486,7 @@ class FeatureConfig:
     agent_id_scale: int = 8
 
     def __post_init__(self) -> None:
+        check_field_types(self, "features")
         if (isinstance(self.gain_smoothing, bool)
                 or not isinstance(self.gain_smoothing, int | float | np.integer | np.floating)
                 or not 0 <= self.gain_smoothing < math.inf):
@@ -506,6 +514,13 @@ class EnvConfig:
     features: FeatureConfig = field(default_factory=FeatureConfig)
 
     def __post_init__(self) -> None:
+        for name, cls in _SECTIONS.items():
+            value = getattr(self, name)
+            if isinstance(value, Mapping):  # EnvConfig(world={...}): the section's fields
+                object.__setattr__(self, name, _build(cls, value, name))
+            elif not isinstance(value, cls):
+                raise ValueError(f"invalid config: section {name!r} must be a {cls.__name__} "
+                                 f"or a dict of its fields, got {short_repr(value)}")
         if len(self.sensor.accuracy) != len(self.world.altitudes):
             _fail("sensor", "accuracy", self.sensor.accuracy,
                   f"needs one value per altitude {self.world.altitudes}")

@@ -452,7 +452,8 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     with contextlib.ExitStack() as stack:
         if folder is not None:
             # Held until the results are written: a second run into the folder is refused.
-            stack.enter_context(claim(folder, EVALUATION_COMMAND, "out_dir"))
+            # The given path: an empty one is refused, not taken as the current folder.
+            stack.enter_context(claim(out_dir, EVALUATION_COMMAND, "out_dir"))
         return _evaluate_claimed(config, specs, labels, missions, seed, workers, folder,
                                  progress, namespace, record, on_recorded, backend, address,
                                  pool)
