@@ -448,9 +448,12 @@ def study_main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     seed = 0 if args.seed is None else args.seed
-    agents = args.agents or "2,4,8"
-    comm = args.comm or "0,25,inf"
+    agents = "2,4,8" if args.agents is None else args.agents
+    comm = "0,25,inf" if args.comm is None else args.comm
     try:
+        if args.study != "sweep":  # the sweep takes one value of each, checked there
+            _distinct_items("--agents", agents)
+            _distinct_items("--comm", comm)
         if args.study == "generalisation":
             from .compare import DEFAULT_PLANNERS
             from .generalisation import generalisation_study, study_cells
@@ -508,6 +511,17 @@ def study_main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return interrupted("ipp-study", Path(out))
     return 0
+
+
+def _distinct_items(flag: str, text: str) -> None:
+    """Refuse a list flag that names no value, an empty item or a value twice (a study would
+    silently fly its defaults or a duplicate row)."""
+    items = [item.strip() for item in text.split(",")]
+    if not text.strip() or any(not item for item in items):
+        raise ValueError(f"{flag} {text!r} has an empty value; give e.g. {flag} 2,4,8")
+    repeated = sorted({item for item in items if items.count(item) > 1})
+    if repeated:
+        raise ValueError(f"{flag} {text!r} gives {', '.join(repeated)} more than once")
 
 
 def _sweep(args: argparse.Namespace, out: str, backend: dict[str, str | None]) -> int:

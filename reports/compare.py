@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ipp_toolkit.config.limits import check_mission, check_result_rows
-from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.config.settings import build_env_config, format_comm, safe_name
 from ipp_toolkit.io import write_json
 from ipp_toolkit.planners import (
@@ -384,6 +384,7 @@ def compare(agents: int | None = None, comm: float | None = None,
         ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
         ConnectionError: no Ray cluster answers at ``address``.
     """
+    seed = check_int("seed", seed, 0)  # 1.5 is refused, not truncated
     if isinstance(trials, bool) or int(trials) != trials or trials < 1:
         raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
     if isinstance(workers, bool) or int(workers) != workers or workers < 1:

@@ -39,6 +39,7 @@ TERRAIN_KINDS = ("split", "split-axis", "blobs", "fractal", "real", "mixture", "
 REAL_SOURCES = ("mission", "train", "validation", "test", "all")
 DEFAULT_MIXTURE = (("split", 1.0), ("blobs", 1.0), ("fractal", 1.0), ("real", 1.0))
 NAN_POLICIES = ("raise", "min", "max", "mean")
+_NO_QUANTILE = ("split", "split-axis", "blobs")  # kinds that draw their own share
 
 
 def check_int(name: str, value: Any, minimum: int) -> int:
@@ -203,6 +204,10 @@ class TerrainConfig:
             _fail("terrain", "nan_policy", self.nan_policy, f"choose one of {NAN_POLICIES}")
         if self.threshold is not None and not math.isfinite(self.threshold):
             _fail("terrain", "threshold", self.threshold, "must be finite")
+        if self.threshold_quantile is not None and self.kind in _NO_QUANTILE:
+            _fail("terrain", "threshold_quantile", self.threshold_quantile,
+                  f"terrain kind {self.kind!r} does not use it (fractal, real, raster and "
+                  "mixture do)")
         if self.threshold_quantile is not None:
             object.__setattr__(self, "threshold_quantile", _range_of(
                 "threshold_quantile", self.threshold_quantile, 0.0, 1.0, open_ends=True))
@@ -427,6 +432,9 @@ class RewardConfig:
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 _fail("reward", name, value, "must lie in [0, 1]")
+        if self.weight_interesting == 0 and self.weight_uninteresting == 0:
+            _fail("reward", "weight_interesting", self.weight_interesting,
+                  "and weight_uninteresting are both 0: the reward would count no entropy")
 
 
 @dataclass(frozen=True)

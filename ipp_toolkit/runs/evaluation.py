@@ -69,6 +69,7 @@ from .result_store import (
     RESULT_COLUMNS,
     EvaluationError,
     check_folder,
+    check_label,
     folder_identity,
     read_identity,
     read_results_csv,
@@ -445,6 +446,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             raise ValueError(f"planner labels {other!r} and {label!r} map to the same file "
                              f"name {safe_name(label)!r}; rename one")
         stems[safe_name(label)] = label
+        check_label(label)
     # Sizes that cannot fit are refused before any folder is touched.
     check_result_rows(config.team.budget, missions, len(specs))
     check_mission(config, at_once=min(workers, missions * len(specs)))
@@ -518,8 +520,27 @@ def _evaluate_claimed(config: EnvConfig, specs: list[PlannerSpec], labels: list[
 
         cluster = connect(address, n_workers)  # starts or reaches Ray before anything is written
 
+    prepared = False
+
+    def prepare() -> None:
+        """Write the folder's identity and planner specs, once: when the first mission has
+        flown (or nothing is left to fly), so input that fails on the first mission (a
+        missing raster, a grid that does not fit, a planner that cannot act) leaves nothing
+        behind."""
+        nonlocal prepared
+        if folder is None or prepared:
+            return
+        if not has_identity:
+            write_json(folder / "config.json", identity)
+        for spec in specs:
+            path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
+            if not path.exists():
+                write_json(path, spec.to_dict())
+        prepared = True
+
     def finish(label: str, mission: int, result: dict[str, Any]) -> None:
         if folder is not None:
+            prepare()
             if result["trajectory"] is not None:
                 write_trajectory(trajectory_path(folder, label, mission), result["trajectory"])
             write_shard(folder, spec_of[label], mission, result, identity)
@@ -530,14 +551,6 @@ def _evaluate_claimed(config: EnvConfig, specs: list[PlannerSpec], labels: list[
                 on_recorded(label, mission, result["trajectory"], result["rows"])
 
     try:
-        if folder is not None:
-            folder.mkdir(parents=True, exist_ok=True)
-            if not has_identity:
-                write_json(folder / "config.json", identity)
-            for spec in specs:
-                path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
-                if not path.exists():
-                    write_json(path, spec.to_dict())
         with progress_bar(len(labels) * missions, "evaluate", "missions",
                           initial=len(labels) * missions - len(tasks),
                           disable=not progress) as bar:
@@ -558,6 +571,7 @@ def _evaluate_claimed(config: EnvConfig, specs: list[PlannerSpec], labels: list[
         if cluster is not None:
             cluster.close()
 
+    prepare()
     rows = [row for label in labels for mission in range(missions)
             for row in done[(label, mission)]]
     if folder is not None:

@@ -37,8 +37,8 @@ if TYPE_CHECKING:
     from ..planners.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
-           "check_folder", "run_key", "shard_path", "trajectory_path", "stored_planners",
-           "read_shard",
+           "check_folder", "check_label", "run_key", "shard_path", "trajectory_path",
+           "stored_planners", "read_shard",
            "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
            "read_results_csv"]
 
@@ -157,6 +157,21 @@ def check_folder(folder: Path, identity: dict[str, Any],
                 f"{spec.effective_label!r} made with {stored_spec!r}, not {spec.to_dict()!r}; "
                 "give this planner another label or use another folder")
     return True
+
+
+_MAX_LABEL_BYTES = 120  # of the file-name stem; trajectories add "_mission<k>.png"
+
+
+def check_label(label: str) -> None:
+    """Refuse a label that cannot name its files: not UTF-8 (undecodable bytes from the
+    command line), or longer than a file name may be."""
+    try:
+        label.encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError(f"planner label {label!r} is not valid UTF-8 text") from None
+    if len(safe_name(label).encode("utf-8")) > _MAX_LABEL_BYTES:
+        raise ValueError(f"planner label {label[:40]!r}... is {len(label)} characters long; "
+                         f"labels name files, keep them to {_MAX_LABEL_BYTES}")
 
 
 def shard_path(folder: Path, label: str, mission: int) -> Path:

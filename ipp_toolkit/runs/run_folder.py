@@ -12,7 +12,8 @@ coma``, ``ipp-train ppo``/``sb3``) claims it first with :func:`claim`, which
   ``config.json``). Folders written before ``run.json`` existed are recognised by their files.
 
 A claim that ends in an error before the run wrote anything removes what the claim itself
-made (the lock, the record, the folder), so refused input leaves nothing behind.
+made (the lock, the record, the folder), so refused input leaves nothing behind; a claim
+removes the temporary files of runs killed mid-write.
 
 This module owns those checks; the commands own what they store inside the folder.
 """
@@ -209,6 +210,21 @@ def _make_folder(folder: Path, created: list[Path]) -> None:
     created.extend(reversed(missing))
 
 
+def _is_temporary(name: str) -> bool:
+    """Whether ``name`` is a half-written file: ``ipp_toolkit.io.atomic_write``'s
+    ``.NAME.PID.HEX.tmp`` or a figure's ``.tmp-XXXX.png``."""
+    return name.startswith(".") and (name.endswith(".tmp") or name.startswith(".tmp-"))
+
+
+def _remove_stale_temporaries(folder: Path) -> None:
+    """Remove what runs killed mid-write (SIGTERM, SIGKILL, power loss) left: under the lock
+    no other run writes here, so every temporary file present is stale."""
+    for path in folder.rglob(".*"):
+        if _is_temporary(path.name) and path.is_file():
+            with contextlib.suppress(OSError):
+                path.unlink()
+
+
 @contextlib.contextmanager
 def claim(folder: str | os.PathLike[str], command: str, what: str = "--out"
           ) -> Iterator[RunFolder]:
@@ -261,6 +277,7 @@ def claim(folder: str | os.PathLike[str], command: str, what: str = "--out"
                 raise RunFolderError(f"cannot write into {str(path)!r}: {err.strerror}") \
                     from None
             run.created.append(record)
+        _remove_stale_temporaries(path)
         _HELD[key] = run
         try:
             yield run

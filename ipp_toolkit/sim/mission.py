@@ -329,6 +329,11 @@ def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str
         truth = np.asarray(ground_truth)
         if truth.shape != (size, size):
             raise ValueError(f"ground_truth has shape {truth.shape}, expected {(size, size)}")
+        # Any object is true: only booleans or numbers 0/1 say which cells are interesting.
+        if truth.dtype.kind not in "biuf" or (truth.dtype.kind != "b"
+                                             and not np.isin(truth, (0, 1)).all()):
+            raise ValueError(f"ground_truth must hold booleans (or 0/1), got dtype "
+                             f"{truth.dtype}")
         truth = truth.astype(bool)
     if not truth.any():
         raise ValueError("the ground truth has no interesting cell")

@@ -527,6 +527,12 @@ def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Ge
         level = float(np.quantile(entry.values, float(rng.uniform(low, high))))
         return entry.values > level if level <= entry.values.min() else entry.values >= level
     interesting = entry.values >= config.threshold
+    if interesting.all():
+        raise ValueError(
+            f"raster {name}: every map cell reaches terrain.threshold = {config.threshold!r}, "
+            "so there is nothing to map; the raster spans "
+            f"[{entry.source_min:g}, {entry.source_max:g}] (area averages on the map: "
+            f"[{entry.values.min():g}, {entry.values.max():g}])")
     if not interesting.any():
         raise ValueError(
             f"raster {name}: no map cell reaches terrain.threshold = {config.threshold!r}; the "
