@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from baselines.ppo import resolve_policy as resolve_ppo_policy
 from coma.persistence import resolve_policy
 from ipp_toolkit.config.limits import LimitError, check_mission, limit_value
 from ipp_toolkit.config.schema import EnvConfig
@@ -49,17 +50,22 @@ def test_training_refuses_networks_that_cannot_fit(tmp_path, capsys, argv, needl
     refused(lambda out: train_main([*argv, "--out", str(out)]), tmp_path, capsys, needle)
 
 
-@pytest.mark.parametrize("field, value, needle", [
-    ("width", 10 ** 6, "width = 1000000 is over the limit"),
-    ("width", 20_000, "IPP_MAX_PARAMETERS"),
+@pytest.mark.parametrize("planner, section, field, value, needle", [
+    ("coma", "coma_config", "width", 10 ** 6, "width = 1000000 is over the limit"),
+    ("coma", "coma_config", "width", 20_000, "IPP_MAX_PARAMETERS"),
+    ("ppo", "ppo_config", "width", 10 ** 6, "width = 1000000 is over the limit"),
+    ("ppo", "ppo_config", "width", 20_000, "IPP_MAX_PARAMETERS"),
 ])
-def test_checkpoint_sizes_are_bounded_before_building(tmp_path, capsys, field, value, needle):
-    data = torch.load(resolve_policy("shipped:prior"), weights_only=True)
-    data["coma_config"][field] = value
+def test_checkpoint_sizes_are_bounded_before_building(tmp_path, capsys, planner, section,
+                                                      field, value, needle):
+    shipped = resolve_policy("shipped:prior") if planner == "coma" else \
+        resolve_ppo_policy("shipped:split")
+    data = torch.load(shipped, weights_only=True)
+    data[section][field] = value
     path = tmp_path / "huge.pt"
     torch.save(data, path)
-    err = refused(lambda out: compare_main([*QUICK, "--planners", f"coma={path}", "--out",
-                                            str(out)]), tmp_path, capsys, needle)
+    err = refused(lambda out: compare_main([*QUICK, "--planners", f"{planner}={path}",
+                                            "--out", str(out)]), tmp_path, capsys, needle)
     assert str(path) in err
 
 
