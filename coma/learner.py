@@ -65,6 +65,7 @@ from .parallel import (
 from .persistence import (
     COMANetworks,
     build_networks,
+    check_network_size,
     load_policy,
     load_state_into,
     save_policy,
@@ -413,6 +414,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                          "failures yet (a failed UAV's transitions would be recorded); "
                          "evaluate a trained policy on them with ipp-compare instead")
     settings = mission_settings(coma_config, env_config)
+    check_network_size(coma_config, env_config)  # before any worker starts or file is written
     geometries = [MissionGeometry(config) for config in settings]
     checks = validation_settings(coma_config, settings)
     check_geometries = geometries if checks == settings else [

@@ -89,13 +89,19 @@ def build_networks(coma_config: COMAConfig, env_config: EnvConfig) -> COMANetwor
         ipp_toolkit.config.limits.LimitError: the networks' parameters exceed the limit
             (counted on torch's meta device, where nothing is allocated or drawn).
     """
+    check_network_size(coma_config, env_config)
+    return _construct(coma_config, env_config)
+
+
+def check_network_size(coma_config: COMAConfig, env_config: EnvConfig) -> None:
+    """Refuse (LimitError) networks whose parameters exceed the limit, counted on torch's
+    meta device: nothing is allocated and no random number is drawn."""
     with torch.device("meta"):
         probe = _construct(coma_config, env_config)
     check_parameters(sum(p.numel() for name in ("actor", "critic", "value")
                          if (module := getattr(probe, name)) is not None
                          for p in module.parameters()),
                      f"COMA (width {coma_config.width}, hidden {coma_config.hidden})")
-    return _construct(coma_config, env_config)
 
 
 def _construct(coma_config: COMAConfig, env_config: EnvConfig) -> COMANetworks:

@@ -95,6 +95,15 @@ def test_the_lock_is_released_with_the_run_and_refused_input_leaves_nothing(tmp_
     assert not (tmp_path / "a").exists()  # failed before writing: the claim's files go
 
 
+def test_a_folder_that_cannot_be_written_is_refused_by_name(tmp_path):
+    out = tmp_path / "out"
+    (out / ".lock").mkdir(parents=True)  # as an unwritable folder fails: the lock cannot open
+    with pytest.raises(RunFolderError, match="cannot write into"):
+        with claim(out, "ipp-train coma"):
+            pass
+    assert sorted(p.name for p in out.iterdir()) == [".lock"]
+
+
 @pytest.mark.parametrize("maker, other", [
     ("ipp-compare", lambda out: train_main(["coma", "--out", str(out), "--agents", "2"])),
     ("ipp-compare", lambda out: train_main(["ppo", "--out", str(out), "--timesteps", "8"])),
