@@ -30,7 +30,7 @@ from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.io import atomic_write
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
-from ipp_toolkit.runs.run_folder import check_out_path
+from ipp_toolkit.runs.run_folder import check_out_path, claim
 
 
 def _comm_range(text: str) -> float:
@@ -429,9 +429,7 @@ def study_main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exit_:
         return exit_.code if isinstance(exit_.code, int) else 2
-    from .studies import credit_assignment_study, robustness_study
-
-    out = args.out or f"results/{args.study}"
+    out = f"results/{args.study}" if args.out is None else args.out  # "" is refused
     try:
         check_backend_flags(args.backend, args.address)
     except (ValueError, RayUnavailableError) as err:
@@ -451,65 +449,75 @@ def study_main(argv: list[str] | None = None) -> int:
     agents = "2,4,8" if args.agents is None else args.agents
     comm = "0,25,inf" if args.comm is None else args.comm
     try:
-        if args.study != "sweep":  # the sweep takes one value of each, checked there
-            _distinct_items("--agents", agents)
-            _distinct_items("--comm", comm)
-        if args.study == "generalisation":
-            from .compare import DEFAULT_PLANNERS
-            from .generalisation import generalisation_study, study_cells
-
-            planners = args.planners or ",".join(DEFAULT_PLANNERS)
-            settings = [(int(a), _comm_range(c)) for a in agents.split(",")
-                        for c in comm.split(",")]
-            cells = study_cells([f for f in args.families.split(",") if f],
-                                [f for f in args.team_families.split(",") if f], settings)
-            study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
-                                         out=out, workers=args.workers,
-                                         resolution=args.resolution, budget=args.budget,
-                                         progress=not args.no_progress, **backend)
-            print(study.table)
-            print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
-        elif args.study == "robustness":
-            study = robustness_study(args.planners or "coma,ig,coverage",
-                                     [int(a) for a in agents.split(",")],
-                                     [_comm_range(c) for c in comm.split(",")],
-                                     trials=args.trials,
-                                     seed=seed, out=out, workers=args.workers,
-                                     resolution=args.resolution,
-                                     progress=not args.no_progress,
-                                     failures=[int(f) for f in args.failures.split(",")],
-                                     **backend)
-            print(study.table)
-            print(f"written: {out}/robustness.md, .csv, .png, .pdf")
-        elif args.study == "sweep":
-            return _sweep(args, out, backend)
-        else:
-            from coma.cli import int_list
-
-            from .studies import ablation_study
-            from .sweep import parse_assignments
-
-            overrides = parse_assignments(args.set)
-            seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
-            common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
-                          train_resolution=args.train_resolution, trials=args.trials,
-                          seed=seed, out=out, workers=args.workers,
-                          eval_resolution=args.resolution, progress=not args.no_progress,
-                          **backend)
-            if args.study == "credit":
-                result = credit_assignment_study([v for v in args.variants.split(",") if v],
-                                                 **common)
-            else:
-                result = ablation_study([a for a in args.ablations.split(",") if a], **common)
-            print(result.table)
-            print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
-                  "F1 per step)")
+        # The study's folder holds the folders of its runs: one study at a time.
+        with claim(out, f"ipp-study {args.study}"):
+            return _study(args, out, backend, seed, agents, comm)
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
         # OSError: ConnectionError (no Ray at --address) included
         print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return interrupted("ipp-study", Path(out))
+
+
+def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], seed: int,
+           agents: str, comm: str) -> int:
+    """Run the study ``args.study`` into ``out`` (claimed); ValueError on bad input."""
+    from .studies import credit_assignment_study, robustness_study
+
+    if args.study != "sweep":  # the sweep takes one value of each, checked there
+        _distinct_items("--agents", agents)
+        _distinct_items("--comm", comm)
+    if args.study == "generalisation":
+        from .compare import DEFAULT_PLANNERS
+        from .generalisation import generalisation_study, study_cells
+
+        planners = args.planners or ",".join(DEFAULT_PLANNERS)
+        settings = [(int(a), _comm_range(c)) for a in agents.split(",")
+                    for c in comm.split(",")]
+        cells = study_cells([f for f in args.families.split(",") if f],
+                            [f for f in args.team_families.split(",") if f], settings)
+        study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
+                                     out=out, workers=args.workers,
+                                     resolution=args.resolution, budget=args.budget,
+                                     progress=not args.no_progress, **backend)
+        print(study.table)
+        print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
+    elif args.study == "robustness":
+        study = robustness_study(args.planners or "coma,ig,coverage",
+                                 [int(a) for a in agents.split(",")],
+                                 [_comm_range(c) for c in comm.split(",")],
+                                 trials=args.trials,
+                                 seed=seed, out=out, workers=args.workers,
+                                 resolution=args.resolution,
+                                 progress=not args.no_progress,
+                                 failures=[int(f) for f in args.failures.split(",")],
+                                 **backend)
+        print(study.table)
+        print(f"written: {out}/robustness.md, .csv, .png, .pdf")
+    elif args.study == "sweep":
+        return _sweep(args, out, backend)
+    else:
+        from coma.cli import int_list
+
+        from .studies import ablation_study
+        from .sweep import parse_assignments
+
+        overrides = parse_assignments(args.set)
+        seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
+        common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
+                      train_resolution=args.train_resolution, trials=args.trials,
+                      seed=seed, out=out, workers=args.workers,
+                      eval_resolution=args.resolution, progress=not args.no_progress,
+                      **backend)
+        if args.study == "credit":
+            result = credit_assignment_study([v for v in args.variants.split(",") if v],
+                                             **common)
+        else:
+            result = ablation_study([a for a in args.ablations.split(",") if a], **common)
+        print(result.table)
+        print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
+              "F1 per step)")
     return 0
 
 

@@ -19,7 +19,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.evaluation import evaluate
 from ipp_toolkit.runs.run_folder import RunFolderError, claim, folder_command
-from reports.cli import compare_main, train_main
+from reports.cli import compare_main, study_main, train_main
 
 FAST = ["--resolution", "1", "--budget", "3", "--agents", "2", "--trials", "1",
         "--planners", "random", "--no-progress"]
@@ -66,6 +66,8 @@ def held(tmp_path):
     ("ipp-train coma", lambda out: train_main(["coma", "--out", str(out), "--agents", "2",
                                                "--missions", "2"])),
     ("ipp-train ppo", lambda out: train_main(["ppo", "--out", str(out), "--timesteps", "8"])),
+    ("ipp-study robustness", lambda out: study_main(["robustness", "--trials", "1",
+                                                     "--out", str(out)])),
 ])
 def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(held, capsys, command,
                                                                       run):

@@ -46,6 +46,11 @@ def test_study_lists_with_no_or_repeated_values_are_refused(tmp_path, capsys, ag
     assert not out.exists()
 
 
+def test_a_study_refuses_an_empty_out(capsys):
+    assert study_main(["robustness", "--out", ""]) == 2
+    assert "--out must name a folder" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("call, message", [
     (lambda: compare(planners=["random"], trials=1, seed=1.5, progress=False),
      "seed must be an integer"),
