@@ -426,9 +426,11 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                                   "(drop --resume to start a new run)")
         existing = [name for name in _RUN_FILES if (out / name).exists()]
         if existing and not resume:
+            how = ("pass resume=True (--resume) to continue it" if last_path.exists() else
+                   "it stopped before its first checkpoint (no last.pt), so it cannot be "
+                   "resumed; move those files away")
             raise FileExistsError(f"{str(out)!r} already holds a run ({', '.join(existing)}): "
-                                  "pass resume=True (--resume) to continue it, or choose "
-                                  "another folder")
+                                  f"{how}, or choose another folder")
         # A checkpoint of another run is refused before anything flies or any worker starts.
         resumable = _resumable(last_path, coma_config, env_config) if resume else None
         if announce:
