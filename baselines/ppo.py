@@ -40,10 +40,11 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, MlpExtr
 from torch import nn
 
 from ipp_toolkit.config.files import config_from_dict, config_to_dict
+from ipp_toolkit.config.limits import check_layer_size, check_parameters
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
 from ipp_toolkit.planners import resolve_shipped
-from ipp_toolkit.sim.features import gain_plane_channels, option_gain_cells
+from ipp_toolkit.sim.features import actor_plane_names, gain_plane_channels, option_gain_cells
 from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = [
@@ -180,6 +181,8 @@ class SB3RunConfig:
         for name in ("total_timesteps", "n_envs", "width", "features_dim", "hidden",
                      "n_agents", "checkpoint_every"):
             _check_integer(what, name, getattr(self, name), 1)
+        for name in ("width", "features_dim", "hidden"):
+            check_layer_size(name, getattr(self, name), f"invalid {what} config")
         for name in ("seed", "num_cpus"):
             _check_integer(what, name, getattr(self, name), 0)
         _check_number(what, "resolution", self.resolution, positive=True)
@@ -294,6 +297,21 @@ class SmallCNN(BaseFeaturesExtractor):
         return self.linear(self.cnn(observations))
 
 
+def check_policy_size(channels: int, grid: int, width: int, features_dim: int, hidden: int,
+                      where: str, extra: float = 0.0) -> None:
+    """Refuse (LimitError) a shared policy over :class:`SmallCNN` whose parameters would exceed
+    the limit, before it is built: the two convolutions, the linear layer and two heads of one
+    hidden layer (``extra``: more, e.g. an LSTM). A float count, so absurd sizes cannot
+    overflow."""
+    side = (int(grid) + 1) // 2  # the stride-2 convolution's output side
+    width, features, hidden = float(width), float(features_dim), float(hidden)
+    count = ((channels * 9 + 1) * width + (width * 9 + 1) * width
+             + (width * side * side + 1) * features
+             + 2 * ((features + N_ACTIONS + 1) * hidden + hidden * N_ACTIONS) + extra)
+    check_parameters(count, f"{where} (width {int(width)}, features_dim {int(features)}, "
+                     f"hidden {int(hidden)})")
+
+
 class GainPriorExtractor(SmallCNN):
     """:class:`SmallCNN` features followed by each option's relative expected gain.
 
@@ -395,8 +413,11 @@ def policy_kwargs(config: PPOTrainConfig, env_config: EnvConfig) -> dict[str, An
     """SB3 ``policy_kwargs`` of the architecture ``config`` describes on ``env_config``'s planes.
 
     Raises:
-        ValueError: ``gain_prior`` > 0 without the ``gain`` planes.
+        ValueError: ``gain_prior`` > 0 without the ``gain`` planes, or networks over the
+            parameter limit (``ipp_toolkit.config.limits``).
     """
+    check_policy_size(len(actor_plane_names(env_config.features)), env_config.world.grid_points,
+                      config.width, config.features_dim, config.hidden, "a PPO policy")
     extractor_kwargs: dict[str, Any] = {"width": config.width,
                                         "features_dim": config.features_dim}
     kwargs: dict[str, Any] = {"net_arch": {"pi": [config.hidden], "vf": [config.hidden]}}

@@ -42,6 +42,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.dqn.policies import DQNPolicy
 
 from ipp_toolkit.config.files import config_from_dict
+from ipp_toolkit.config.limits import check_layer_size
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch
 from ipp_toolkit.sim.features import actor_plane_names
@@ -49,7 +50,7 @@ from ipp_toolkit.sim.team import N_ACTIONS
 
 from .ppo import CHECKPOINT_KIND as PPO_KIND
 from .ppo import TRAINING_KIND as PPO_TRAINING_KIND
-from .ppo import NoOptimizer, SmallCNN, masked_greedy_actions
+from .ppo import NoOptimizer, SmallCNN, check_policy_size, masked_greedy_actions
 from .ppo import load_policy as load_ppo_policy
 
 __all__ = [
@@ -154,6 +155,7 @@ class PolicyArchitecture:
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
                 raise ValueError(f"invalid architecture: {name} must be an integer >= 1, "
                                  f"got {value!r}")
+            check_layer_size(name, int(value), "invalid architecture")
 
     def to_dict(self) -> dict[str, int]:
         return {name: int(value) for name, value in asdict(self).items()}
@@ -197,6 +199,11 @@ def build_policy(algo: str, architecture: PolicyArchitecture, obs_shape: tuple[i
     :class:`~baselines.ppo.NoOptimizer`, as a torch optimiser's import of ``torch._dynamo``
     costs seconds per process.
     """
+    lstm = float(architecture.lstm_hidden_size)
+    check_policy_size(obs_shape[0], obs_shape[-1], architecture.width, architecture.features_dim,
+                      architecture.hidden, f"an {algo} policy",
+                      extra=8 * (architecture.features_dim + lstm + 2) * lstm
+                      + architecture.hidden * N_ACTIONS * architecture.n_quantiles)
     observation_space = spaces.Box(-1.0, 1.0, tuple(obs_shape), dtype=np.float32)
     action_space = spaces.Discrete(int(n_actions))
     kwargs = sb3_policy_kwargs(algo, architecture)
@@ -315,7 +322,10 @@ def load_sb3_policy(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, 
                         num_timesteps=int(data.get("num_timesteps", 0)), format=tag,
                         record={k: data[k] for k in ("sb3_config",) if k in data})
     check_shapes(path, meta)
-    policy = build_policy(algo, architecture, obs_shape, n_actions, device)
+    try:
+        policy = build_policy(algo, architecture, obs_shape, n_actions, device)
+    except ValueError as error:  # networks over the parameter limit
+        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
     try:
         policy.load_state_dict(data["policy"])
     except (RuntimeError, TypeError, AttributeError) as error:

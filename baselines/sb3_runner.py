@@ -40,6 +40,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import load_torch, save_torch, write_json
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.runs.progress import progress_bar
+from ipp_toolkit.runs.run_folder import claim
 
 __all__ = ["RunFormat", "run_sb3_training", "progress_callback", "task_metrics_callback",
            "time_limit_callback",
@@ -142,6 +143,12 @@ class RunFormat:
     metadata: Callable[..., dict[str, Any]]
     tb_log_name: str
 
+    @property
+    def command(self) -> str:
+        """The command recorded in the run folder (``ipp_toolkit.runs.run_folder``)."""
+        return ("ipp-train ppo" if self.algo_label == "PPO"
+                else f"ipp-train sb3 --algo {self.algo_label}")
+
 
 def same_run_check(config: Any, env_config: EnvConfig, key: str, what: str
                    ) -> Callable[[dict[str, Any], Path], None]:
@@ -218,7 +225,21 @@ def run_sb3_training(
     torch.set_num_threads(1)  # two shared cores: more intra-op threads collapse throughput
     limit_blas_threads()
     retain_freed_memory()  # large freed buffers are reused, not faulted in anew
-    out_dir = Path(out_dir)
+    # Held for the whole run: a second run into the folder is refused, naming this process.
+    with claim(out_dir, run_format.command) as run:
+        return _run_claimed(run.path, run_format, seed, total_timesteps, checkpoint_every,
+                            make_env, make_model, payload, check_resume, extra_record,
+                            progress, resume, time_limit_s, announce)
+
+
+def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timesteps: int,
+                 checkpoint_every: int, make_env: Callable[[int], VecEnv],
+                 make_model: Callable[[VecEnv, int, str, int], Any],
+                 payload: Callable[[Any], dict[str, Any]],
+                 check_resume: Callable[[dict[str, Any], Path], None],
+                 extra_record: dict[str, Any] | None, progress: bool, resume: bool,
+                 time_limit_s: float | None, announce: str) -> Path:
+    """:func:`run_sb3_training` once ``out_dir`` is claimed."""
     ckpt_path = out_dir / "checkpoint.pt"
     extra_record = dict(extra_record or {})
     state = None
@@ -233,7 +254,6 @@ def run_sb3_training(
                          "resume=True (--resume) or choose another output folder")
     if announce:
         print(announce, file=sys.stderr)
-    out_dir.mkdir(parents=True, exist_ok=True)
 
     done = int(state["num_timesteps"]) if state is not None else 0
     # A resumed run starts new missions: copy c continues on run seed + done + c.

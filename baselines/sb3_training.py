@@ -38,9 +38,17 @@ from ipp_toolkit.config.settings import setting_line
 from ipp_toolkit.io import CheckpointError, save_torch, write_json
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.vec import make_sb3_vec_env
 
-from .ppo import PPOTrainConfig, SB3RunConfig, config_from_record, config_record, save_policy
+from .ppo import (
+    PPOTrainConfig,
+    SB3RunConfig,
+    check_policy_size,
+    config_from_record,
+    config_record,
+    save_policy,
+)
 from .ppo_training import (
     add_run_config_flags,
     add_run_flags,
@@ -351,6 +359,10 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
                          announce=announce)
     env_cfg = training_env_config(config, env_config)
     algo = config.algo
+    architecture = config.architecture()
+    check_policy_size(len(actor_plane_names(env_cfg.features)), env_cfg.world.grid_points,
+                      architecture.width, architecture.features_dim, architecture.hidden,
+                      f"an {algo} policy")
 
     check_resume = same_run_check(config, env_cfg, "sb3_config", "SB3")
 

@@ -39,6 +39,7 @@ from ipp_toolkit.planners import REMOVED_NAMES
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import add_backend_flags, check_backend_flags, probe
+from ipp_toolkit.runs.run_folder import COMA_COMMAND, check_out_path, claim
 
 from .config import (
     PRECISIONS,
@@ -279,6 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
                 planner_factory(coma_config.warm_start.planner)  # an unknown name fails here
         _check_compute(args)
+        check_out_path(args.out)  # an empty --out is not the current folder
     except (ValueError, ImportError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
@@ -291,17 +293,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     folders = _stage_folders(args.out, [stage for stage, _, _ in stages])
     compute = {"workers": args.workers, "backend": args.backend, "address": args.address,
                "device": args.device}
-    with contextlib.ExitStack() as stack:
-        if args.backend == "ray":  # one Ray for every stage
-            from ipp_toolkit.runs.ray_backend import session
+    try:
+        with contextlib.ExitStack() as stack:
+            if args.backend == "ray":  # one Ray for every stage
+                from ipp_toolkit.runs.ray_backend import session
 
-            try:
-                stack.enter_context(session(args.address, args.workers))
-            except (ValueError, ConnectionError) as error:
-                print(f"ipp-train coma: error: {error}", file=sys.stderr)
-                return 2
-        code = _train_stages(args, stages, folders, compute)
+                try:
+                    stack.enter_context(session(args.address, args.workers))
+                except (ValueError, ConnectionError) as error:
+                    print(f"ipp-train coma: error: {error}", file=sys.stderr)
+                    return 2
+            if len(stages) > 1:
+                # A recipe's folder holds its stages' folders: held as one run, so a second
+                # recipe (or another command) into it is refused before any stage starts.
+                try:
+                    stack.enter_context(claim(args.out, COMA_COMMAND))
+                except ValueError as error:
+                    print(f"ipp-train coma: error: {error}", file=sys.stderr)
+                    return 2
+            code = _train_stages(args, stages, folders, compute)
+            if code != 0:
+                raise _Failed(code)  # the claim removes the folder if nothing was written
+    except _Failed as failed:
+        return int(failed.args[0])
     return code
+
+
+class _Failed(Exception):
+    """A run that ended with a nonzero exit code (already reported)."""
 
 
 def _train_stages(args: argparse.Namespace, stages: list[tuple[Stage, COMAConfig, EnvConfig]],

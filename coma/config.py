@@ -25,6 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
+from ipp_toolkit.config.limits import check_layer_size
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 
 __all__ = ["VARIANTS", "PRECISIONS", "PRESETS", "FLAT_NAMES", "WarmStartConfig", "COMAConfig",
@@ -260,6 +261,8 @@ class COMAConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 _fail(name, value, "must be an integer >= 1")
+        for name in ("width", "hidden"):
+            check_layer_size(name, getattr(self, name), "invalid COMA config")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             _fail("seed", self.seed, "must be a non-negative integer")
         for name in ("lr_actor", "lr_critic", "max_grad_norm"):

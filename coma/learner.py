@@ -39,6 +39,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, write_json
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.runs.progress import progress_bar
+from ipp_toolkit.runs.run_folder import COMA_COMMAND, claim
 from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.sim.mission import MissionGeometry
 from ipp_toolkit.sim.team import N_ACTIONS
@@ -64,6 +65,7 @@ from .parallel import (
 from .persistence import (
     COMANetworks,
     build_networks,
+    check_network_size,
     load_policy,
     load_state_into,
     save_policy,
@@ -270,6 +272,12 @@ def make_optimisers(networks: COMANetworks) -> dict[str, torch.optim.Optimizer]:
     return optimisers
 
 
+# What a run leaves that a new run would overwrite: refused unless resuming.
+_RUN_FILES = ("last.pt", "best.pt", "warm_start.pt", "progress.csv")
+_PROGRESS_KEYS = frozenset({"update", "missions", "transitions", "since_target", "best_entropy",
+                            "best_update", "wall_s"})
+
+
 def _resumable(last_path: Path, coma_config: COMAConfig, env_config: EnvConfig
                ) -> tuple[COMANetworks, dict[str, Any]]:
     """The checkpoint ``last_path`` (networks and payload), checked to belong to the run
@@ -279,6 +287,14 @@ def _resumable(last_path: Path, coma_config: COMAConfig, env_config: EnvConfig
         CheckpointError: the checkpoint is corrupt or belongs to another run.
     """
     networks, data = load_policy(last_path)
+    progress = data.get("progress")
+    missing = [key for key in ("target_critic", "optimisers", "generator", "progress")
+               if key not in data]
+    if missing or not isinstance(progress, dict) or not _PROGRESS_KEYS <= set(progress):
+        raise CheckpointError(f"{str(last_path)!r} is a policy file (like best.pt), not a "
+                              "training checkpoint: it lacks the training state "
+                              f"({', '.join(missing) or 'progress counters'}); it cannot be "
+                              "resumed")
     stored, wanted = resume_fields(networks.coma_config), resume_fields(coma_config)
     if stored != wanted:
         changed = ", ".join(f"{name} = {stored.get(name)!r} in the run, {wanted.get(name)!r} now"
@@ -290,6 +306,8 @@ def _resumable(last_path: Path, coma_config: COMAConfig, env_config: EnvConfig
     if config_to_dict(networks.env_config) != config_to_dict(env_config):
         raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
                               "mission config; start a new folder instead")
+    # A damaged or missing history is refused now, before any worker starts.
+    read_progress(last_path.parent / "progress.csv", int(progress["update"]))
     return networks, data
 
 
@@ -396,37 +414,44 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
                          "failures yet (a failed UAV's transitions would be recorded); "
                          "evaluate a trained policy on them with ipp-compare instead")
     settings = mission_settings(coma_config, env_config)
+    check_network_size(coma_config, env_config)  # before any worker starts or file is written
     geometries = [MissionGeometry(config) for config in settings]
     checks = validation_settings(coma_config, settings)
     check_geometries = geometries if checks == settings else [
         MissionGeometry(config) for config in checks]
-    if resume and not last_path.exists():
-        raise CheckpointError(f"nothing to resume: {str(last_path)!r} does not exist (drop "
-                              "--resume to start a new run)")
-    if last_path.exists() and not resume:
-        raise FileExistsError(f"{str(out)!r} already holds a run (last.pt): pass resume=True "
-                              "(--resume) to continue it, or choose another folder")
-    # A checkpoint of another run is refused before anything flies or any worker starts.
-    resumable = _resumable(last_path, coma_config, env_config) if resume else None
-    if announce:
-        print(announce, file=sys.stderr)
-    # IG's reference flies before the actors exist (they hold their CPUs for the whole run):
-    # on the cluster at --address, else in local processes (a local Ray of the run is not
-    # started yet, and would cost its start-up twice).
-    reference = None
-    if coma_config.selection == "worst_vs_ig":
-        # check_workers has refused an address without the ray backend.
-        reference = reference_scores(
-            checks, coma_config.seed, coma_config.eval_missions,
-            workers=workers if address is not None else min(workers, os.cpu_count() or 1),
-            backend="local" if address is None else "ray", address=address)
-    spec = RunSpec(coma_config, env_config, tuple(settings), tuple(checks), coma_config.seed)
-    known = {**{("train", k): g for k, g in enumerate(geometries)},
-             **{("check", k): g for k, g in enumerate(check_geometries)}}
-    with make_workers(spec, workers, backend, address, known) as pool:
-        return _train_with(pool, coma_config, env_config, out, resumable, progress,
-                           tensorboard, max_updates, warm_start, learner_device, settings,
-                           checks, reference)
+    # Held for the whole run: a second run into the folder is refused, naming this process.
+    with claim(out_dir, COMA_COMMAND):  # the given path: an empty one is refused
+        if resume and not last_path.exists():
+            raise CheckpointError(f"nothing to resume: {str(last_path)!r} does not exist "
+                                  "(drop --resume to start a new run)")
+        existing = [name for name in _RUN_FILES if (out / name).exists()]
+        if existing and not resume:
+            how = ("pass resume=True (--resume) to continue it" if last_path.exists() else
+                   "it stopped before its first checkpoint (no last.pt), so it cannot be "
+                   "resumed; move those files away")
+            raise FileExistsError(f"{str(out)!r} already holds a run ({', '.join(existing)}): "
+                                  f"{how}, or choose another folder")
+        # A checkpoint of another run is refused before anything flies or any worker starts.
+        resumable = _resumable(last_path, coma_config, env_config) if resume else None
+        if announce:
+            print(announce, file=sys.stderr)
+        # IG's reference flies before the actors exist (they hold their CPUs for the whole run):
+        # on the cluster at --address, else in local processes (a local Ray of the run is not
+        # started yet, and would cost its start-up twice).
+        reference = None
+        if coma_config.selection == "worst_vs_ig":
+            # check_workers has refused an address without the ray backend.
+            reference = reference_scores(
+                checks, coma_config.seed, coma_config.eval_missions,
+                workers=workers if address is not None else min(workers, os.cpu_count() or 1),
+                backend="local" if address is None else "ray", address=address)
+        spec = RunSpec(coma_config, env_config, tuple(settings), tuple(checks), coma_config.seed)
+        known = {**{("train", k): g for k, g in enumerate(geometries)},
+                 **{("check", k): g for k, g in enumerate(check_geometries)}}
+        with make_workers(spec, workers, backend, address, known) as pool:
+            return _train_with(pool, coma_config, env_config, out, resumable, progress,
+                               tensorboard, max_updates, warm_start, learner_device, settings,
+                               checks, reference)
 
 
 def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, out: Path,

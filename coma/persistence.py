@@ -23,6 +23,7 @@ from typing import Any
 import torch
 
 from ipp_toolkit.config.files import config_from_dict, config_to_dict
+from ipp_toolkit.config.limits import check_parameters
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
 from ipp_toolkit.planners import check_policy_transfer as check_transfer
@@ -82,7 +83,28 @@ class COMANetworks:
 
 
 def build_networks(coma_config: COMAConfig, env_config: EnvConfig) -> COMANetworks:
-    """Fresh networks sized for ``env_config``'s feature planes (torch's global RNG inits)."""
+    """Fresh networks sized for ``env_config``'s feature planes (torch's global RNG inits).
+
+    Raises:
+        ipp_toolkit.config.limits.LimitError: the networks' parameters exceed the limit
+            (counted on torch's meta device, where nothing is allocated or drawn).
+    """
+    check_network_size(coma_config, env_config)
+    return _construct(coma_config, env_config)
+
+
+def check_network_size(coma_config: COMAConfig, env_config: EnvConfig) -> None:
+    """Refuse (LimitError) networks whose parameters exceed the limit, counted on torch's
+    meta device: nothing is allocated and no random number is drawn."""
+    with torch.device("meta"):
+        probe = _construct(coma_config, env_config)
+    check_parameters(sum(p.numel() for name in ("actor", "critic", "value")
+                         if (module := getattr(probe, name)) is not None
+                         for p in module.parameters()),
+                     f"COMA (width {coma_config.width}, hidden {coma_config.hidden})")
+
+
+def _construct(coma_config: COMAConfig, env_config: EnvConfig) -> COMANetworks:
     features = env_config.features
     grid = env_config.world.grid_points
     width, hidden = coma_config.width, coma_config.hidden
@@ -130,7 +152,10 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, A
     except (KeyError, TypeError, ValueError) as error:
         raise CheckpointError(f"checkpoint {str(path)!r} has no valid configs: {error}") \
             from None
-    networks = build_networks(coma_config, env_config)
+    try:
+        networks = build_networks(coma_config, env_config)
+    except ValueError as error:  # networks over the size limit, or a grid too small
+        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
     for name in ("actor", "critic", "value"):
         module = getattr(networks, name)
         if module is None:

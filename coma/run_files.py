@@ -73,12 +73,39 @@ def resume_fields(config: COMAConfig) -> dict[str, Any]:
 
 
 def read_progress(path: Path, up_to_update: int) -> list[dict[str, Any]]:
-    """The rows of ``progress.csv`` up to update ``up_to_update`` (none when it is missing)."""
+    """The rows of ``progress.csv`` for updates 1..``up_to_update`` (a resumed run's history).
+
+    Raises:
+        CheckpointError: the file is missing (at update > 0), unreadable, malformed, or does
+            not hold one row per update up to ``up_to_update``; resuming would silently
+            restart or garble the history.
+    """
     if not path.exists():
-        return []
-    with open(path, newline="") as handle:
-        history = [{k: _parse(v) for k, v in row.items()} for row in csv.DictReader(handle)]
-    return [row for row in history if row["update"] <= up_to_update]
+        if up_to_update == 0:
+            return []
+        raise CheckpointError(f"{str(path)!r} is missing, but the checkpoint is at update "
+                              f"{up_to_update}: resuming would lose the history; restore it "
+                              "or start a new folder")
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            reader = csv.DictReader(handle)
+            if reader.fieldnames is None or list(reader.fieldnames) != CSV_COLUMNS:
+                raise ValueError(f"its header is not {','.join(CSV_COLUMNS)}")
+            history = []
+            for row in reader:
+                if None in row or any(value is None for value in row.values()):
+                    raise ValueError(f"line {reader.line_num} has the wrong number of cells")
+                history.append({k: _parse(v) for k, v in row.items()})
+    except (OSError, UnicodeDecodeError, csv.Error, ValueError) as err:
+        raise CheckpointError(f"{str(path)!r} is damaged ({err}); restore it or start a new "
+                              "folder") from None
+    rows = [row for row in history if isinstance(row["update"], int)
+            and row["update"] <= up_to_update]
+    if [row["update"] for row in rows] != list(range(1, up_to_update + 1)):
+        raise CheckpointError(f"{str(path)!r} does not hold one row per update 1..{up_to_update} "
+                              "(the checkpoint's): it is truncated or damaged; restore it or "
+                              "start a new folder")
+    return rows
 
 
 def saved_update(path: Path) -> str:

@@ -54,11 +54,27 @@ from .sim.mission import (
     reset_mission,
     step_mission,
 )
-from .sim.team import N_ACTIONS
+from .sim.team import ACTION_NAMES, N_ACTIONS
 
 __all__ = ["INVALID_ACTION_POLICIES", "IPPEnv", "parallel_env"]
 
 INVALID_ACTION_POLICIES = ("hold", "raise")
+
+
+def action_index(agent: str, action: Any) -> int:
+    """``action`` as an action index 0..5 (InvalidActionError naming ``agent`` otherwise):
+    an integer or a one-element array of one, not a bool, never wider than an index."""
+    if isinstance(action, np.ndarray):
+        if action.size != 1:
+            raise InvalidActionError(f"agent {agent!r}: action {action!r} must be one integer")
+        action = action.reshape(()).item()
+    if isinstance(action, bool) or not isinstance(action, int | np.integer):
+        raise InvalidActionError(f"agent {agent!r}: action {action!r} must be an integer in "
+                                 f"0..{N_ACTIONS - 1}")
+    if not 0 <= action < N_ACTIONS:
+        raise InvalidActionError(f"agent {agent!r}: action {action!r} is out of range; valid "
+                                 f"indices are 0..{N_ACTIONS - 1} {ACTION_NAMES}")
+    return int(action)
 
 
 class IPPEnv(ParallelEnv):
@@ -100,6 +116,9 @@ class IPPEnv(ParallelEnv):
             raise ValueError(f"render_mode {render_mode!r} is not supported; "
                              f"choose from {self.metadata['render_modes']}")
         self.render_mode = render_mode
+        if not isinstance(namespace, str) or not namespace.strip():
+            raise ValueError(f"namespace must be 'train', 'validation', 'test' or a name of "
+                             f"your own, got {namespace!r}")
         self.namespace = namespace
         self.geometry = MissionGeometry(self._mission_config)
         self._ground_truth = ground_truth
@@ -205,16 +224,7 @@ class IPPEnv(ParallelEnv):
             raise InvalidActionError(f"no action for agent(s) {missing}")
         joint = np.zeros(len(self.possible_agents), dtype=np.int64)  # gone agents: ignored
         for agent in self.agents:
-            action = actions[agent]
-            if isinstance(action, np.ndarray):
-                if action.size != 1:
-                    raise InvalidActionError(f"agent {agent!r}: action {action!r} must be "
-                                             "one integer")
-                action = action.reshape(()).item()
-            if isinstance(action, bool) or not isinstance(action, int | np.integer):
-                raise InvalidActionError(f"agent {agent!r}: action {action!r} must be an "
-                                         f"integer in 0..{N_ACTIONS - 1}")
-            joint[self._index[agent]] = int(action)
+            joint[self._index[agent]] = action_index(agent, actions[agent])
         was_alive = self.mission.alive.copy()
         reward = step_mission(self.mission, joint)
         agents = list(self.agents)
@@ -263,8 +273,18 @@ class IPPEnv(ParallelEnv):
         if self.mission is None:
             raise RuntimeError("call reset() before critic_observations()")
         if isinstance(joint_action, dict):
-            joint_action = np.array([joint_action[a] for a in self.possible_agents])
-        return critic_observations(self.mission, self.config.features, joint_action)
+            missing = [a for a in self.possible_agents if a not in joint_action]
+            if missing:
+                raise InvalidActionError(f"no action for agent(s) {missing}")
+            joint_action = [joint_action[a] for a in self.possible_agents]
+        values = list(np.asarray(joint_action, dtype=object).reshape(-1)) \
+            if not isinstance(joint_action, list | tuple) else list(joint_action)
+        if len(values) != len(self.possible_agents):
+            raise InvalidActionError(f"expected one action per agent "
+                                     f"({len(self.possible_agents)}), got {len(values)}")
+        joint = np.array([action_index(agent, action) for agent, action
+                          in zip(self.possible_agents, values, strict=True)], dtype=np.int64)
+        return critic_observations(self.mission, self.config.features, joint)
 
     def action_mask(self, agent: str) -> np.ndarray:
         """(6,) int8 valid actions of ``agent`` now."""

@@ -79,6 +79,8 @@ def load_torch(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
     import torch
 
     path = Path(path)
+    if path.is_dir():
+        raise CheckpointError(f"checkpoint {str(path)!r} is a folder, not a checkpoint file")
     if not path.is_file():
         raise CheckpointError(f"checkpoint {str(path)!r} does not exist")
     if path.stat().st_size == 0:
@@ -138,6 +140,20 @@ def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, 
 _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _strict_mapping)
 
 
+def _no_anchors(loader: _StrictLoader, parent: Any, index: Any) -> Any:
+    """Compose a node, refusing anchors (``&a``) and aliases (``*a``): a config needs neither,
+    and a few hundred bytes of nested aliases expand to gigabytes (a "billion laughs")."""
+    event = loader.peek_event()
+    if isinstance(event, yaml.events.AliasEvent) or getattr(event, "anchor", None) is not None:
+        raise yaml.composer.ComposerError(
+            None, None, "anchors and aliases (&name, *name) are not allowed in config files",
+            event.start_mark)
+    return yaml.composer.Composer.compose_node(loader, parent, index)
+
+
+_StrictLoader.compose_node = _no_anchors  # type: ignore[method-assign]
+
+
 def read_yaml(path: str | os.PathLike[str], what: str = "file") -> Any:
     """Parse a YAML file safely, refusing a key written twice in one mapping.
 
@@ -145,13 +161,24 @@ def read_yaml(path: str | os.PathLike[str], what: str = "file") -> Any:
         ValueError: the file cannot be read, is not text or is not valid YAML (the message
             names ``what`` and the file).
     """
+    from .config.limits import check_limit
+
     path = Path(path)
     try:
-        text = path.read_text()
+        if path.is_dir():
+            raise IsADirectoryError(21, "is a folder, not a file")
+        check_limit("config_bytes", path.stat().st_size, f"{what} {str(path)!r}",
+                    estimate=False)
+        text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
-        why = err.strerror if isinstance(err, OSError) else "not a text file"
-        raise ValueError(f"cannot read {what} {str(path)!r}: {why}") from err
+        why = err.strerror if isinstance(err, OSError) else "not a UTF-8 text file"
+        raise ValueError(f"cannot read {what} {str(path)!r}: {why}") from None
     try:
         return yaml.load(text, Loader=_StrictLoader)
     except yaml.YAMLError as err:
-        raise ValueError(f"{what} {str(path)!r} is not valid YAML: {err}") from err
+        # One line: the problem and where (the parser's own message quotes the text).
+        mark = getattr(err, "problem_mark", None)
+        message = " ".join(str(getattr(err, "problem", None) or err).split())[:300]
+        if mark is not None:
+            message += f" (line {mark.line + 1}, column {mark.column + 1})"
+        raise ValueError(f"{what} {str(path)!r} is not valid YAML: {message}") from None

@@ -50,7 +50,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from .config.schema import EnvConfig, check_int
-from .env import INVALID_ACTION_POLICIES, IPPEnv
+from .env import INVALID_ACTION_POLICIES, IPPEnv, action_index
 from .sim.team import N_ACTIONS
 
 __all__ = ["IPPVecEnv", "INVALID_ACTION_POLICIES", "make_sb3_vec_env"]
@@ -175,7 +175,11 @@ class IPPVecEnv(VecEnv):
         if actions.size != self.num_envs:
             raise ValueError(f"expected one action per agent slot ({self.num_envs}), got an "
                              f"array of shape {actions.shape}")
-        self._actions = actions.reshape(self.num_envs)
+        actions = actions.reshape(self.num_envs)
+        # Checked here, by slot: an out-of-range index would read past the masks below.
+        for slot, action in enumerate(actions.tolist()):
+            action_index(f"slot {slot}", action)
+        self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
         """Step every agent slot (auto-resetting finished copies).

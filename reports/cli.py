@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import csv
 import gc
+import io
 import math
 import os
 import sys
@@ -26,9 +27,11 @@ import numpy as np
 
 from ipp_toolkit.config.settings import build_env_config, comm_label, parse_comm, setting_line
 from ipp_toolkit.env import IPPEnv
+from ipp_toolkit.io import atomic_write
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
+from ipp_toolkit.runs.run_folder import check_out_path, claim
 
 from .compare import DEFAULT_PLANNERS
 
@@ -55,7 +58,7 @@ def _simulate_parser() -> argparse.ArgumentParser:
     parser.add_argument("--resolution", type=_positive_float, help="map resolution r_M in metres")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED", help="run seed")
     parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
-    parser.add_argument("--out", type=Path, default=Path("results/simulate"),
+    parser.add_argument("--out", default="results/simulate",
                         help="folder for metrics.csv and final.png")
     return parser
 
@@ -65,11 +68,17 @@ def simulate_main(argv: list[str] | None = None) -> int:
     parser = _simulate_parser()
     args = parser.parse_args(argv)
     try:
+        args.out = check_out_path(args.out)  # before Path("") turns into the current folder
+        targets = (args.out / "final.png", args.out / "metrics.csv")
         config = build_env_config(args.config, agents=args.agents, comm=args.comm,
                                   resolution=args.resolution)
-        args.out.mkdir(parents=True, exist_ok=True)
+        for target in targets:
+            if target.exists() and not target.is_file():
+                raise ValueError(f"{str(target)!r} exists and is not a file; it would be "
+                                 "written after the mission")
         env = IPPEnv(config, render_mode="rgb_array", namespace="test")
         observations, infos = env.reset(seed=args.seed, options={"mission": args.mission})
+        args.out.mkdir(parents=True, exist_ok=True)  # after the mission is built: no litter
     except ValueError as err:
         print(f"ipp-simulate: error: {err}", file=sys.stderr)
         return 2
@@ -97,13 +106,19 @@ def simulate_main(argv: list[str] | None = None) -> int:
               f"{metrics['f1']:6.3f} {metrics['rmse']:6.3f}")
     from ipp_toolkit.sim.rendering import save_png
 
-    save_png(env.render(), args.out / "final.png")
-    tmp = args.out / "metrics.csv.tmp"
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=["step", "reward", "entropy", "f1", "rmse"])
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, args.out / "metrics.csv")
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=["step", "reward", "entropy", "f1", "rmse"],
+                            lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    data = text.getvalue().encode("utf-8")
+    try:
+        save_png(env.render(), targets[0])
+        atomic_write(targets[1], lambda handle: handle.write(data))
+    except OSError as err:
+        print(f"ipp-simulate: error: cannot write into {str(args.out)!r}: {err.strerror}",
+              file=sys.stderr)
+        return 2
     print(f"wrote {args.out / 'metrics.csv'} and {args.out / 'final.png'}")
     return 0
 
@@ -256,7 +271,10 @@ def compare_main(argv: list[str] | None = None) -> int:
                          comm=comm_label(env_config.team.comm_range))
         if args.namespace == "validation":
             out = out.replace("compare-", "validate-")
-    out_dir = Path(out)
+    try:
+        out_dir = check_out_path(out)  # before Path("") turns into the current folder
+    except ValueError as err:
+        return error(err)
     print(setting_line(env_config, args.config), file=sys.stderr)
     try:
         comparison = compare(
@@ -429,9 +447,7 @@ def study_main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exit_:
         return exit_.code if isinstance(exit_.code, int) else 2
-    from .studies import credit_assignment_study, robustness_study
-
-    out = args.out or f"results/{args.study}"
+    out = f"results/{args.study}" if args.out is None else args.out  # "" is refused
     try:
         check_backend_flags(args.backend, args.address)
     except (ValueError, RayUnavailableError) as err:
@@ -448,66 +464,90 @@ def study_main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     seed = 0 if args.seed is None else args.seed
-    agents = args.agents or "2,4,8"
-    comm = args.comm or "0,25,inf"
+    agents = "2,4,8" if args.agents is None else args.agents
+    comm = "0,25,inf" if args.comm is None else args.comm
     try:
-        if args.study == "generalisation":
-            from .generalisation import generalisation_study, study_cells
-
-            planners = args.planners or ",".join(DEFAULT_PLANNERS)
-            settings = [(int(a), _comm_range(c)) for a in agents.split(",")
-                        for c in comm.split(",")]
-            cells = study_cells([f for f in args.families.split(",") if f],
-                                [f for f in args.team_families.split(",") if f], settings)
-            study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
-                                         out=out, workers=args.workers,
-                                         resolution=args.resolution, budget=args.budget,
-                                         reference=args.reference,
-                                         progress=not args.no_progress, **backend)
-            print(study.table)
-            print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
-        elif args.study == "robustness":
-            study = robustness_study(args.planners or "coma,ig,coverage",
-                                     [int(a) for a in agents.split(",")],
-                                     [_comm_range(c) for c in comm.split(",")],
-                                     trials=args.trials,
-                                     seed=seed, out=out, workers=args.workers,
-                                     resolution=args.resolution,
-                                     progress=not args.no_progress,
-                                     failures=[int(f) for f in args.failures.split(",")],
-                                     **backend)
-            print(study.table)
-            print(f"written: {out}/robustness.md, .csv, .png, .pdf")
-        elif args.study == "sweep":
-            return _sweep(args, out, backend)
-        else:
-            from coma.cli import int_list
-
-            from .studies import ablation_study
-            from .sweep import parse_assignments
-
-            overrides = parse_assignments(args.set)
-            seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
-            common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
-                          train_resolution=args.train_resolution, trials=args.trials,
-                          seed=seed, out=out, workers=args.workers,
-                          eval_resolution=args.resolution, progress=not args.no_progress,
-                          **backend)
-            if args.study == "credit":
-                result = credit_assignment_study([v for v in args.variants.split(",") if v],
-                                                 **common)
-            else:
-                result = ablation_study([a for a in args.ablations.split(",") if a], **common)
-            print(result.table)
-            print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
-                  "F1 per step)")
+        # The study's folder holds the folders of its runs: one study at a time.
+        with claim(out, f"ipp-study {args.study}"):
+            return _study(args, out, backend, seed, agents, comm)
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
         # OSError: ConnectionError (no Ray at --address) included
         print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return interrupted("ipp-study", Path(out))
+
+
+def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], seed: int,
+           agents: str, comm: str) -> int:
+    """Run the study ``args.study`` into ``out`` (claimed); ValueError on bad input."""
+    from .studies import credit_assignment_study, robustness_study
+
+    if args.study != "sweep":  # the sweep takes one value of each, checked there
+        _distinct_items("--agents", agents)
+        _distinct_items("--comm", comm)
+    if args.study == "generalisation":
+        from .generalisation import generalisation_study, study_cells
+
+        planners = args.planners or ",".join(DEFAULT_PLANNERS)
+        settings = [(int(a), _comm_range(c)) for a in agents.split(",")
+                    for c in comm.split(",")]
+        cells = study_cells([f for f in args.families.split(",") if f],
+                            [f for f in args.team_families.split(",") if f], settings)
+        study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
+                                     out=out, workers=args.workers,
+                                     resolution=args.resolution, budget=args.budget,
+                                     reference=args.reference,
+                                     progress=not args.no_progress, **backend)
+        print(study.table)
+        print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
+    elif args.study == "robustness":
+        study = robustness_study(args.planners or "coma,ig,coverage",
+                                 [int(a) for a in agents.split(",")],
+                                 [_comm_range(c) for c in comm.split(",")],
+                                 trials=args.trials,
+                                 seed=seed, out=out, workers=args.workers,
+                                 resolution=args.resolution,
+                                 progress=not args.no_progress,
+                                 failures=[int(f) for f in args.failures.split(",")],
+                                 **backend)
+        print(study.table)
+        print(f"written: {out}/robustness.md, .csv, .png, .pdf")
+    elif args.study == "sweep":
+        return _sweep(args, out, backend)
+    else:
+        from coma.cli import int_list
+
+        from .studies import ablation_study
+        from .sweep import parse_assignments
+
+        overrides = parse_assignments(args.set)
+        seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
+        common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
+                      train_resolution=args.train_resolution, trials=args.trials,
+                      seed=seed, out=out, workers=args.workers,
+                      eval_resolution=args.resolution, progress=not args.no_progress,
+                      **backend)
+        if args.study == "credit":
+            result = credit_assignment_study([v for v in args.variants.split(",") if v],
+                                             **common)
+        else:
+            result = ablation_study([a for a in args.ablations.split(",") if a], **common)
+        print(result.table)
+        print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
+              "F1 per step)")
     return 0
+
+
+def _distinct_items(flag: str, text: str) -> None:
+    """Refuse a list flag that names no value, an empty item or a value twice (a study would
+    silently fly its defaults or a duplicate row)."""
+    items = [item.strip() for item in text.split(",")]
+    if not text.strip() or any(not item for item in items):
+        raise ValueError(f"{flag} {text!r} has an empty value; give e.g. {flag} 2,4,8")
+    repeated = sorted({item for item in items if items.count(item) > 1})
+    if repeated:
+        raise ValueError(f"{flag} {text!r} gives {', '.join(repeated)} more than once")
 
 
 def _sweep(args: argparse.Namespace, out: str, backend: dict[str, str | None]) -> int:

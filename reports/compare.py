@@ -25,7 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.limits import check_mission, check_result_rows
+from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.config.settings import build_env_config, format_comm, safe_name
 from ipp_toolkit.io import write_json
 from ipp_toolkit.planners import (
@@ -40,6 +41,7 @@ from ipp_toolkit.planners import (
 from ipp_toolkit.runs.process_pool import WorkerPool
 from ipp_toolkit.runs.ray_backend import check_backend
 from ipp_toolkit.runs.result_store import shard_path, trajectory_path
+from ipp_toolkit.runs.run_folder import EVALUATION_COMMAND, claim
 
 from .tables import Summary, summarise, to_markdown, write_tables
 
@@ -383,6 +385,7 @@ def compare(agents: int | None = None, comm: float | None = None,
         ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
         ConnectionError: no Ray cluster answers at ``address``.
     """
+    seed = check_int("seed", seed, 0)  # 1.5 is refused, not truncated
     if isinstance(trials, bool) or int(trials) != trials or trials < 1:
         raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
     if isinstance(workers, bool) or int(workers) != workers or workers < 1:
@@ -393,7 +396,14 @@ def compare(agents: int | None = None, comm: float | None = None,
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)
+    # Before any worker starts or planner loads (the evaluation checks the same, later).
+    check_result_rows(env_config.team.budget, int(trials), max(1, len(_requested_specs(planners))))
+    check_mission(env_config, at_once=min(int(workers), int(trials)))
     with contextlib.ExitStack() as stack:
+        if out is not None:
+            # Held until the tables and figures are written: a second run into the folder
+            # (another seed, say) is refused instead of mixing its missions in.
+            stack.enter_context(claim(out, EVALUATION_COMMAND))
         pool = None
         requested = _requested_specs(planners)
         names = [spec.name for spec in requested]

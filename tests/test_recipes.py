@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import pytest
 
@@ -59,3 +60,5 @@ def test_a_two_stage_recipe_runs_and_resumes(tmp_path, monkeypatch):
     assert main(argv) == 2  # the folder holds a run: never overwritten without --resume
     assert main(argv + ["--resume"]) == 0  # both stages finished: nothing more to do
     assert main(["--preset", "tiny", "--out", str(tmp_path / "none"), "--resume"]) == 2
+    assert not (tmp_path / "none").exists()  # refused: no folder left behind
+    assert json.loads((out / "run.json").read_text())["command"] == "ipp-train coma"

@@ -435,10 +435,15 @@ def test_array_checks():
 
 def test_non_square_array_warns():
     with pytest.warns(UserWarning, match=r"\(3, 6\).*stretched"):
-        truth = _raster(np.ones((3, 6)), threshold=1.0)
-    assert truth.all()
+        truth = _raster(np.repeat([[0.0], [1.0], [2.0]], 6, axis=1), threshold=1.0)
+    assert truth.any() and not truth.all()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        _raster(np.repeat([[0.0], [2.0]], 3, axis=0).repeat(6, axis=1), threshold=1.0)
+
+
+def test_a_threshold_every_cell_reaches_is_refused():
+    with pytest.raises(ValueError, match=r"every map cell reaches terrain.threshold = 1\.0"):
         _raster(np.ones((6, 6)), threshold=1.0)
 
 

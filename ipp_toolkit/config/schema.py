@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from .field_types import check_field_types, short_repr
+
 __all__ = [
     "WorldConfig",
     "SensorConfig",
@@ -37,6 +39,7 @@ TERRAIN_KINDS = ("split", "split-axis", "blobs", "fractal", "real", "mixture", "
 REAL_SOURCES = ("mission", "train", "validation", "test", "all")
 DEFAULT_MIXTURE = (("split", 1.0), ("blobs", 1.0), ("fractal", 1.0), ("real", 1.0))
 NAN_POLICIES = ("raise", "min", "max", "mean")
+_NO_QUANTILE = ("split", "split-axis", "blobs")  # kinds that draw their own share
 
 
 def check_int(name: str, value: Any, minimum: int) -> int:
@@ -48,7 +51,7 @@ def check_int(name: str, value: Any, minimum: int) -> int:
 
 
 def _fail(section: str, name: str, value: Any, why: str) -> None:
-    raise ValueError(f"invalid config: {section}.{name} = {value!r}: {why}")
+    raise ValueError(f"invalid config: {section}.{name} = {short_repr(value)}: {why}")
 
 
 def _positive(section: str, name: str, value: float) -> None:
@@ -78,6 +81,7 @@ class WorldConfig:
     prior: float = 0.5
 
     def __post_init__(self) -> None:
+        check_field_types(self, "world")
         object.__setattr__(self, "altitudes", tuple(float(a) for a in self.altitudes))
         _positive("world", "area_size", self.area_size)
         _positive("world", "resolution", self.resolution)
@@ -123,6 +127,7 @@ class SensorConfig:
     accuracy: tuple[float, ...] = (0.99, 0.735, 0.625)
 
     def __post_init__(self) -> None:
+        check_field_types(self, "sensor")
         object.__setattr__(self, "accuracy", tuple(float(a) for a in self.accuracy))
         if not 0.0 < self.fov_deg < 180.0:
             _fail("sensor", "fov_deg", self.fov_deg, "must lie in (0, 180)")
@@ -187,6 +192,7 @@ class TerrainConfig:
     mixture: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
+        check_field_types(self, "terrain")
         kinds = terrain_kinds()
         if self.kind not in kinds:
             _fail("terrain", "kind", self.kind, f"unknown terrain kind; choose one of {kinds}")
@@ -198,6 +204,10 @@ class TerrainConfig:
             _fail("terrain", "nan_policy", self.nan_policy, f"choose one of {NAN_POLICIES}")
         if self.threshold is not None and not math.isfinite(self.threshold):
             _fail("terrain", "threshold", self.threshold, "must be finite")
+        if self.threshold_quantile is not None and self.kind in _NO_QUANTILE:
+            _fail("terrain", "threshold_quantile", self.threshold_quantile,
+                  f"terrain kind {self.kind!r} does not use it (fractal, real, raster and "
+                  "mixture do)")
         if self.threshold_quantile is not None:
             object.__setattr__(self, "threshold_quantile", _range_of(
                 "threshold_quantile", self.threshold_quantile, 0.0, 1.0, open_ends=True))
@@ -348,6 +358,7 @@ class TeamConfig:
                 object.__setattr__(self, "comm_range", float(self.comm_range))
             except ValueError:
                 _fail("team", "comm_range", self.comm_range, "must be a number of metres or 'inf'")
+        check_field_types(self, "team")
         if not isinstance(self.n_agents, int | np.integer) or isinstance(self.n_agents, bool) \
                 or self.n_agents < 1:
             _fail("team", "n_agents", self.n_agents, "must be an integer >= 1")
@@ -413,6 +424,7 @@ class RewardConfig:
     weight_uninteresting: float = 0.0
 
     def __post_init__(self) -> None:
+        check_field_types(self, "reward")
         _positive("reward", "alpha", self.alpha)
         if not math.isfinite(self.beta):
             _fail("reward", "beta", self.beta, "must be finite")
@@ -420,6 +432,9 @@ class RewardConfig:
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 _fail("reward", name, value, "must lie in [0, 1]")
+        if self.weight_interesting == 0 and self.weight_uninteresting == 0:
+            _fail("reward", "weight_interesting", self.weight_interesting,
+                  "and weight_uninteresting are both 0: the reward would count no entropy")
 
 
 @dataclass(frozen=True)
@@ -479,6 +494,7 @@ class FeatureConfig:
     agent_id_scale: int = 8
 
     def __post_init__(self) -> None:
+        check_field_types(self, "features")
         if (isinstance(self.gain_smoothing, bool)
                 or not isinstance(self.gain_smoothing, int | float | np.integer | np.floating)
                 or not 0 <= self.gain_smoothing < math.inf):
@@ -506,6 +522,13 @@ class EnvConfig:
     features: FeatureConfig = field(default_factory=FeatureConfig)
 
     def __post_init__(self) -> None:
+        for name, cls in _SECTIONS.items():
+            value = getattr(self, name)
+            if isinstance(value, Mapping):  # EnvConfig(world={...}): the section's fields
+                object.__setattr__(self, name, _build(cls, value, name))
+            elif not isinstance(value, cls):
+                raise ValueError(f"invalid config: section {name!r} must be a {cls.__name__} "
+                                 f"or a dict of its fields, got {short_repr(value)}")
         if len(self.sensor.accuracy) != len(self.world.altitudes):
             _fail("sensor", "accuracy", self.sensor.accuracy,
                   f"needs one value per altitude {self.world.altitudes}")

@@ -27,6 +27,7 @@ folder layout (:mod:`ipp_toolkit.runs.result_store`).
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import math
 import os
@@ -40,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..config.files import config_from_dict
+from ..config.limits import check_mission, check_result_rows
 from ..config.schema import EnvConfig, check_int
 from ..config.settings import safe_name
 from ..io import write_json
@@ -67,6 +69,7 @@ from .result_store import (
     RESULT_COLUMNS,
     EvaluationError,
     check_folder,
+    check_label,
     folder_identity,
     read_identity,
     read_results_csv,
@@ -79,6 +82,7 @@ from .result_store import (
     write_shard,
     write_trajectory,
 )
+from .run_folder import EVALUATION_COMMAND, claim
 
 __all__ = [
     "RESULT_COLUMNS",
@@ -442,8 +446,30 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             raise ValueError(f"planner labels {other!r} and {label!r} map to the same file "
                              f"name {safe_name(label)!r}; rename one")
         stems[safe_name(label)] = label
+        check_label(label)
+    # Sizes that cannot fit are refused before any folder is touched.
+    check_result_rows(config.team.budget, missions, len(specs))
+    check_mission(config, at_once=min(workers, missions * len(specs)))
     folder = Path(out_dir) if out_dir is not None else None
+    with contextlib.ExitStack() as stack:
+        if folder is not None:
+            # Held until the results are written: a second run into the folder is refused.
+            # The given path: an empty one is refused, not taken as the current folder.
+            stack.enter_context(claim(out_dir, EVALUATION_COMMAND, "out_dir"))
+        return _evaluate_claimed(config, specs, labels, missions, seed, workers, folder,
+                                 progress, namespace, record, on_recorded, backend, address,
+                                 pool)
+
+
+def _evaluate_claimed(config: EnvConfig, specs: list[PlannerSpec], labels: list[str],
+                      missions: int, seed: int, workers: int, folder: Path | None,
+                      progress: bool, namespace: str, record: frozenset[int],
+                      on_recorded: Callable[[str, int, dict[str, Any], list[dict[str, Any]]],
+                                            None] | None, backend: str,
+                      address: str | None, pool: WorkerPool | None) -> EvaluationResult:
+    """:func:`evaluate` once its inputs are checked and ``folder`` (if any) is claimed."""
     identity = folder_identity(config, seed, namespace)
+    # The folder's config.json matches identity (else refused); shards are checked against it.
     has_identity = check_folder(folder, identity, specs) if folder is not None else False
 
     spec_of = dict(zip(labels, specs, strict=True))
@@ -456,10 +482,12 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                 if not path.exists():
                     continue
                 try:
-                    rows = read_shard(path, label, mission, config.team.budget)
+                    rows = read_shard(path, label, mission, config.team.budget,
+                                      identity)
                 except (OSError, UnicodeDecodeError, ValueError, KeyError) as err:
-                    warnings.warn(f"shard {str(path)!r} is corrupt ({err}); flying mission "
-                                  f"{mission} of planner {label!r} again", stacklevel=2)
+                    warnings.warn(f"shard {str(path)!r} is corrupt or of another run ({err}); "
+                                  f"flying mission {mission} of planner {label!r} again",
+                                  stacklevel=2)
                     continue
                 if mission in record:
                     npz = trajectory_path(folder, label, mission)
@@ -492,11 +520,30 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
 
         cluster = connect(address, n_workers)  # starts or reaches Ray before anything is written
 
+    prepared = False
+
+    def prepare() -> None:
+        """Write the folder's identity and planner specs, once: when the first mission has
+        flown (or nothing is left to fly), so input that fails on the first mission (a
+        missing raster, a grid that does not fit, a planner that cannot act) leaves nothing
+        behind."""
+        nonlocal prepared
+        if folder is None or prepared:
+            return
+        if not has_identity:
+            write_json(folder / "config.json", identity)
+        for spec in specs:
+            path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
+            if not path.exists():
+                write_json(path, spec.to_dict())
+        prepared = True
+
     def finish(label: str, mission: int, result: dict[str, Any]) -> None:
         if folder is not None:
+            prepare()
             if result["trajectory"] is not None:
                 write_trajectory(trajectory_path(folder, label, mission), result["trajectory"])
-            write_shard(folder, spec_of[label], mission, result)
+            write_shard(folder, spec_of[label], mission, result, identity)
         done[(label, mission)] = result["rows"]
         if result["trajectory"] is not None:
             trajectories[(label, mission)] = result["trajectory"]
@@ -504,14 +551,6 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                 on_recorded(label, mission, result["trajectory"], result["rows"])
 
     try:
-        if folder is not None:
-            folder.mkdir(parents=True, exist_ok=True)
-            if not has_identity:
-                write_json(folder / "config.json", identity)
-            for spec in specs:
-                path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
-                if not path.exists():
-                    write_json(path, spec.to_dict())
         with progress_bar(len(labels) * missions, "evaluate", "missions",
                           initial=len(labels) * missions - len(tasks),
                           disable=not progress) as bar:
@@ -532,11 +571,12 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
         if cluster is not None:
             cluster.close()
 
+    prepare()
     rows = [row for label in labels for mission in range(missions)
             for row in done[(label, mission)]]
     if folder is not None:
         # A result folder is a growing set: planners flown into it before keep their rows.
-        stored = stored_planners(folder, labels, missions, config.team.budget)
+        stored = stored_planners(folder, labels, missions, config.team.budget, identity)
         labels = labels + list(stored)
         rows += [row for label_rows in stored.values() for row in label_rows]
         write_results_csv(folder / "results.csv", rows)

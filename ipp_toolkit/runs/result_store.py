@@ -17,6 +17,7 @@ grown with more planners. Layout (written atomically, file by file)::
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 import math
@@ -36,7 +37,8 @@ if TYPE_CHECKING:
     from ..planners.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
-           "check_folder", "shard_path", "trajectory_path", "stored_planners", "read_shard",
+           "check_folder", "check_label", "run_key", "shard_path", "trajectory_path",
+           "stored_planners", "read_shard",
            "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
            "read_results_csv"]
 
@@ -49,6 +51,7 @@ at s = 0)."""
 
 _INT_COLUMNS = frozenset({"agents", "seed", "mission", "step"})
 _FLOAT_COLUMNS = frozenset({"comm", "entropy", "f1", "rmse", "reward", "plan_ms"})
+_MISSING = object()
 _FORMAT = 1  # version of the shard and config.json layout
 
 
@@ -90,6 +93,25 @@ def read_identity(folder: Path) -> dict[str, Any]:
         raise EvaluationError(f"{str(path)!r} is not an evaluation identity: it needs the "
                               "keys 'config', 'seed' and 'namespace'")
     return stored
+
+
+def run_key(identity: Mapping[str, Any]) -> str:
+    """A digest of what a folder's missions depend on (config, seed, namespace), stored in
+    every shard so that a shard of another run is recognised when it is read.
+
+    Only the config fields that differ from the defaults count: a field added in a later
+    version, with a default that keeps the old behaviour, leaves the key of a folder as it was.
+    """
+    defaults = config_to_dict(EnvConfig())
+    config = identity.get("config")
+    if isinstance(config, dict):
+        config = {section: {k: v for k, v in values.items()
+                            if defaults.get(section, {}).get(k, _MISSING) != v}
+                  if isinstance(values, dict) else values
+                  for section, values in json.loads(json.dumps(config)).items()}
+    data = json.dumps({"config": config, "seed": identity.get("seed"),
+                       "namespace": identity.get("namespace")}, sort_keys=True)
+    return hashlib.sha256(data.encode("utf-8")).hexdigest()[:16]
 
 
 def check_folder(folder: Path, identity: dict[str, Any],
@@ -137,6 +159,21 @@ def check_folder(folder: Path, identity: dict[str, Any],
     return True
 
 
+_MAX_LABEL_BYTES = 120  # of the file-name stem; trajectories add "_mission<k>.png"
+
+
+def check_label(label: str) -> None:
+    """Refuse a label that cannot name its files: not UTF-8 (undecodable bytes from the
+    command line), or longer than a file name may be."""
+    try:
+        label.encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError(f"planner label {label!r} is not valid UTF-8 text") from None
+    if len(safe_name(label).encode("utf-8")) > _MAX_LABEL_BYTES:
+        raise ValueError(f"planner label {label[:40]!r}... is {len(label)} characters long; "
+                         f"labels name files, keep them to {_MAX_LABEL_BYTES}")
+
+
 def shard_path(folder: Path, label: str, mission: int) -> Path:
     """Where the rows of one mission of one planner label are stored."""
     return folder / "shards" / safe_name(label) / f"mission_{mission:05d}.json"
@@ -147,7 +184,8 @@ def trajectory_path(folder: Path, label: str, mission: int) -> Path:
     return folder / "trajectories" / f"{safe_name(label)}_mission{mission}.npz"
 
 
-def _check_rows(rows: Any, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
+def _check_rows(rows: Any, label: str, mission: int, budget: int,
+                seed: int) -> list[dict[str, Any]]:
     if not isinstance(rows, list) or len(rows) != budget + 1:
         raise ValueError(f"expected {budget + 1} rows")
     for step, row in enumerate(rows):
@@ -155,11 +193,13 @@ def _check_rows(rows: Any, label: str, mission: int, budget: int) -> list[dict[s
             raise ValueError(f"row {step} does not have the columns {RESULT_COLUMNS}")
         if row["planner"] != label or row["mission"] != mission or row["step"] != step:
             raise ValueError(f"row {step} belongs to another planner, mission or step")
+        if row["seed"] != seed:
+            raise ValueError(f"row {step} is of seed {row['seed']!r}, the folder's is {seed}")
     return rows
 
 
-def stored_planners(folder: Path, exclude: Sequence[str], missions: int,
-                    budget: int) -> dict[str, list[dict[str, Any]]]:
+def stored_planners(folder: Path, exclude: Sequence[str], missions: int, budget: int,
+                    identity: Mapping[str, Any]) -> dict[str, list[dict[str, Any]]]:
     """Rows of the planners stored in ``folder`` (other than ``exclude``) that hold every one
     of missions 0..missions-1, by label in folder order; incomplete ones are left out."""
     stored: dict[str, list[dict[str, Any]]] = {}
@@ -175,27 +215,36 @@ def stored_planners(folder: Path, exclude: Sequence[str], missions: int,
             continue
         try:
             stored[label] = [row for mission in range(missions) for row in read_shard(
-                shard_path(folder, label, mission), label, mission, budget)]
+                shard_path(folder, label, mission), label, mission, budget, identity)]
         except (OSError, UnicodeDecodeError, ValueError, KeyError):
             continue  # missing or damaged missions: not a complete planner of this run
     return stored
 
 
-def read_shard(path: Path, label: str, mission: int, budget: int) -> list[dict[str, Any]]:
-    """The checked rows of a shard (ValueError when it is not that mission's, or malformed)."""
+def read_shard(path: Path, label: str, mission: int, budget: int,
+               identity: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The checked rows of a shard (ValueError when it is not that mission's of the run
+    ``identity`` (the folder's ``config.json``), or malformed)."""
     shard = json.loads(path.read_text(encoding="utf-8"))
     if not isinstance(shard, dict) or shard.get("format") != _FORMAT:
         raise ValueError("not a shard of this format")
     if shard.get("label") != label or shard.get("mission") != mission:
         raise ValueError("the shard belongs to another planner or mission")
-    return _check_rows(shard.get("rows"), label, mission, budget)
+    # Shards written before the run key existed are checked by the seed of their rows.
+    if "run" in shard and shard["run"] != run_key(identity):
+        raise ValueError("the shard belongs to another run (config, seed or namespace) than "
+                         "the folder's config.json")
+    return _check_rows(shard.get("rows"), label, mission, budget, identity["seed"])
 
 
-def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any]) -> None:
-    """Store the rows (and the path) of one flown mission, atomically."""
+def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any],
+                identity: Mapping[str, Any]) -> None:
+    """Store the rows (and the path) of one flown mission of the run ``identity`` (the
+    folder's ``config.json``), atomically."""
     trajectory = result["trajectory"]
     shard = {
         "format": _FORMAT,
+        "run": run_key(identity),
         "label": spec.effective_label,
         "planner": spec.name,
         "options": spec.options,

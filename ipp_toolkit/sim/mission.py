@@ -25,6 +25,7 @@ import numpy as np
 from .._native import kernels
 from ..belief.block_grid import BlockGrid, Rect
 from ..belief.mapping import BeliefMaps
+from ..config.limits import check_mission
 from ..config.schema import EnvConfig, fixed_start_waypoints
 from ..world.seeding import MissionStreams, mission_streams
 from ..world.sensor import Camera
@@ -71,6 +72,7 @@ class MissionGeometry:
     """
 
     def __init__(self, config: EnvConfig):
+        check_mission(config)  # an absurd size is refused before its tables are built
         world = config.world
         self.config = config
         self.camera = Camera(world, config.sensor)
@@ -330,6 +332,11 @@ def reset_mission(config: EnvConfig, seed: int, mission: int = 0, namespace: str
         truth = np.asarray(ground_truth)
         if truth.shape != (size, size):
             raise ValueError(f"ground_truth has shape {truth.shape}, expected {(size, size)}")
+        # Any object is true: only booleans or numbers 0/1 say which cells are interesting.
+        if truth.dtype.kind not in "biuf" or (truth.dtype.kind != "b"
+                                             and not np.isin(truth, (0, 1)).all()):
+            raise ValueError(f"ground_truth must hold booleans (or 0/1), got dtype "
+                             f"{truth.dtype}")
         truth = truth.astype(bool)
     if not truth.any():
         raise ValueError("the ground truth has no interesting cell")

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config.limits import LimitError, check_raster_cells
 from ..config.schema import NAN_POLICIES, TerrainConfig, WorldConfig
 
 __all__ = [
@@ -266,10 +267,30 @@ def _as_2d_numeric(data: Any, name: str) -> np.ndarray:
 
 
 def _read_npy(path: Path) -> np.ndarray:
-    data = np.load(path, allow_pickle=False)
+    # Mapped first: the shape is checked against the limit before the values are read.
+    data = np.load(path, allow_pickle=False, mmap_mode="r")
     if not isinstance(data, np.ndarray):  # an .npz archive renamed to .npy
         raise ValueError("not a single .npy array")
+    check_raster_cells(data.shape, repr(str(path)))
     return data
+
+
+def _image_shape(path: Path) -> tuple[int, int] | None:
+    """The (h, w) of an image file from its header (None when it cannot be told)."""
+    try:
+        from PIL import Image
+
+        with Image.open(path) as image:
+            return image.size[1], image.size[0]
+    except Exception:  # not an image Pillow knows: the reader reports it
+        pass
+    try:
+        import tifffile
+
+        with tifffile.TiffFile(path) as tiff:
+            return tuple(tiff.series[0].shape)[:2]  # type: ignore[return-value]
+    except Exception:
+        return None
 
 
 def _read_pillow(path: Path) -> np.ndarray:
@@ -315,8 +336,14 @@ def load_raster(path: str | os.PathLike[str]) -> np.ndarray:
                          f"use one of {', '.join(RASTER_SUFFIXES)}")
     reader = _read_npy if suffix == ".npy" else _read_tiff if suffix in TIFF_SUFFIXES \
         else _read_pillow
+    if suffix != ".npy":
+        shape = _image_shape(file)
+        if shape is not None:
+            check_raster_cells(shape, repr(name))  # before the pixels are decoded
     try:
         data = reader(file)
+    except LimitError:
+        raise
     except Exception as err:  # decoders raise many types; all mean "unreadable file"
         raise ValueError(f"cannot read raster file {name!r}: {err}") from err
     values = _as_2d_numeric(data, repr(name))
@@ -500,6 +527,12 @@ def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Ge
         level = float(np.quantile(entry.values, float(rng.uniform(low, high))))
         return entry.values > level if level <= entry.values.min() else entry.values >= level
     interesting = entry.values >= config.threshold
+    if interesting.all():
+        raise ValueError(
+            f"raster {name}: every map cell reaches terrain.threshold = {config.threshold!r}, "
+            "so there is nothing to map; the raster spans "
+            f"[{entry.source_min:g}, {entry.source_max:g}] (area averages on the map: "
+            f"[{entry.values.min():g}, {entry.values.max():g}])")
     if not interesting.any():
         raise ValueError(
             f"raster {name}: no map cell reaches terrain.threshold = {config.threshold!r}; the "
