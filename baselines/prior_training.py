@@ -56,6 +56,7 @@ from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch
 from ipp_toolkit.planners import Planner, planner_views
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import progress_bar, report_interrupt
+from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.world.seeding import planner_seed
 
@@ -65,6 +66,7 @@ from .spatial_gain import SpatialGainPlanner
 __all__ = ["PriorTrainingConfig", "collect_states", "main", "train_prior"]
 
 TRAINING_FORMAT = "ipp-toolkit/field-prior-training"
+PRIOR_COMMAND = "ipp-train prior"
 PROGRESS_COLUMNS = ("round", "epoch", "train_bce", "validation_bce", "smoothing_bce", "states",
                     "seconds")
 
@@ -284,9 +286,18 @@ def train_prior(config: PriorTrainingConfig, env_config: EnvConfig, out: str | P
     out = Path(out)
     record = {"command": command, "training": config.to_json(),
               "env": config_to_dict(env_config)}
-    state = _open_run(out, record, resume)
-    if announce:
-        print(announce, file=sys.stderr)
+    with claim(out, PRIOR_COMMAND) as folder:
+        state = _open_run(out, record, resume, folder.found - {LOCK_NAME, RECORD_NAME})
+        if announce:
+            print(announce, file=sys.stderr)
+        return _train(config, env_config, out, record, state, progress)
+
+
+def _train(config: PriorTrainingConfig, env_config: EnvConfig, out: Path,
+           record: dict[str, Any], state: dict[str, Any] | None, progress: bool) -> Path:
+    """The rounds of :func:`train_prior` from ``state`` (None: a new run) to the end."""
+    import torch
+
     torch.manual_seed(config.seed)
     network = build_network(PriorNetConfig(config.width))
     optimiser = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
@@ -376,26 +387,27 @@ def _load_rounds(out: Path, rounds: int) -> tuple[list[dict], list[dict]]:
     return train, validation
 
 
-def _open_run(out: Path, record: dict[str, Any], resume: bool) -> dict[str, Any] | None:
-    """Check ``out`` and write its ``config.json``; the ``last.pt`` state when resuming."""
+def _open_run(out: Path, record: dict[str, Any], resume: bool, found: frozenset[str]
+              ) -> dict[str, Any] | None:
+    """Check ``out`` (holding the files ``found``) and write its ``config.json``; the
+    ``last.pt`` state when resuming."""
     config_path = out / "config.json"
     if resume:
         if not config_path.is_file() or not (out / "last.pt").is_file():
             raise ValueError(f"nothing to resume in {str(out)!r} (no config.json and last.pt "
                              "of a prior's training)")
         stored = json.loads(config_path.read_text(encoding="utf-8"))
-        if stored.get("kind") != "ipp-train prior":
+        if stored.get("kind") != PRIOR_COMMAND:
             raise ValueError(f"{str(out)!r} holds another command's run, not a prior's")
         for key in ("training", "env"):
             if stored.get(key) != json.loads(json.dumps(record[key])):
                 raise ValueError(f"--resume: the settings differ from the run in {str(out)!r} "
                                  f"(section {key!r}); resume with the run's own flags")
         return load_torch(out / "last.pt", TRAINING_FORMAT)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+    if found:
         raise ValueError(f"--out {str(out)!r} exists and is not an empty folder; use --resume "
                          "to continue the run in it, or another folder")
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(config_path, {"kind": "ipp-train prior", **record})
+    write_json(config_path, {"kind": PRIOR_COMMAND, **record})
     with open(out / "progress.csv", "w", newline="", encoding="utf-8") as handle:
         csv.writer(handle).writerow(PROGRESS_COLUMNS)
     return None

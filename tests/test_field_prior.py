@@ -215,3 +215,15 @@ def test_ipp_train_prior_refuses_bad_flags_before_writing(tmp_path, capsys, flag
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_ipp_train_prior_refuses_another_command_s_folder(tmp_path, capsys):
+    from ipp_toolkit.runs.run_folder import claim
+    from reports.cli import train_main
+
+    out = tmp_path / "compare"
+    with claim(out, "ipp-compare"):
+        (out / "results.csv").write_text("planner\n")
+    assert train_main(["prior", "--out", str(out), *TINY]) == 2
+    assert "was made by ipp-compare" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == [".lock", "results.csv", "run.json"]
