@@ -28,8 +28,8 @@ Output: (N, h, w) probabilities per block, calibrated (trained with cross-entrop
 share of interesting cells of each block). :meth:`FieldPrior.fine_values` resamples them
 bilinearly onto a finer block grid (e.g. the 0.5 m blocks ``ig_spatial`` evaluates on).
 
-Cost: one forward pass per decision for the whole team (N maps batched); about 2 ms for four
-UAVs on one CPU thread at the defaults (docs/performance.md). torch is imported on first use.
+Cost: one forward pass per decision for the whole team (N maps batched); 6-9 ms for four
+UAVs on one CPU thread (docs/field-prior.md, "Cost"). torch is imported on first use.
 """
 
 from __future__ import annotations
