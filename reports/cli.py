@@ -25,7 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.config.settings import build_env_config, comm_label, parse_comm, setting_line
+from ipp_toolkit.config.settings import (
+    build_env_config,
+    comm_label,
+    named_terrain_kinds,
+    parse_comm,
+    setting_line,
+)
 from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.io import atomic_write
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
@@ -188,9 +194,9 @@ def _compare_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, metavar="SEED",
                         help="run seed of the test missions")
     parser.add_argument("--terrain", default=None, metavar="KIND|FILE",
-                        help="terrain kind (split, split-axis, blobs, fractal, real, "
-                             "mixture) or a raster FILE (.npy/.png/.tif; needs --threshold or "
-                             "--threshold-quantile); default: the --config file's, else split")
+                        help=f"terrain kind ({', '.join(named_terrain_kinds())}) or a raster "
+                             "FILE (.npy/.png/.tif; needs --threshold or --threshold-quantile); "
+                             "default: the --config file's, else split")
     parser.add_argument("--threshold", type=_finite_float, default=None, metavar="T",
                         help="raster threshold in the raster's units: cells whose mean value "
                              "is >= T are interesting (required with a terrain FILE)")

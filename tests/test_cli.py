@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ipp_toolkit.config.settings import named_terrain_kinds
 from ipp_toolkit.planners import available_planners
 from reports import compare as compare_function
 from reports.cli import compare_main
@@ -83,7 +84,7 @@ def test_bad_terrain_exits_2_and_writes_nothing(capsys, tmp_path):
     _fails(capsys, ["--terrain", str(tmp_path / "missing.tif"), "--threshold", "0.5",
                     "--out", str(out)], "cannot read terrain file")
     _fails(capsys, ["--terrain", "splt", "--out", str(out)],
-           "terrain is one of split, split-axis, blobs, fractal, real, mixture or a raster FILE")
+           f"terrain is one of {', '.join(named_terrain_kinds())} or a raster FILE")
     raster = tmp_path / "field.npy"
     np.save(raster, np.zeros((10, 10)))
     _fails(capsys, ["--terrain", str(raster), "--out", str(out)], "needs a threshold")

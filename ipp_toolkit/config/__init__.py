@@ -4,7 +4,6 @@ files (:mod:`.files`) and the one builder from flags, files and keywords (:mod:`
 from .files import config_from_dict, config_to_dict, load_config, read_config_file, save_config
 from .schema import (
     ACTOR_PLANES,
-    TERRAIN_KINDS,
     EnvConfig,
     FeatureConfig,
     RewardConfig,
@@ -16,7 +15,6 @@ from .schema import (
 
 __all__ = [
     "ACTOR_PLANES",
-    "TERRAIN_KINDS",
     "EnvConfig",
     "FeatureConfig",
     "RewardConfig",

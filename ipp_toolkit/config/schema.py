@@ -27,7 +27,6 @@ __all__ = [
     "RewardConfig",
     "FeatureConfig",
     "EnvConfig",
-    "TERRAIN_KINDS",
     "terrain_kinds",
     "start_for_team_size",
     "fixed_starts_fit",
@@ -35,7 +34,6 @@ __all__ = [
     "check_int",
 ]
 
-TERRAIN_KINDS = ("split", "split-axis", "blobs", "fractal", "real", "mixture", "raster")
 REAL_SOURCES = ("mission", "train", "validation", "test", "all")
 DEFAULT_MIXTURE = (("split", 1.0), ("blobs", 1.0), ("fractal", 1.0), ("real", 1.0))
 NAN_POLICIES = ("raise", "min", "max", "mean")
@@ -138,10 +136,12 @@ class SensorConfig:
 
 
 def terrain_kinds() -> tuple[str, ...]:
-    """The built-in terrain kinds and every kind added with ``terrain.register_terrain``."""
+    """Every terrain kind: the names of the terrain registry
+    (:data:`ipp_toolkit.world.terrain.TERRAIN_GENERATORS`, the one owner of them; the
+    built-in kinds and every kind added with ``register_terrain``)."""
     from ..world.terrain import TERRAIN_GENERATORS  # terrain imports this module: look up lazily
 
-    return tuple(dict.fromkeys((*TERRAIN_KINDS, *TERRAIN_GENERATORS)))
+    return tuple(TERRAIN_GENERATORS)
 
 
 @dataclass(frozen=True)
