@@ -43,6 +43,7 @@ import numpy as np
 from ipp_toolkit.belief.field_prior import (
     FieldPrior,
     PriorNetConfig,
+    block_average,
     block_cells,
     block_labels,
     build_network,
@@ -169,7 +170,8 @@ def collect_states(env_config: EnvConfig, config: PriorTrainingConfig, planner: 
                                 replace=False)
             prob = np.stack([views[k].local_prob for k in sorted(chosen)])
             inputs.append(prior_inputs(prob, resolution).astype(np.float16))
-            smooth = _coarse_smoothing(smoother, prob, block_cells(resolution, prob.shape[1]))
+            # ig_spatial's Gaussian prior averaged onto the prior's blocks: the reference
+            smooth = block_average(smoother(prob), block_cells(resolution, prob.shape[1]))
             smoothing.append(smooth.astype(np.float16))
             owners.append(np.full(len(prob), len(labels) - 1, dtype=np.int32))
 
@@ -184,20 +186,6 @@ def collect_states(env_config: EnvConfig, config: PriorTrainingConfig, planner: 
     bar.close()
     return {"inputs": np.concatenate(inputs), "mission": np.concatenate(owners),
             "labels": np.stack(labels), "smoothing": np.concatenate(smoothing)}
-
-
-def _coarse_smoothing(smoother: Any, prob: np.ndarray, b: int) -> np.ndarray:
-    """(N, h, w) ``ig_spatial``'s Gaussian prior averaged onto the prior's blocks."""
-    fine = smoother(prob)  # (N, H, W) per cell
-    n, rows, cols = fine.shape
-    h, w = -(-rows // b), -(-cols // b)
-    padded = np.zeros((n, h * b, w * b), dtype=np.float32)
-    padded[:, :rows, :cols] = fine
-    inside = np.zeros((h * b, w * b), dtype=np.float32)
-    inside[:rows, :cols] = 1.0
-    sums = padded.reshape(n, h, b, w, b).sum(axis=(2, 4))
-    count = np.maximum(inside.reshape(h, b, w, b).sum(axis=(1, 3)), 1.0)
-    return sums / count
 
 
 def merge(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:

@@ -45,8 +45,8 @@ from ..io import CheckpointError, load_torch, save_torch
 from .interest import block_means
 
 __all__ = ["BLOCK_METRES", "FORMAT", "INPUT_PLANES", "FieldPrior", "PriorNetConfig",
-           "block_cells", "block_labels", "build_network", "parameter_count", "prior_inputs",
-           "resample_matrix"]
+           "block_average", "block_cells", "block_labels", "build_network", "parameter_count",
+           "prior_inputs", "resample_matrix"]
 
 #: Side of the blocks the prior sees and predicts, in metres.
 BLOCK_METRES = 2.0
@@ -90,6 +90,18 @@ def _inside_share(rows: int, cols: int, b: int) -> np.ndarray:
     return _block_sums(np.ones((1, rows, cols), dtype=np.float32), b)[0] / np.float32(b * b)
 
 
+def _inside_count(inside: np.ndarray, b: int) -> np.ndarray:
+    """Cells of each block inside the area (at least 1, so padding blocks average to 0)."""
+    return np.maximum(inside * np.float32(b * b), np.float32(1.0))
+
+
+def block_average(values: np.ndarray, b: int) -> np.ndarray:
+    """(N, h, w) float32 mean of (N, H, W) ``values`` over the cells of every b x b block
+    that lie inside the area (the map padded to whole blocks; a padding block is 0)."""
+    count = _inside_count(_inside_share(*values.shape[1:], b), b)
+    return _block_sums(values, b) / count
+
+
 def prior_inputs(prob: np.ndarray, resolution: float) -> np.ndarray:
     """The (N, 5, h, w) float32 input planes (:data:`INPUT_PLANES`) of (N, H, W) local maps.
 
@@ -110,7 +122,7 @@ def prior_inputs(prob: np.ndarray, resolution: float) -> np.ndarray:
     b = block_cells(resolution, prob.shape[1]) // sub
     n, rows, cols = squares.shape
     inside = _inside_share(rows, cols, b)
-    count = np.maximum(inside * np.float32(b * b), np.float32(1.0))
+    count = _inside_count(inside, b)
     planes = np.empty((n, len(INPUT_PLANES)) + inside.shape, dtype=np.float32)
     planes[:, 0] = _block_sums(squares - np.float32(0.5), b) / count
     planes[:, 1] = _block_sums(np.abs(squares * np.float32(2.0) - np.float32(1.0)), b) / count
@@ -124,9 +136,7 @@ def block_labels(ground_truth: np.ndarray, resolution: float) -> np.ndarray:
     """(h, w) float32 share of interesting cells of every block of an (H, W) ground truth
     (the training target; padding blocks are 0)."""
     truth = np.asarray(ground_truth, dtype=np.float32)[None]
-    b = block_cells(resolution, truth.shape[1])
-    count = np.maximum(_inside_share(*truth.shape[1:], b) * np.float32(b * b), np.float32(1.0))
-    return _block_sums(truth, b)[0] / count
+    return block_average(truth, block_cells(resolution, truth.shape[1]))[0]
 
 
 @functools.lru_cache(maxsize=32)
