@@ -55,6 +55,7 @@ from .sim.mission import (
     step_mission,
 )
 from .sim.team import ACTION_NAMES, N_ACTIONS
+from .world.seeding import check_namespace
 
 __all__ = ["INVALID_ACTION_POLICIES", "IPPEnv", "parallel_env"]
 
@@ -116,10 +117,7 @@ class IPPEnv(ParallelEnv):
             raise ValueError(f"render_mode {render_mode!r} is not supported; "
                              f"choose from {self.metadata['render_modes']}")
         self.render_mode = render_mode
-        if not isinstance(namespace, str) or not namespace.strip():
-            raise ValueError(f"namespace must be 'train', 'validation', 'test' or a name of "
-                             f"your own, got {namespace!r}")
-        self.namespace = namespace
+        self.namespace = check_namespace(namespace)
         self.geometry = MissionGeometry(self._mission_config)
         self._ground_truth = ground_truth
         self._raster = raster

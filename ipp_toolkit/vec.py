@@ -52,6 +52,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 from .config.schema import EnvConfig, check_int
 from .env import INVALID_ACTION_POLICIES, IPPEnv, action_index
 from .sim.team import N_ACTIONS
+from .world.seeding import check_namespace
 
 __all__ = ["IPPVecEnv", "INVALID_ACTION_POLICIES", "make_sb3_vec_env"]
 
@@ -323,8 +324,7 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus
     n_envs = check_int("n_envs", n_envs, 1)
     seed = check_int("seed", seed, 0)
     num_cpus = check_int("num_cpus", num_cpus, 0)
-    if not isinstance(namespace, str) or not namespace:
-        raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
+    check_namespace(namespace)
     if invalid_action not in INVALID_ACTION_POLICIES:
         raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
                          f"{invalid_action!r}")

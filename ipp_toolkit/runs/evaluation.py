@@ -55,7 +55,7 @@ from ..planners import (
 from ..planners.specs import PlannerSpec, as_specs
 from ..sim.driver import fly_missions, start_missions
 from ..sim.mission import MissionGeometry, MissionState
-from ..world.seeding import planner_seed
+from ..world.seeding import check_namespace, planner_seed
 from .process_pool import (
     WorkerPool,
     limit_blas_threads,
@@ -426,8 +426,7 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     missions = check_int("missions", missions, 1)
     workers = check_int("workers", workers, 1)
     seed = check_int("seed", seed, 0)
-    if not isinstance(namespace, str) or not namespace:
-        raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
+    check_namespace(namespace)
     check_backend(backend, address)  # a missing Ray is reported even when nothing is left to fly
     if isinstance(record_missions, int | np.integer):
         record_missions = (int(record_missions),)

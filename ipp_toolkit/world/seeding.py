@@ -14,17 +14,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["NAMESPACES", "MissionStreams", "mission_streams", "planner_seed"]
+__all__ = ["NAMESPACES", "MissionStreams", "check_namespace", "mission_streams", "planner_seed"]
 
 NAMESPACES = {"train": 0, "validation": 1, "test": 2}
 """Training, in-training evaluation (checkpoint choice) and held-out test (``ipp-compare``)."""
 
 
+def check_namespace(namespace: object) -> str:
+    """``namespace`` if it names a random-stream namespace: ``train``, ``validation``, ``test``
+    or a name of your own (a string with more than blanks); ValueError naming it otherwise."""
+    if not isinstance(namespace, str) or not namespace.strip():
+        raise ValueError(f"namespace must be 'train', 'validation', 'test' or a name of your "
+                         f"own, got {namespace!r}")
+    return namespace
+
+
 def _namespace_id(namespace: str) -> int:
     if namespace in NAMESPACES:
         return NAMESPACES[namespace]
-    if not isinstance(namespace, str) or not namespace:
-        raise ValueError(f"namespace must be a non-empty string, got {namespace!r}")
+    check_namespace(namespace)
     # A user's own namespace: a stable id well away from the built-in ones.
     return 1000 + zlib.crc32(namespace.encode())
 
