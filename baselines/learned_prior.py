@@ -9,8 +9,9 @@ UAV's own local map, how likely each 2 m block is to be interesting, having lear
 shapes fields take (straight boundaries continue, hotspots have sizes) from simulator ground
 truth (``ipp-train prior``). No policy is learned: the decision is still the greedy argmax.
 
-``ig_learned`` flies the shipped prior (``baselines/checkpoints/field_prior.pt``, its JSON
-record beside it); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
+``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON
+record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read
+the same file); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
 unused. Cost: ``ig_spatial``'s work plus one batched forward pass of the prior per step.
 """
 
@@ -20,15 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.belief.field_prior import FieldPrior
-from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, FieldPrior, prior_file
 from ipp_toolkit.planners import AgentView
 
 from .spatial_gain import SpatialGainPlanner
 
 __all__ = ["DEFAULT_PRIOR", "LearnedPriorPlanner"]
 
-DEFAULT_PRIOR = Path(__file__).resolve().parent / "checkpoints" / "field_prior.pt"
+DEFAULT_PRIOR = SHIPPED_PRIOR
 """The shipped field prior."""
 
 
@@ -51,14 +51,7 @@ class LearnedPriorPlanner(SpatialGainPlanner):
         super().__init__(overlap_discount=overlap_discount)
         # A batch of N small maps: extra intra-op threads only spin on busy cores.
         torch.set_num_threads(1)
-        path = Path(DEFAULT_PRIOR if checkpoint is None else checkpoint)
-        if checkpoint is None and not path.is_file():
-            raise CheckpointError(f"the shipped field prior {str(path)!r} does not exist; train "
-                                  "one with `ipp-train prior --out RUN` and pass "
-                                  "ig_learned=RUN/best.pt")
-        if path.is_dir():
-            raise CheckpointError(f"field prior {str(path)!r} is a folder; give the file "
-                                  f"(e.g. {str(path / 'best.pt')!r})")
+        path = prior_file(DEFAULT_PRIOR if checkpoint is None else checkpoint)
         self.checkpoint = path
         self.prior = FieldPrior.load(path)
         self._fine: np.ndarray | None = None  # (N, H / b, W / b) prior of this step's views

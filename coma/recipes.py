@@ -71,6 +71,14 @@ RECIPES: dict[str, tuple[Stage, ...]] = {
               {"features": {"gain": True, "gain_smoothing": 5.0},
                "terrain": {"kind": "mixture"}}),
     ),
+    # spatial-mixture's recipe with the learned field prior in the gain planes: its untrained
+    # residual flies ig_learned's objective (without ig's same-step coordination).
+    "learned-mixture": (
+        Stage("learned", {**_GAIN_PRIOR, **_MIXTURE_SELECTION, "missions": 2500,
+                          "lr_actor": 1e-4, "seed": 0},
+              {"features": {"gain": True, "gain_interest": "learned"},
+               "terrain": {"kind": "mixture"}}),
+    ),
 }
 
 

@@ -37,34 +37,39 @@ from __future__ import annotations
 import functools
 import os
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..config.schema import GAIN_INTEREST_LEARNED
 from ..io import CheckpointError, load_torch, save_torch
-from .interest import block_means
+from .interest import block_means, square_cells
 
-__all__ = ["BLOCK_METRES", "FORMAT", "INPUT_PLANES", "FieldPrior", "PriorNetConfig",
-           "block_average", "block_cells", "block_labels", "build_network", "parameter_count",
-           "prior_inputs", "resample_matrix"]
+__all__ = ["BLOCK_METRES", "FORMAT", "INPUT_PLANES", "SHIPPED_PRIOR", "FieldPrior",
+           "PriorNetConfig", "block_average", "block_cells", "block_labels", "build_network",
+           "parameter_count", "prior_file", "prior_inputs", "resample_matrix", "shared_prior",
+           "square_inputs"]
 
 #: Side of the blocks the prior sees and predicts, in metres.
 BLOCK_METRES = 2.0
-#: Side of the squares the maps are averaged over before the planes are taken, in metres.
-SUB_BLOCK_METRES = 0.5
 #: The input planes, in order.
 INPUT_PLANES = ("prob", "certainty", "interesting", "uninteresting", "inside")
 #: The format tag of a field-prior file (:func:`ipp_toolkit.io.load_torch`).
 FORMAT = "ipp-toolkit/field-prior"
 #: Largest network a file may ask for (channels of the first level); the default is 8.
 MAX_WIDTH = 128
+#: The packaged prior (``ipp-train prior --seed 0``; its JSON record beside it): the one
+#: ``ig_learned`` flies and ``features.gain_interest = "learned"`` reads.
+SHIPPED_PRIOR = Path(__file__).resolve().parents[1] / "data" / "field_prior.pt"
+#: The name that stands for :data:`SHIPPED_PRIOR` in configs and on command lines.
+SHIPPED_NAME = GAIN_INTEREST_LEARNED
 
 
 def _sub_block(resolution: float, size: int) -> int:
     """Cells per side of the ~0.5 m squares the maps are averaged over first (divides
-    ``size``; 1 at r_M >= 0.5 m)."""
-    target = max(1, int(round(SUB_BLOCK_METRES / resolution)))
-    return max(s for s in range(1, target + 1) if size % s == 0)
+    ``size``; 1 at r_M >= 0.5 m): the squares of :mod:`ipp_toolkit.belief.interest`."""
+    return square_cells(size, resolution)
 
 
 def block_cells(resolution: float, size: int) -> int:
@@ -119,7 +124,15 @@ def prior_inputs(prob: np.ndarray, resolution: float) -> np.ndarray:
         raise ValueError(f"expected (N, H, H) probability maps, got shape {prob.shape}")
     sub = _sub_block(resolution, prob.shape[1])
     squares = block_means(prob, sub) if sub > 1 else prob
-    b = block_cells(resolution, prob.shape[1]) // sub
+    return square_inputs(squares, resolution, prob.shape[1])
+
+
+def square_inputs(squares: np.ndarray, resolution: float, size: int) -> np.ndarray:
+    """:func:`prior_inputs` from the maps' ~0.5 m square means (N, H / s, W / s), s =
+    :func:`~ipp_toolkit.belief.interest.square_cells` (e.g. kept up to date by
+    :class:`~ipp_toolkit.belief.interest.BlockMeanCache`); ``size`` = H = W."""
+    squares = np.ascontiguousarray(squares, dtype=np.float32)
+    b = block_cells(resolution, size) // _sub_block(resolution, size)
     n, rows, cols = squares.shape
     inside = _inside_share(rows, cols, b)
     count = _inside_count(inside, b)
@@ -270,11 +283,13 @@ class FieldPrior:
             prob: (N, H, W) float32 probabilities of the local maps.
             resolution: their cell side r_M in metres.
         """
+        return self._forward(prior_inputs(prob, resolution))
+
+    def _forward(self, planes: np.ndarray) -> np.ndarray:
         import torch
 
-        planes = torch.from_numpy(prior_inputs(prob, resolution))
         with torch.inference_mode():
-            return torch.sigmoid(self.network(planes)).numpy()
+            return torch.sigmoid(self.network(torch.from_numpy(planes))).numpy()
 
     def fine_values(self, prob: np.ndarray, resolution: float, fine_cells: int) -> np.ndarray:
         """(N, H / f, W / f) float32 prior on blocks of ``fine_cells`` = f cells per side.
@@ -282,14 +297,25 @@ class FieldPrior:
         The predicted 2 m blocks resampled bilinearly (:func:`resample_matrix`); ``H`` and
         ``W`` must be multiples of ``f``.
         """
-        coarse = self.predict(prob, resolution)
         rows, cols = prob.shape[-2:]
         if rows % fine_cells or cols % fine_cells:
             raise ValueError(f"maps of {rows} x {cols} cells do not divide into blocks of "
                              f"{fine_cells}")
-        b = block_cells(resolution, rows)
-        left = resample_matrix(rows // fine_cells, fine_cells, coarse.shape[1], b)
-        right = resample_matrix(cols // fine_cells, fine_cells, coarse.shape[2], b)
+        return self._resampled(self.predict(prob, resolution), resolution, rows, fine_cells)
+
+    def square_values(self, squares: np.ndarray, resolution: float, size: int) -> np.ndarray:
+        """(N, H / s, W / s) float32 prior on the maps' ~0.5 m squares, from their means
+        (:func:`square_inputs`): :meth:`fine_values` with ``fine_cells`` = s, without the
+        maps' cells (``size`` = H = W)."""
+        coarse = self._forward(square_inputs(squares, resolution, size))
+        return self._resampled(coarse, resolution, size, _sub_block(resolution, size))
+
+    @staticmethod
+    def _resampled(coarse: np.ndarray, resolution: float, size: int,
+                   fine_cells: int) -> np.ndarray:
+        b = block_cells(resolution, size)
+        left = resample_matrix(size // fine_cells, fine_cells, coarse.shape[1], b)
+        right = resample_matrix(size // fine_cells, fine_cells, coarse.shape[2], b)
         return left @ coarse @ right.T
 
 
@@ -303,3 +329,36 @@ def parameter_count(config: PriorNetConfig) -> int:
     return (pair(planes, c1) + pair(c1, c2) + pair(2 * c2, c2) + pair(2 * c2, c2)
             + pair(c2 + c1, c1) + c1 + 1)
 
+
+
+def prior_file(name: str | os.PathLike[str]) -> Path:
+    """The file a prior is named by: :data:`SHIPPED_NAME` (``learned``) for the packaged one,
+    else a path to a file written by ``ipp-train prior`` (``RUN/best.pt``).
+
+    Raises:
+        CheckpointError: the file does not exist, or the name is a folder.
+    """
+    path = SHIPPED_PRIOR if str(name) == SHIPPED_NAME else Path(name)
+    if path.is_dir():
+        raise CheckpointError(f"field prior {str(path)!r} is a folder; give the file "
+                              f"(e.g. {str(path / 'best.pt')!r})")
+    if not path.is_file():
+        hint = ("the package is incomplete; reinstall it" if path == SHIPPED_PRIOR else
+                "train one with `ipp-train prior --out RUN` and name RUN/best.pt")
+        raise CheckpointError(f"field prior {str(path)!r} does not exist; {hint}")
+    return path
+
+
+def shared_prior(name: str | os.PathLike[str]) -> FieldPrior:
+    """The prior named ``name`` (see :func:`prior_file`), loaded once per process and file
+    version: every mission that reads it shares one network (inference only, so sharing is
+    safe). A file replaced on disk is read again."""
+    path = prior_file(name).resolve()
+    stat = path.stat()
+    return _load_once(str(path), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _load_once(path: str, mtime_ns: int, size: int) -> FieldPrior:
+    # mtime and size are part of the key so a retrained file is not served stale.
+    return FieldPrior.load(path)

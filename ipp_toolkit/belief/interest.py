@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from .mapping import BeliefMaps
 
 __all__ = ["BlockMeanCache", "InterestSmoother", "block_means", "interest_smoother",
-           "smoothing_matrix"]
+           "smoothing_matrix", "square_cells"]
 
 #: Side of the blocks the probabilities are averaged over before smoothing, in metres.
 BLOCK_METRES = 0.5
@@ -51,8 +51,10 @@ def smoothing_matrix(size: int, sigma: float) -> np.ndarray:
     return (weights / weights.sum(axis=1, keepdims=True)).astype(np.float32)
 
 
-def _block_side(size: int, resolution: float) -> int:
-    """The largest divisor of ``size`` not above BLOCK_METRES / resolution cells (>= 1)."""
+def square_cells(size: int, resolution: float) -> int:
+    """Side, in cells, of the ~0.5 m squares maps of ``size`` cells per side are averaged
+    over: the largest divisor of ``size`` not above BLOCK_METRES / resolution (>= 1; 1 at
+    r_M >= 0.5 m). The smoothing here and the learned field prior's inputs share it."""
     target = max(1, int(round(BLOCK_METRES / resolution)))
     return max(b for b in range(1, target + 1) if size % b == 0)
 
@@ -128,7 +130,7 @@ class InterestSmoother:
             raise ValueError(f"the smoothing sigma must be a positive number of metres, "
                              f"got {sigma!r}")
         self.size = int(size)
-        self.block = _block_side(self.size, resolution)
+        self.block = square_cells(self.size, resolution)
         self.sigma = float(sigma)
         blocks = self.size // self.block
         self.matrix = smoothing_matrix(blocks, self.sigma / (self.block * resolution))

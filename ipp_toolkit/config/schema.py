@@ -437,6 +437,12 @@ class RewardConfig:
                   "and weight_uninteresting are both 0: the reward would count no entropy")
 
 
+#: ``features.gain_interest``: the Gaussian smoothing of ``gain_smoothing`` metres.
+GAIN_INTEREST_SMOOTHED = "smoothed"
+#: ``features.gain_interest``: the packaged learned field prior.
+GAIN_INTEREST_LEARNED = "learned"
+
+
 @dataclass(frozen=True)
 class FeatureConfig:
     """Which 11 x 11 feature planes the actor and the critic see.
@@ -471,6 +477,12 @@ class FeatureConfig:
             smoothed over its neighbourhood with a Gaussian of this standard deviation
             (:mod:`ipp_toolkit.belief.interest`; the maps treat cells as independent, real fields
             are not). Same scale, divided by the largest footprint's cell count.
+        gain_interest: where the ``ig_spatial`` objective's probability of interest comes
+            from. ``smoothed`` (default): the Gaussian smoothing of ``gain_smoothing``
+            (0: ``ig``'s objective). ``learned``: the packaged learned field prior, the one
+            ``ig_learned`` flies (:mod:`ipp_toolkit.belief.field_prior`); or the path of a
+            field-prior file (``ipp-train prior`` writes ``RUN/best.pt``). With a learned
+            prior the planes hold ``ig_learned``'s objective and ``gain_smoothing`` is unused.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
     """
@@ -491,6 +503,7 @@ class FeatureConfig:
     other_actions: bool = True
     centred: bool = True
     gain_smoothing: float = 0.0
+    gain_interest: str = GAIN_INTEREST_SMOOTHED
     agent_id_scale: int = 8
 
     def __post_init__(self) -> None:
@@ -500,6 +513,11 @@ class FeatureConfig:
                 or not 0 <= self.gain_smoothing < math.inf):
             _fail("features", "gain_smoothing", self.gain_smoothing,
                   "must be a finite number of metres >= 0 (0: ig's objective)")
+        if (self.gain_interest not in (GAIN_INTEREST_SMOOTHED, GAIN_INTEREST_LEARNED)
+                and not os.path.isfile(self.gain_interest)):
+            _fail("features", "gain_interest", self.gain_interest,
+                  f"must be {GAIN_INTEREST_SMOOTHED!r}, {GAIN_INTEREST_LEARNED!r} or the path "
+                  "of a field-prior file (`ipp-train prior` writes RUN/best.pt); no such file")
         if not isinstance(self.agent_id_scale, int | np.integer) or self.agent_id_scale < 1:
             _fail("features", "agent_id_scale", self.agent_id_scale, "must be an integer >= 1")
         if not any(getattr(self, name) for name in ACTOR_PLANES):

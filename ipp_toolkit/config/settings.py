@@ -274,17 +274,17 @@ def setting_line(config: EnvConfig, config_file: str | os.PathLike[str] | None =
 _TRUE, _FALSE = ("true", "1", "on", "yes"), ("false", "0", "off", "no")
 
 
-def parse_feature_flags(items: Sequence[str]) -> dict[str, bool | int | float]:
+def parse_feature_flags(items: Sequence[str]) -> dict[str, bool | int | float | str]:
     """``--feature NAME=VALUE`` flags as a ``features`` section, typed by :class:`FeatureConfig`.
 
     Switches take true/false (also 1/0, on/off, yes/no); ``gain_smoothing`` a number of
-    metres; ``agent_id_scale`` an integer.
+    metres; ``agent_id_scale`` an integer; ``gain_interest`` a word or a path, as written.
 
     Raises:
         ValueError: an unknown feature or a value of the wrong kind (the message names it).
     """
     kinds = {f.name: f.type for f in dataclasses.fields(FeatureConfig)}
-    parsed: dict[str, bool | int | float] = {}
+    parsed: dict[str, bool | int | float | str] = {}
     for item in items:
         name, sep, raw = (part.strip() for part in item.partition("="))
         if not sep or name not in kinds:
@@ -299,6 +299,8 @@ def parse_feature_flags(items: Sequence[str]) -> dict[str, bool | int | float]:
                 parsed[name] = raw.lower() in _TRUE
             elif kind in (int, "int"):
                 parsed[name] = int(raw)
+            elif kind in (str, "str"):
+                parsed[name] = raw
             else:
                 parsed[name] = float(raw)
         except ValueError:

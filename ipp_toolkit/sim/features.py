@@ -14,9 +14,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..belief.field_prior import shared_prior
 from ..belief.gain import FootprintGainCache
-from ..belief.interest import BlockMeanCache, interest_smoother
-from ..config.schema import ACTOR_PLANES, FeatureConfig
+from ..belief.interest import BlockMeanCache, interest_smoother, square_cells
+from ..config.schema import ACTOR_PLANES, GAIN_INTEREST_SMOOTHED, FeatureConfig
 from .mission import MissionState
 from .team import ACTION_DELTAS, N_ACTIONS
 
@@ -178,11 +179,13 @@ def actor_observations(state: MissionState, features: FeatureConfig) -> np.ndarr
     if features.footprints:
         planes.append(_footprint_cover(state, state.heard))
     if features.gain:
-        planes.extend(np.moveaxis(gain_planes(state, features.gain_smoothing), 1, 0))
+        planes.extend(np.moveaxis(
+            gain_planes(state, features.gain_smoothing, features.gain_interest), 1, 0))
     return np.stack(planes, axis=1).astype(np.float32)
 
 
-def footprint_gain(state: MissionState, smoothing: float | None = None) -> np.ndarray:
+def footprint_gain(state: MissionState, smoothing: float | None = None,
+                   interest: str | None = None) -> np.ndarray:
     """Expected gain of a reading from every waypoint, on every agent's local map.
 
     The gain of one reading from waypoint (ix, iy, iz) is the sum over its footprint of
@@ -199,26 +202,38 @@ def footprint_gain(state: MissionState, smoothing: float | None = None) -> np.nd
     interesting class (:mod:`ipp_toolkit.belief.interest`), divided by the same cell count (at most
     1; slightly negative where only cells believed uninteresting are left).
 
+    With ``interest`` naming a learned field prior (``learned`` or a file; None: the mission's
+    ``features.gain_interest``) the probability of interest is the prior's prediction from
+    each agent's local map instead of the smoothing: ``ig_learned``'s objective
+    (:mod:`ipp_toolkit.belief.field_prior`; one batched forward pass per call).
+
     Returns:
         (N, Z, G, G) float32.
     """
     reward = state.config.reward
-    if smoothing is None:
-        smoothing = state.config.features.gain_smoothing
-    objective = "interesting" if smoothing > 0 else "ig"
+    features = state.config.features
+    smoothing = features.gain_smoothing if smoothing is None else smoothing
+    interest = features.gain_interest if interest is None else interest
+    learned = interest != GAIN_INTEREST_SMOOTHED
+    objective = "interesting" if smoothing > 0 or learned else "ig"
     cache = state.gain_cache
     if cache is None or cache.maps is not state.maps or cache.objective != objective:
         cache = state.gain_cache = FootprintGainCache(
             state.maps, state.n_agents, state.geometry.camera,
             (reward.weight_interesting, reward.weight_uninteresting), objective)
-    if smoothing > 0:
+    if objective == "interesting":
         world = state.config.world
-        smoother = interest_smoother(world.map_cells, world.resolution, smoothing)
+        block = square_cells(world.map_cells, world.resolution)
         means = state.block_mean_cache
-        if means is None or means.maps is not state.maps or means.block != smoother.block:
-            means = state.block_mean_cache = BlockMeanCache(state.maps, state.n_agents,
-                                                            smoother.block)
-        sums = cache.weighted_sums(smoother.smooth(means.means()), smoother.block)
+        if means is None or means.maps is not state.maps or means.block != block:
+            means = state.block_mean_cache = BlockMeanCache(state.maps, state.n_agents, block)
+        if learned:
+            weight = shared_prior(interest).square_values(means.means(), world.resolution,
+                                                          world.map_cells)
+        else:
+            weight = interest_smoother(world.map_cells, world.resolution,
+                                       smoothing).smooth(means.means())
+        sums = cache.weighted_sums(weight, block)
         scale = 1.0
     else:
         sums = cache.sums()
@@ -226,9 +241,10 @@ def footprint_gain(state: MissionState, smoothing: float | None = None) -> np.nd
     return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
 
 
-def gain_planes(state: MissionState, smoothing: float | None = None) -> np.ndarray:
-    """The ``gain`` planes: :func:`footprint_gain` at the agent's altitude, above and below,
-    in an 11 x 11 window centred on the agent.
+def gain_planes(state: MissionState, smoothing: float | None = None,
+                interest: str | None = None) -> np.ndarray:
+    """The ``gain`` planes: :func:`footprint_gain` (of ``smoothing`` and ``interest``) at the
+    agent's altitude, above and below, in an 11 x 11 window centred on the agent.
 
     Window cell (v, u) of agent k shows waypoint (y_k + v - c, x_k + u - c), c = G // 2, so the
     six options of every decision sit at the same cells: the four horizontal moves next to
@@ -240,7 +256,7 @@ def gain_planes(state: MissionState, smoothing: float | None = None) -> np.ndarr
     Returns:
         (N, 3, G, G) float32 in :data:`GAIN_PLANES` order.
     """
-    gain = footprint_gain(state, smoothing)
+    gain = footprint_gain(state, smoothing, interest)
     n, z, g = gain.shape[:3]
     c = g // 2
     level = state.positions[:, 2]

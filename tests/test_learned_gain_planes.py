@@ -1,0 +1,128 @@
+"""The ``gain`` planes with a learned field prior (``features.gain_interest``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ipp_toolkit.belief.field_prior import (
+    SHIPPED_PRIOR,
+    FieldPrior,
+    prior_file,
+    shared_prior,
+)
+from ipp_toolkit.belief.gain import recomputed_footprint_sums
+from ipp_toolkit.belief.interest import block_means, square_cells
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import parse_feature_flags
+from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.sim.features import actor_observations, footprint_gain, gain_planes
+from ipp_toolkit.sim.mission import reset_mission, step_mission
+
+LEARNED = {"gain": True, "gain_interest": "learned"}
+
+
+@pytest.mark.parametrize("agents, comm, resolution", [(4, 25.0, 0.5), (2, math.inf, 0.25)])
+def test_learned_gain_planes_equal_a_full_recomputation(agents, comm, resolution):
+    """The planes weight every cell's interesting-class gain by the prior's prediction from
+    the agent's own local map, predicted afresh from the whole maps at every step."""
+    config = EnvConfig().replace(world={"resolution": resolution},
+                                 team={"n_agents": agents, "comm_range": comm},
+                                 features=LEARNED)
+    prior = FieldPrior.load(SHIPPED_PRIOR)
+    size = config.world.map_cells
+    square = square_cells(size, resolution)
+    state = reset_mission(config, seed=2, mission=0, namespace="validation")
+    camera = state.geometry.camera
+    rng = np.random.default_rng(4)
+    for _ in range(4):
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+        prob = state.maps.prob[:agents]
+        weight = prior.fine_values(prob, resolution, square)
+        cells = np.repeat(np.repeat(weight, square, axis=-2), square, axis=-1)
+        full = recomputed_footprint_sums(state.maps, agents, camera, (1.0, 0.0),
+                                         objective="interesting", cell_weight=cells)
+        np.testing.assert_allclose(footprint_gain(state), full / camera.largest_footprint_cells,
+                                   rtol=0, atol=2e-6)
+
+
+def test_square_values_equal_the_fine_values_of_the_maps():
+    prior = shared_prior("learned")
+    rng = np.random.default_rng(0)
+    prob = rng.random((3, 500, 500), dtype=np.float32)
+    square = square_cells(500, 0.1)
+    assert square == 5
+    np.testing.assert_allclose(prior.square_values(block_means(prob, square), 0.1, 500),
+                               prior.fine_values(prob, 0.1, square), rtol=0, atol=1e-6)
+
+
+def test_learned_planes_differ_from_the_smoothed_ones_and_a_policy_reads_its_own():
+    smoothed = EnvConfig().replace(world={"resolution": 0.5},
+                                   features={"gain": True, "gain_smoothing": 5.0})
+    learned = smoothed.replace(features=LEARNED)
+    state = reset_mission(smoothed, seed=0, mission=0)
+    reference = reset_mission(learned, seed=0, mission=0)
+    for _ in range(3):  # the same moves on both missions (same starts and terrain)
+        actions = [int(np.flatnonzero(m)[-1]) for m in state.masks()]
+        step_mission(state, actions)
+        step_mission(reference, actions)
+    planes = actor_observations(state, learned.features)[:, -3:]
+    np.testing.assert_array_equal(planes, gain_planes(reference))
+    assert not np.allclose(planes, actor_observations(state, smoothed.features)[:, -3:])
+    assert np.all(planes <= 1.0 + 1e-6)
+
+
+def test_gain_interest_is_validated_and_parsed(tmp_path):
+    with pytest.raises(ValueError, match=r"features.gain_interest = 'guess'.*field-prior file"):
+        EnvConfig().replace(features={"gain_interest": "guess"})
+    with pytest.raises(ValueError, match="gain_interest"):
+        EnvConfig().replace(features={"gain_interest": str(tmp_path / "missing.pt")})
+    parsed = parse_feature_flags(["gain=true", "gain_interest=learned"])
+    assert parsed == {"gain": True, "gain_interest": "learned"}
+    assert EnvConfig().replace(features=parsed).features.gain_interest == "learned"
+    # a path names a prior file
+    own = tmp_path / "prior.pt"
+    own.write_bytes(SHIPPED_PRIOR.read_bytes())
+    config = EnvConfig().replace(world={"resolution": 0.5},
+                                 features={"gain": True, "gain_interest": str(own)})
+    state = reset_mission(config, seed=0, mission=0)
+    np.testing.assert_array_equal(footprint_gain(state), footprint_gain(state, None, "learned"))
+
+
+def test_prior_file_names_the_missing_or_folder(tmp_path):
+    assert prior_file("learned") == SHIPPED_PRIOR
+    with pytest.raises(CheckpointError, match="is a folder"):
+        prior_file(tmp_path)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        prior_file(tmp_path / "nope.pt")
+
+
+def test_shared_prior_is_loaded_once_and_again_when_the_file_changes(tmp_path):
+    own = tmp_path / "prior.pt"
+    own.write_bytes(SHIPPED_PRIOR.read_bytes())
+    first = shared_prior(own)
+    assert shared_prior(own) is first
+    shared_prior("learned").save(own)  # rewritten: another version of the file
+    assert shared_prior(own) is not first
+
+
+def test_the_first_agents_best_learned_option_is_ig_learneds_choice():
+    """Agent 0 hears no lower-index teammate, so ``ig_learned`` flies the argmax of its
+    planes: the planes hold that planner's objective."""
+    from baselines.learned_prior import LearnedPriorPlanner
+    from ipp_toolkit.planners import planner_views
+    from ipp_toolkit.sim.features import option_gain_cells
+
+    config = EnvConfig().replace(world={"resolution": 0.5}, features=LEARNED)
+    planner = LearnedPriorPlanner()
+    planner.reset(config, 0)
+    state = reset_mission(config, seed=0, mission=1)
+    channel, row, col = option_gain_cells([0, 1, 2], state.geometry.grid_points)
+    while not state.done:
+        actions = planner.act(planner_views(state, planner))
+        options = gain_planes(state)[0, channel, row, col]
+        options[~state.masks()[0].astype(bool)] = -np.inf
+        assert int(np.argmax(options)) == actions[0]
+        step_mission(state, actions)
