@@ -82,7 +82,8 @@ class RLlibTrainConfig:
         width, features_dim, hidden: the network's sizes.
         num_env_runners: Ray actors that sample (0: the driver samples).
         envs_per_runner: env copies each runner steps.
-        train_batch: agent-steps sampled per iteration (``train_batch_size_per_learner``).
+        train_batch: team steps (joint steps of all UAVs) sampled per iteration (RLlib's
+            ``train_batch_size_per_learner`` counts env steps): N times as many agent-steps.
         lr: learning rate.
         gamma: discount factor.
         checkpoint_every: iterations between checkpoints (and policy exports).
@@ -99,7 +100,7 @@ class RLlibTrainConfig:
     hidden: int = 64
     num_env_runners: int = 0
     envs_per_runner: int = 1
-    train_batch: int = 2048
+    train_batch: int = 512
     lr: float = 3e-4
     gamma: float = 0.99
     checkpoint_every: int = 5
@@ -192,6 +193,10 @@ def train_rllib(config: RLlibTrainConfig, env_config: EnvConfig, out_dir: str | 
         raise ValueError(f"time_limit_s must be a positive number or None, got {time_limit_s!r}")
     env_cfg = training_env_config(config, env_config)
     check_sizes(config, env_cfg)
+    if address is not None:
+        from ipp_toolkit.runs.ray_backend import probe
+
+        probe(address)  # fails in seconds, naming the address, with or without Ray here
     require_rllib()
     from . import rllib_run  # imports Ray
 
@@ -234,7 +239,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--algo", default="PPO", metavar="|".join(RLLIB_ALGORITHMS),
                         help="the RLlib algorithm (any case)")
     parser.add_argument("--iterations", type=int, default=defaults.iterations,
-                        help="training iterations (each samples --train-batch agent-steps)")
+                        help="training iterations (each samples --train-batch team steps)")
     parser.add_argument("--out", default=None, help="output folder (default runs/rllib-ALGO)")
     parser.add_argument("--address", default=None,
                         help="a running Ray cluster (HOST:PORT as printed by `ray start "
@@ -244,7 +249,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--envs-per-runner", type=int, default=defaults.envs_per_runner,
                         help="simulator copies each sampler steps")
     parser.add_argument("--train-batch", type=int, default=defaults.train_batch,
-                        help="agent-steps sampled per iteration")
+                        help="team steps (joint steps of all UAVs) sampled per iteration; "
+                             "agent-steps are N (--agents) times as many")
     parser.add_argument("--lr", type=float, default=defaults.lr, help="learning rate")
     parser.add_argument("--gamma", type=float, default=defaults.gamma, help="discount factor")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
