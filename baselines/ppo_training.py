@@ -44,7 +44,9 @@ from .ppo import (
 )
 from .sb3_runner import RunFormat, run_sb3_training, same_run_check
 
-__all__ = ["TrainingWorld", "training_env_config", "train_ppo", "main"]
+__all__ = ["TrainingWorld", "training_env_config", "train_ppo", "add_mission_flags",
+           "add_network_flags", "mission_config_from_args", "add_run_config_flags",
+           "run_config_from_args", "add_run_flags", "main"]
 
 
 class TrainingWorld(Protocol):
@@ -160,21 +162,12 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def add_run_config_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig) -> None:
-    """The flags of :class:`~baselines.ppo.SB3RunConfig`'s fields (every SB3 trainer): the
-    env file, the run's length, seed and network sizes, and the training world."""
+def add_mission_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig | Any) -> None:
+    """The mission flags every trainer shares (``ipp-train ppo``, ``sb3``, ``rllib``): the env
+    file, the run seed and the training world (team size, range, resolution). ``defaults``
+    has the fields ``seed``, ``n_agents``, ``comm_range`` and ``resolution``."""
     parser.add_argument("--config", help="env config YAML (defaults: the paper's world)")
-    parser.add_argument("--timesteps", type=int, default=defaults.total_timesteps,
-                        help="agent-transitions to train for")
-    parser.add_argument("--n-envs", type=int, default=defaults.n_envs,
-                        help="simulator copies stepped together")
     parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--width", type=int, default=defaults.width,
-                        help="conv channels of the features extractor")
-    parser.add_argument("--features-dim", type=int, default=defaults.features_dim,
-                        help="output size of the features extractor")
-    parser.add_argument("--hidden", type=int, default=defaults.hidden,
-                        help="hidden layer width of each head")
     parser.add_argument("--agents", type=int, default=None,
                         help=f"team size N (default: the --config file's, else "
                              f"{defaults.n_agents})")
@@ -184,6 +177,38 @@ def add_run_config_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig
     parser.add_argument("--resolution", type=float, default=None,
                         help=f"training map resolution in metres per cell (default: the "
                              f"--config file's, else {defaults.resolution:g})")
+
+
+def add_network_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig | Any) -> None:
+    """The network-size flags of the shared conv policy (``defaults``: ``width``,
+    ``features_dim``, ``hidden``)."""
+    parser.add_argument("--width", type=int, default=defaults.width,
+                        help="conv channels of the features extractor")
+    parser.add_argument("--features-dim", type=int, default=defaults.features_dim,
+                        help="output size of the features extractor")
+    parser.add_argument("--hidden", type=int, default=defaults.hidden,
+                        help="hidden layer width of each head")
+
+
+def mission_config_from_args(args: argparse.Namespace, defaults: SB3RunConfig | Any
+                             ) -> EnvConfig:
+    """The env config that :func:`add_mission_flags`' flags give (flag > ``--config`` file >
+    ``defaults``)."""
+    return build_env_config(
+        args.config, agents=args.agents, comm=args.comm, resolution=args.resolution,
+        defaults={"world": {"resolution": defaults.resolution},
+                  "team": {"n_agents": defaults.n_agents, "comm_range": defaults.comm_range}})
+
+
+def add_run_config_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig) -> None:
+    """The flags of :class:`~baselines.ppo.SB3RunConfig`'s fields (every SB3 trainer): the
+    mission flags (:func:`add_mission_flags`), the run's length and network sizes."""
+    add_mission_flags(parser, defaults)
+    parser.add_argument("--timesteps", type=int, default=defaults.total_timesteps,
+                        help="agent-transitions to train for")
+    parser.add_argument("--n-envs", type=int, default=defaults.n_envs,
+                        help="simulator copies stepped together")
+    add_network_flags(parser, defaults)
     parser.add_argument("--workers", "--num-cpus", dest="num_cpus", type=int,
                         default=defaults.num_cpus, metavar="N",
                         help="SuperSuit worker processes (0: none; --num-cpus is the old name)")
@@ -199,10 +224,7 @@ def run_config_from_args(args: argparse.Namespace, defaults: SB3RunConfig
                     ) -> tuple[EnvConfig, dict[str, Any]]:
     """The env config and the :class:`~baselines.ppo.SB3RunConfig` fields that
     :func:`add_run_config_flags`' flags give (flag > ``--config`` file > ``defaults``)."""
-    env_config = build_env_config(
-        args.config, agents=args.agents, comm=args.comm, resolution=args.resolution,
-        defaults={"world": {"resolution": defaults.resolution},
-                  "team": {"n_agents": defaults.n_agents, "comm_range": defaults.comm_range}})
+    env_config = mission_config_from_args(args, defaults)
     fields = {"total_timesteps": args.timesteps, "n_envs": args.n_envs, "seed": args.seed,
               "width": args.width, "features_dim": args.features_dim, "hidden": args.hidden,
               "resolution": env_config.world.resolution, "n_agents": env_config.team.n_agents,

@@ -318,7 +318,7 @@ def interrupted(tool: str, out_dir: Path) -> int:
 
 
 TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training", "sb3": "baselines.sb3_training",
-            "prior": "baselines.prior_training"}
+            "prior": "baselines.prior_training", "rllib": "baselines.rllib_training"}
 
 
 def train_main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,175 @@
+"""What ``ipp-train rllib`` hands to RLlib: the multi-agent env, the masked RLModule, the
+episode callback. Imports Ray: only :mod:`baselines.rllib_training` imports this module, and
+only once Ray is known to be importable.
+
+* :class:`IPPMultiAgentEnv`: :class:`ipp_toolkit.env.IPPEnv` as an RLlib ``MultiAgentEnv``.
+  Each UAV is one agent (``uav_0`` ...); all map to the one shared policy
+  (:data:`SHARED_POLICY`). Every agent gets the team reward. Seeding: copy ``v`` of env
+  runner ``w`` flies missions 0, 1, 2, ... of run ``base_seed + w * envs_per_runner + v``
+  (``base_seed`` is the run seed plus the agent-steps done before a resume).
+* :class:`IPPMaskedRLModule`: a ``TorchRLModule`` around
+  :class:`baselines.rllib_policy.MaskedConvPolicy` (the conv encoder of the (C, 11, 11)
+  planes, masked logits, a value head); it implements the ``ValueFunctionAPI`` (PPO, APPO,
+  IMPALA) and the ``TargetNetworkAPI`` (APPO).
+* :class:`TeamMetricsCallback`: logs each finished mission's team return, final entropy and
+  F1 (RLlib's own ``episode_return_mean`` sums the returns of all agents of an episode).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+from ray.rllib.callbacks.callbacks import RLlibCallback
+from ray.rllib.core.columns import Columns
+from ray.rllib.core.learner.utils import make_target_network
+from ray.rllib.core.rl_module.apis import (
+    TARGET_NETWORK_ACTION_DIST_INPUTS,
+    TargetNetworkAPI,
+    ValueFunctionAPI,
+)
+from ray.rllib.core.rl_module.torch import TorchRLModule
+from ray.rllib.env.multi_agent_env import MultiAgentEnv
+
+from ipp_toolkit.config.files import config_from_dict
+from ipp_toolkit.env import IPPEnv
+
+from .rllib_policy import MaskedConvPolicy, RLlibArchitecture
+
+__all__ = ["SHARED_POLICY", "ENV_NAME", "IPPMultiAgentEnv", "make_env", "IPPMaskedRLModule",
+           "TeamMetricsCallback"]
+
+SHARED_POLICY = "shared"
+"""The id of the one policy (RLModule) every UAV maps to."""
+ENV_NAME = "ipp_toolkit_multi_agent"
+"""The name the env is registered under with Ray's Tune registry."""
+
+_COPIES: dict[int, itertools.count] = defaultdict(itertools.count)
+"""Per env-runner index: env copies made in this process so far (their vector index)."""
+
+
+class IPPMultiAgentEnv(MultiAgentEnv):
+    """:class:`ipp_toolkit.env.IPPEnv` as an RLlib multi-agent env (see the module docstring).
+
+    Args:
+        env_config: RLlib's env config: ``env`` (an :func:`~ipp_toolkit.config.files.
+            config_to_dict` dict), ``base_seed`` (int), ``envs_per_runner`` (int); the
+            runner's ``worker_index`` is read from it when it is an ``EnvContext``.
+    """
+
+    def __init__(self, env_config: Any) -> None:
+        super().__init__()
+        worker = int(getattr(env_config, "worker_index", 0) or 0)
+        copy = next(_COPIES[worker])
+        self.run_seed = (int(env_config["base_seed"])
+                         + worker * int(env_config["envs_per_runner"]) + copy)
+        self.env = IPPEnv(config_from_dict(env_config["env"]))
+        self.possible_agents = list(self.env.possible_agents)
+        self.agents = list(self.possible_agents)
+        self.observation_spaces = {a: self.env.observation_space(a) for a in self.agents}
+        self.action_spaces = {a: self.env.action_space(a) for a in self.agents}
+        self._seeded = False
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None
+              ) -> tuple[dict, dict]:
+        """The next mission of this copy's run (RLlib's ``seed`` is not used: see above)."""
+        first = not self._seeded
+        self._seeded = True
+        obs, infos = self.env.reset(seed=self.run_seed if first else None, options=options)
+        self.agents = list(self.env.agents)
+        return obs, infos
+
+    def step(self, action_dict: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """One joint step; ``__all__`` ends the episode once no agent is left."""
+        obs, rewards, terminated, truncated, infos = self.env.step(
+            {a: int(np.asarray(act).reshape(())) for a, act in action_dict.items()})
+        self.agents = list(self.env.agents)
+        terminated = dict(terminated)
+        truncated = dict(truncated)
+        terminated["__all__"] = not self.agents and all(terminated.values())
+        truncated["__all__"] = not self.agents and not terminated["__all__"]
+        return obs, rewards, terminated, truncated, infos
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def make_env(env_config: Any) -> IPPMultiAgentEnv:
+    """The env creator registered as :data:`ENV_NAME`."""
+    return IPPMultiAgentEnv(env_config)
+
+
+class IPPMaskedRLModule(TorchRLModule, ValueFunctionAPI, TargetNetworkAPI):
+    """The shared policy: :class:`MaskedConvPolicy` over the Dict observation
+    ``{"observation": (C, G, G), "action_mask": (6,)}``.
+
+    ``model_config``: ``width``, ``features_dim``, ``hidden`` (the sizes of
+    :class:`~baselines.rllib_policy.RLlibArchitecture`).
+    """
+
+    def setup(self) -> None:
+        planes = self.observation_space["observation"].shape
+        config = dict(self.model_config or {})
+        self.architecture = RLlibArchitecture(
+            channels=int(planes[0]), grid=int(planes[1]), width=int(config.get("width", 32)),
+            features_dim=int(config.get("features_dim", 128)),
+            hidden=int(config.get("hidden", 64)))
+        self.net = MaskedConvPolicy(self.architecture)
+
+    def _split(self, batch: dict[str, Any]) -> tuple[Any, Any]:
+        obs = batch[Columns.OBS]
+        return obs["observation"], obs["action_mask"]
+
+    def _forward(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        planes, mask = self._split(batch)
+        features = self.net.features(planes)
+        return {Columns.ACTION_DIST_INPUTS: self.net.logits(features, mask)}
+
+    def _forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        planes, mask = self._split(batch)
+        features = self.net.features(planes)
+        return {Columns.ACTION_DIST_INPUTS: self.net.logits(features, mask),
+                Columns.EMBEDDINGS: features}
+
+    def compute_values(self, batch: dict[str, Any], embeddings: Any = None) -> Any:
+        """(B,) values; ``embeddings`` are the encoder's features when already computed."""
+        if embeddings is None:
+            embeddings = self.net.features(self._split(batch)[0])
+        return self.net.value(embeddings)
+
+    def make_target_networks(self) -> None:
+        """APPO's target copy of the whole network."""
+        self._target_net = make_target_network(self.net)
+
+    def get_target_network_pairs(self) -> list[tuple[Any, Any]]:
+        return [(self.net, self._target_net)]
+
+    def forward_target(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        planes, mask = self._split(batch)
+        return {TARGET_NETWORK_ACTION_DIST_INPUTS: self._target_net(planes, mask)}
+
+    def get_non_inference_attributes(self) -> list[str]:
+        return ["_target_net"]
+
+
+class TeamMetricsCallback(RLlibCallback):
+    """Logs ``team_return`` (the longest-lived UAV's return: every UAV gets the team reward),
+    ``final_entropy`` and ``final_f1`` of each finished mission (means per iteration)."""
+
+    def on_episode_end(self, *, episode: Any, metrics_logger: Any = None,
+                       **kwargs: Any) -> None:
+        if metrics_logger is None:
+            return
+        agents = list(episode.agent_episodes.values())
+        if not agents:
+            return
+        metrics_logger.log_value("team_return", max(float(a.get_return()) for a in agents),
+                                 reduce="mean")
+        infos = [a.get_infos(-1) for a in agents]
+        last = max((info for info in infos if "entropy" in info),
+                   key=lambda info: info.get("step", 0), default=None)
+        if last is not None:
+            metrics_logger.log_value("final_entropy", float(last["entropy"]), reduce="mean")
+            metrics_logger.log_value("final_f1", float(last["f1"]), reduce="mean")

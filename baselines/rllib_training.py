@@ -1,0 +1,307 @@
+"""``ipp-train rllib --algo PPO|APPO|IMPALA``: train the shared policy with RLlib, on a local
+Ray or a cluster (``--address``).
+
+Every UAV is one agent of an RLlib multi-agent env and all map to one policy (parameter
+sharing, :mod:`baselines.rllib_module`); the RLModule reads the action mask from the
+observation and masks the invalid logits, so a masked action is never sampled. The run folder
+``OUT`` holds, as the other trainers' do:
+
+* ``OUT/checkpoint/`` (RLlib's checkpoint of the whole algorithm, swapped in atomically:
+  written beside, then renamed) and ``OUT/checkpoint.json`` (the configs, iterations,
+  agent-steps, seconds); ``--resume`` carries on from it (same configs; only
+  ``--iterations`` may change);
+* ``OUT/policy.pt`` + ``policy.json``: the policy's plain weights for the ``rllib`` planner
+  (``ipp-compare --planners rllib=OUT``), written atomically at every checkpoint and at the end;
+* ``OUT/tb/``: TensorBoard: ``rollout/ep_rew_mean`` (the team return per mission, mean of the
+  last 100 missions, as SB3's), ``rollout/final_entropy``, ``rollout/final_f1``,
+  ``rollout/rllib_episode_return_mean`` (RLlib's own: the sum over the UAVs of an episode),
+  throughput and the learner's losses, against agent-steps.
+
+Ray is optional (``pip install -c constraints-rllib.txt -e ".[rllib]"``): this module
+imports it only inside :func:`train_rllib`, so the command line checks its arguments without it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+import sys
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from ipp_toolkit.config.files import config_from_dict, config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.settings import setting_line
+from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
+from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.sim.features import actor_plane_names
+
+from .ppo import check_policy_size
+from .ppo_training import (
+    add_mission_flags,
+    add_network_flags,
+    add_run_flags,
+    mission_config_from_args,
+    training_env_config,
+)
+from .rllib_policy import RLLIB_ALGORITHMS, canonical_rllib_algo
+
+__all__ = ["INSTALL_COMMAND", "RLlibUnavailableError", "RLlibTrainConfig", "require_rllib",
+           "train_rllib", "main"]
+
+INSTALL_COMMAND = 'pip install -c constraints-rllib.txt -e ".[rllib]"'
+"""How to install the optional RLlib extra (docs/rllib.md)."""
+
+
+class RLlibUnavailableError(ValueError):
+    """``ray[rllib]`` cannot be imported here."""
+
+
+def require_rllib() -> None:
+    """Raise :class:`RLlibUnavailableError` (naming the install command) unless RLlib imports."""
+    try:
+        import ray.rllib  # noqa: F401
+    except ImportError as err:
+        raise RLlibUnavailableError(
+            f"ipp-train rllib needs ray[rllib], which cannot be imported here ({err}); install "
+            f"the optional extra with: {INSTALL_COMMAND}") from None
+
+
+@dataclass(frozen=True)
+class RLlibTrainConfig:
+    """One ``ipp-train rllib`` run.
+
+    Attributes:
+        algo: ``PPO``, ``APPO`` or ``IMPALA`` (any case; stored in RLlib's spelling).
+        iterations: RLlib training iterations (``algo.train()`` calls) of the whole run.
+        seed: the run seed (missions, weights).
+        n_agents, comm_range, resolution: the training world.
+        width, features_dim, hidden: the network's sizes.
+        num_env_runners: Ray actors that sample (0: the driver samples).
+        envs_per_runner: env copies each runner steps.
+        train_batch: team steps (joint steps of all UAVs) sampled per iteration (RLlib's
+            ``train_batch_size_per_learner`` counts env steps): N times as many agent-steps.
+        lr: learning rate.
+        gamma: discount factor.
+        checkpoint_every: iterations between checkpoints (and policy exports).
+    """
+
+    algo: str = "PPO"
+    iterations: int = 10
+    seed: int = 0
+    n_agents: int = 4
+    comm_range: float = 25.0
+    resolution: float = 0.5
+    width: int = 32
+    features_dim: int = 128
+    hidden: int = 64
+    num_env_runners: int = 0
+    envs_per_runner: int = 1
+    train_batch: int = 512
+    lr: float = 3e-4
+    gamma: float = 0.99
+    checkpoint_every: int = 5
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "algo", canonical_rllib_algo(self.algo))
+        minimum = {"iterations": 1, "seed": 0, "n_agents": 1, "width": 1, "features_dim": 1,
+                   "hidden": 1, "num_env_runners": 0, "envs_per_runner": 1, "train_batch": 2,
+                   "checkpoint_every": 1}
+        for name, low in minimum.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"invalid RLlib config: {name} must be an integer >= {low}, "
+                                 f"got {value!r}")
+        for name in ("comm_range", "resolution", "lr", "gamma"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) \
+                    or math.isnan(value) or value <= 0:
+                raise ValueError(f"invalid RLlib config: {name} must be a number > 0, got "
+                                 f"{value!r}")
+        if not math.isfinite(self.lr) or self.gamma > 1:
+            raise ValueError(f"invalid RLlib config: lr must be finite and gamma <= 1, got "
+                             f"lr={self.lr!r}, gamma={self.gamma!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict (an infinite comm_range becomes ``"inf"``)."""
+        values = asdict(self)
+        if math.isinf(self.comm_range):
+            values["comm_range"] = "inf"
+        return values
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> RLlibTrainConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are refused."""
+        unknown = set(values) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"unknown RLlib config keys {sorted(unknown)}")
+        values = dict(values)
+        if values.get("comm_range") == "inf":
+            values["comm_range"] = math.inf
+        return cls(**values)
+
+    def model_config(self) -> dict[str, int]:
+        """The RLModule's ``model_config`` (the network's sizes)."""
+        return {"width": self.width, "features_dim": self.features_dim, "hidden": self.hidden}
+
+
+def check_sizes(config: RLlibTrainConfig, env_cfg: EnvConfig) -> None:
+    """Refuse (before any work) a network whose parameter count exceeds the project's limit."""
+    check_policy_size(len(actor_plane_names(env_cfg.features)), env_cfg.world.grid_points,
+                      config.width, config.features_dim, config.hidden, "an RLlib policy")
+
+
+def train_rllib(config: RLlibTrainConfig, env_config: EnvConfig, out_dir: str | Path,
+                address: str | None = None, progress: bool = True, resume: bool = False,
+                time_limit_s: float | None = None, command: str | None = None,
+                announce: str = "") -> Path:
+    """Train ``config.algo`` with one shared policy and write ``out_dir/policy.pt``.
+
+    Args:
+        config: algorithm, length, sizes and resources.
+        env_config: the mission configuration (team size, range and resolution are
+            ``config``'s).
+        out_dir: the run folder (created).
+        address: a Ray cluster (``HOST:PORT`` as printed by ``ray start --head``, or
+            ``auto``); None starts a local Ray with ``num_env_runners + 1`` CPUs.
+        progress: show a progress bar over iterations.
+        resume: continue from ``out_dir/checkpoint`` (same configs; only ``iterations`` may
+            differ).
+        time_limit_s: stop after the iteration that passes this many seconds, and save.
+        command: the command line, recorded in the JSON files.
+        announce: a line printed to stderr once the folder is checked (the ``setting:`` line).
+
+    Returns:
+        the path of ``policy.pt``.
+
+    Raises:
+        RLlibUnavailableError: ray[rllib] is not installed.
+        ConnectionError: no Ray cluster answers at ``address``.
+        ValueError: bad arguments, an existing run without ``resume``, nothing to resume, or
+            a checkpoint of other configs.
+    """
+    if not isinstance(config, RLlibTrainConfig):
+        raise ValueError(f"config must be an RLlibTrainConfig, got {type(config).__name__}")
+    if not isinstance(env_config, EnvConfig):
+        raise ValueError(f"env_config must be an EnvConfig, got {type(env_config).__name__}")
+    if time_limit_s is not None and (isinstance(time_limit_s, bool)
+                                     or not isinstance(time_limit_s, int | float)
+                                     or not time_limit_s > 0):
+        raise ValueError(f"time_limit_s must be a positive number or None, got {time_limit_s!r}")
+    env_cfg = training_env_config(config, env_config)
+    check_sizes(config, env_cfg)
+    if address is not None:
+        from ipp_toolkit.runs.ray_backend import probe
+
+        probe(address)  # fails in seconds, naming the address, with or without Ray here
+    require_rllib()
+    from . import rllib_run  # imports Ray
+
+    return rllib_run.run(config, env_cfg, Path(out_dir), address=address, progress=progress,
+                         resume=resume, time_limit_s=time_limit_s, command=command,
+                         announce=announce)
+
+
+def same_run(config: RLlibTrainConfig, env_cfg: EnvConfig, record: dict[str, Any],
+             where: str) -> None:
+    """ValueError unless ``record`` (``checkpoint.json``) is a run of ``config`` (except its
+    ``iterations``) on ``env_cfg``."""
+    stored = RLlibTrainConfig.from_dict(record["rllib_config"])
+    if replace(stored, iterations=config.iterations) != config:
+        raise ValueError(f"cannot resume {where!r}: its RLlib config {stored} differs from the "
+                         f"given {config} (only iterations may change)")
+    if config_from_dict(record["env_config"]) != env_cfg:
+        raise ValueError(f"cannot resume {where!r}: it was trained on another env config")
+
+
+def env_record(env_cfg: EnvConfig) -> dict[str, Any]:
+    """The env config as stored in the JSON records."""
+    return config_to_dict(env_cfg)
+
+
+# --------------------------------------------------------------------------------------------
+# Command line
+
+
+def _parser() -> argparse.ArgumentParser:
+    defaults = RLlibTrainConfig()
+    parser = argparse.ArgumentParser(
+        prog="ipp-train rllib",
+        description="Train a shared (parameter-sharing) policy with RLlib (PPO, APPO or "
+                    "IMPALA) on a local Ray or a Ray cluster; the rllib planner flies it "
+                    "(ipp-compare --planners rllib=OUT). Needs the optional extra: "
+                    + INSTALL_COMMAND,
+        formatter_class=HelpFormatter)
+    add_version(parser)
+    parser.add_argument("--algo", default="PPO", metavar="|".join(RLLIB_ALGORITHMS),
+                        help="the RLlib algorithm (any case)")
+    parser.add_argument("--iterations", type=int, default=defaults.iterations,
+                        help="training iterations (each samples --train-batch team steps)")
+    parser.add_argument("--out", default=None, help="output folder (default runs/rllib-ALGO)")
+    parser.add_argument("--address", default=None,
+                        help="a running Ray cluster (HOST:PORT as printed by `ray start "
+                             "--head`, or auto); default: a local Ray for this run")
+    parser.add_argument("--num-env-runners", type=int, default=defaults.num_env_runners,
+                        metavar="K", help="Ray actors that sample (0: the driver samples)")
+    parser.add_argument("--envs-per-runner", type=int, default=defaults.envs_per_runner,
+                        help="simulator copies each sampler steps")
+    parser.add_argument("--train-batch", type=int, default=defaults.train_batch,
+                        help="team steps (joint steps of all UAVs) sampled per iteration; "
+                             "agent-steps are N (--agents) times as many")
+    parser.add_argument("--lr", type=float, default=defaults.lr, help="learning rate")
+    parser.add_argument("--gamma", type=float, default=defaults.gamma, help="discount factor")
+    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every,
+                        help="iterations between checkpoints")
+    add_mission_flags(parser, defaults)
+    add_network_flags(parser, defaults)
+    add_run_flags(parser)
+    return parser
+
+
+def _config_from_args(args: argparse.Namespace) -> tuple[RLlibTrainConfig, EnvConfig]:
+    """The run's config and env config (ValueError naming a bad value)."""
+    algo = canonical_rllib_algo(args.algo)
+    env_config = mission_config_from_args(args, RLlibTrainConfig())
+    config = RLlibTrainConfig(
+        algo=algo, iterations=args.iterations, seed=args.seed,
+        n_agents=env_config.team.n_agents, comm_range=env_config.team.comm_range,
+        resolution=env_config.world.resolution, width=args.width,
+        features_dim=args.features_dim, hidden=args.hidden,
+        num_env_runners=args.num_env_runners, envs_per_runner=args.envs_per_runner,
+        train_batch=args.train_batch, lr=args.lr, gamma=args.gamma,
+        checkpoint_every=args.checkpoint_every)
+    return config, env_config
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``ipp-train rllib [options]``; 0 on success, 2 on bad input, 1 when Ray fails."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = shlex.join(["ipp-train", "rllib", *argv])
+    args = _parser().parse_args(argv)  # exits with status 2 on malformed options
+    try:
+        config, env_config = _config_from_args(args)
+    except ValueError as error:
+        print(f"ipp-train rllib: error: {error}", file=sys.stderr)
+        return 2
+    out = args.out or f"runs/rllib-{config.algo.lower()}"
+    try:
+        path = train_rllib(config, env_config, out, address=args.address,
+                           progress=not args.no_progress, resume=args.resume,
+                           time_limit_s=None if args.time_limit is None
+                           else args.time_limit * 60,
+                           command=command, announce=setting_line(env_config, args.config))
+    except (ValueError, CheckpointError, ConnectionError) as error:
+        print(f"ipp-train rllib: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return report_interrupt("ipp-train rllib", f"continue with the same command plus "
+                                f"--resume --out {out} (from the last checkpoint)")
+    print(f"saved {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
