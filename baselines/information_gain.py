@@ -12,7 +12,7 @@ from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
-from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS
+from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
 
 __all__ = ["InformationGainPlanner", "PaperInformationGainPlanner", "expected_gain"]
@@ -123,10 +123,7 @@ class InformationGainPlanner(Planner):
             if not mask.any():
                 raise ValueError(f"agent {k} has no valid action")
             candidates = view.position[None, :].astype(np.int64) + ACTION_DELTAS  # (6, 3)
-            claimed = (candidates[:, None, :2] == targets[mates][None, :, :2]).all(-1).any(-1)
-            allowed = mask & ~claimed
-            if not allowed.any():
-                allowed = mask
+            allowed = unclaimed_options(view.position, mask, targets[mates])
             mate_rects = camera.rects[targets[mates, 2], targets[mates, 1],
                                       targets[mates, 0]]  # (K, 4)
             values = self._action_values(view, camera, weights, candidates, allowed, mate_rects)

@@ -21,7 +21,8 @@ from ipp_toolkit.sim.features import option_gain_cells
 from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bfloat16_hardware", "bounded_softmax", "epsilon_at",
-           "greedy_actions", "in_input_layout", "learning_forward", "mixed_precision"]
+           "greedy_actions", "in_input_layout", "learning_forward", "masked_logits",
+           "mixed_precision"]
 
 _KERNELS = (5, 4, 4)
 
@@ -252,7 +253,12 @@ def greedy_actions(actor: nn.Module, observations: np.ndarray, masks: np.ndarray
     Returns:
         (B,) int64 actions, always valid.
     """
+    return masked_logits(actor, observations, masks).argmax(axis=-1)
+
+
+def masked_logits(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """(B, 6) float32 actor logits, -inf on invalid actions (shapes as :func:`greedy_actions`)."""
     with torch.no_grad():
         logits = actor(torch.as_tensor(observations, dtype=torch.float32))
     logits = logits.masked_fill(~torch.as_tensor(masks, dtype=torch.bool), -math.inf)
-    return logits.argmax(dim=-1).numpy()
+    return logits.numpy()

@@ -18,9 +18,10 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
+from ipp_toolkit.sim.team import ACTION_DELTAS, unclaimed_options
 
 from .config import mission_settings
-from .networks import greedy_actions
+from .networks import masked_logits
 from .persistence import (
     DEFAULT_SHIPPED,
     check_transfer,
@@ -80,9 +81,20 @@ class COMAPlanner(Planner):
         self.transfer_notes = check_transfer(trained, config, self.checkpoint)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
+        """(N,) int64: each agent's likeliest valid action, chosen in agent order, avoiding
+        the 2-D targets heard lower-index teammates chose (``ig``'s rule; the actors' logits
+        come from one batched forward pass)."""
         observations = np.stack([view.observation for view in views])
         masks = np.stack([view.mask for view in views]).astype(bool)
-        return greedy_actions(self.actor, observations, masks)
+        logits = masked_logits(self.actor, observations, masks)
+        actions = np.empty(len(views), dtype=np.int64)
+        targets = np.empty((len(views), 3), dtype=np.int64)
+        for k, view in enumerate(views):
+            mates = view.teammates[view.teammates < k]
+            allowed = unclaimed_options(view.position, masks[k], targets[mates])
+            actions[k] = int(np.argmax(np.where(allowed, logits[k], -np.inf)))
+            targets[k] = view.position + ACTION_DELTAS[actions[k]]
+        return actions
 
 
 class COMAPriorPlanner(COMAPlanner):

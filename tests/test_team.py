@@ -119,3 +119,21 @@ def test_masks_and_moves_match_their_numpy_reference():
         np.testing.assert_array_equal(moved, expected_moved)
         np.testing.assert_array_equal(blocked, expected_blocked)
         assert moved.dtype == np.int64 and blocked.dtype == bool
+
+
+def test_unclaimed_options_on_a_hand_sized_case():
+    from ipp_toolkit.sim.team import ACTION_NAMES, unclaimed_options
+
+    position = np.array([2, 2, 1])
+    mask = np.ones(6, dtype=bool)
+    # A teammate goes to (3, 2) at another altitude: east is claimed (2-D cells), the rest not.
+    allowed = unclaimed_options(position, mask, np.array([[3, 2, 0]]))
+    assert allowed.tolist() == [name != "east" for name in ACTION_NAMES]
+    # Up and down keep the agent's cell: a teammate moving onto it claims both.
+    allowed = unclaimed_options(position, mask, np.array([[2, 2, 2]]))
+    assert not allowed[ACTION_NAMES.index("up")] and not allowed[ACTION_NAMES.index("down")]
+    # Nothing claimed, or everything valid claimed: the mask itself.
+    assert unclaimed_options(position, mask, np.empty((0, 3), dtype=int)).all()
+    only_east = np.array([name == "east" for name in ACTION_NAMES])
+    assert unclaimed_options(position, only_east, np.array([[3, 2, 0]])).tolist() == \
+        only_east.tolist()

@@ -13,6 +13,7 @@ __all__ = [
     "ACTION_DELTAS",
     "N_ACTIONS",
     "action_masks",
+    "unclaimed_options",
     "resolve_moves",
     "communication_matrix",
     "positions_in_metres",
@@ -64,6 +65,30 @@ def action_masks(positions: np.ndarray, grid_points: int, n_altitudes: int,
          for dx, dy, dz in _DELTAS]
         for k, (x, y, z) in enumerate(cells)]
     return np.array(masks, dtype=np.int8).reshape(len(cells), N_ACTIONS)
+
+
+def unclaimed_options(position: np.ndarray, mask: np.ndarray,
+                      claimed_targets: np.ndarray) -> np.ndarray:
+    """The valid options of an agent that avoid the targets teammates already chose.
+
+    Agents that decide in index order and hear lower-index teammates' choices (the ``ig``
+    family, the ``coma`` planner) avoid a 2-D cell such a teammate will move to: the
+    same-target rule (:func:`resolve_moves`) would hold one of them back.
+
+    Args:
+        position: (3,) int the agent's waypoint (x, y, z).
+        mask: (6,) valid actions.
+        claimed_targets: (K, 3) int next waypoints chosen by heard, already decided teammates.
+
+    Returns:
+        (6,) bool: valid and unclaimed; all valid options when every valid one is claimed.
+    """
+    mask = np.asarray(mask).astype(bool)
+    candidates = np.asarray(position)[None, :].astype(np.int64) + ACTION_DELTAS  # (6, 3)
+    claimed = (candidates[:, None, :2] == np.asarray(claimed_targets)[None, :, :2]
+               ).all(-1).any(-1)
+    allowed = mask & ~claimed
+    return allowed if allowed.any() else mask
 
 
 def resolve_moves(positions: np.ndarray, actions: np.ndarray,
