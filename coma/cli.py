@@ -53,7 +53,7 @@ from .config import (
 from .learner import TrainingDiverged, train
 from .networks import bfloat16_hardware
 from .parallel import resolve_device
-from .persistence import DEFAULT_SHIPPED, resolve_policy
+from .persistence import DEFAULT_SHIPPED, SHIPPED_POLICIES, resolve_policy
 from .recipes import RECIPES, Stage, recipe
 from .validation import validation_settings
 
@@ -124,8 +124,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--init", metavar="POLICY",
                         help="start from this COMA policy file instead of a warm start "
                              "(fine-tuning), or a shipped one: --init shipped:NAME "
-                             "(paper-actor, prior, prior-mixture, spatial-mixture; plain "
-                             "'shipped': coma's default)")
+                             f"({', '.join(SHIPPED_POLICIES)}; plain 'shipped': coma's "
+                             "default)")
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=VALUE",
                         help="set a feature of the mission config, e.g. --feature "
                              "own_position=true or --feature gain_smoothing=5 (repeatable)")

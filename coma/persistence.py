@@ -49,13 +49,16 @@ SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 #: fractal, real), selected by its worst gap to IG over those families on validation missions.
 #: ``spatial-mixture``: the gain-prior actor over the ``ig_spatial`` objective
 #: (``features.gain_smoothing`` = 5 m), its residual trained by COMA on the terrain mixture.
+#: ``learned-mixture``: the same recipe over ``ig_learned``'s objective
+#: (``features.gain_interest = learned``: the learned field prior in the gain planes).
 #: Removed names (``mixed``) are refused with a hint: ``ipp_toolkit.planners.REMOVED_NAMES``.
 SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
                     "prior-mixture": "coma_prior_mixture_4agents_d25.pt",
-                    "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt"}
+                    "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt",
+                    "learned-mixture": "coma_learned_mixture_4agents_d25.pt"}
 #: The shipped policy the ``coma`` planner flies by default: the best on validation missions
 #: (4 UAVs, 25 m, every terrain family at r_M = 0.5 m; docs/generalisation.md).
-DEFAULT_SHIPPED = "spatial-mixture"
+DEFAULT_SHIPPED = "learned-mixture"
 
 
 @dataclass

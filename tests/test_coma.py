@@ -15,7 +15,7 @@ from helpers import small_config, tiny_coma, tiny_env
 
 from coma.config import VARIANTS, COMAConfig, mission_settings, preset
 from coma.learner import TrainingDiverged, setting_of_update, train
-from coma.persistence import check_transfer, load_policy
+from coma.persistence import SHIPPED_POLICIES, check_transfer, load_policy
 from coma.planner import COMAPlanner
 from coma.rollout import collect_rollout
 from ipp_toolkit.io import CheckpointError
@@ -316,7 +316,7 @@ def test_warm_start_settings_come_from_the_coma_config(tmp_path):
         tiny_coma(warm_start={"epochs": 0})
 
 
-@pytest.mark.parametrize("name", ["paper-actor", "prior", "prior-mixture", "spatial-mixture"])
+@pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))
 def test_shipped_policies_load_by_name_and_fly(name):
     from ipp_toolkit.planners import make_planner
 
@@ -457,7 +457,8 @@ def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
     assert resolve_policy("runs/x/best.pt") == Path("runs/x/best.pt")
     with pytest.raises(ValueError, match="unknown shipped policy 'nope'; shipped policies: "
                                          "shipped:paper-actor, shipped:prior, "
-                                         "shipped:prior-mixture, shipped:spatial-mixture"):
+                                         "shipped:prior-mixture, shipped:spatial-mixture, "
+                                         "shipped:learned-mixture"):
         resolve_policy("shipped:nope")
     default = make_planner("coma")
     assert Path(default.checkpoint) == resolve_policy(f"shipped:{DEFAULT_SHIPPED}")

@@ -59,8 +59,7 @@ __all__ = [
 ENTRY_POINT_GROUP = "ipp_toolkit.planners"
 
 _COMA_MIXED_GONE = ("removed 2026-12-01: dominated by the default coma on validation missions, "
-                    "see docs/generalisation.md; use coma, whose default policy is "
-                    "coma=shipped:spatial-mixture")
+                    "see docs/generalisation.md; use coma (its default policy)")
 
 #: Names that earlier versions accepted and that were removed, with when, why and what to use
 #: instead: a planner name (``coma_mixed``) or a shipped policy as ``PLANNER=shipped:NAME``.
