@@ -36,9 +36,10 @@ from ipp_toolkit.config.settings import (
 )
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import REMOVED_NAMES
+from ipp_toolkit.runs.cli_flags import add_compute_flags, add_progress_flag, add_set_flag
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
-from ipp_toolkit.runs.ray_backend import add_backend_flags, check_backend_flags, probe
+from ipp_toolkit.runs.ray_backend import check_backend_flags, probe
 from ipp_toolkit.runs.run_folder import COMA_COMMAND, check_out_path, claim
 
 from .config import (
@@ -80,6 +81,8 @@ def _preset_name(value: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``ipp-train coma``; the flags it shares with ``ipp-compare`` and
+    ``ipp-study`` come from :mod:`ipp_toolkit.runs.cli_flags`."""
     parser = argparse.ArgumentParser(
         prog="ipp-train coma",
         description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.",
@@ -129,25 +132,25 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=VALUE",
                         help="set a feature of the mission config, e.g. --feature "
                              "own_position=true or --feature gain_smoothing=5 (repeatable)")
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="any COMAConfig field, e.g. --set lr_actor=1e-4; a warm-start "
-                             "field with a dot, e.g. --set warm_start.missions=100 (the older "
-                             "warm_start_missions / warm_start_epochs are still read) "
-                             "(repeatable)")
-    parser.add_argument("--workers", type=_positive_int, default=1, metavar="K",
-                        help="workers that fly each update's missions and the validation "
-                             "missions (default 1: this process); the same seed trains the "
-                             "same weights with any K (--backend ray: K Ray actors of one CPU)")
-    add_backend_flags(parser, "where the workers run: processes on this machine, or Ray actors",
-                      "")
+    add_set_flag(parser, "any COMAConfig field, e.g. --set lr_actor=1e-4; a warm-start field "
+                 "with a dot, e.g. --set warm_start.missions=100 (the older "
+                 "warm_start_missions / warm_start_epochs are still read) (repeatable)")
+    add_compute_flags(parser, workers_type=_positive_int, workers_metavar="K",
+                      workers_help="workers that fly each update's missions and the validation "
+                                   "missions (default 1: this process); the same seed trains "
+                                   "the same weights with any K (--backend ray: K Ray actors "
+                                   "of one CPU)",
+                      backend_help="where the workers run: processes on this machine, or Ray "
+                                   "actors", address_help="")
     parser.add_argument("--device", default="cpu", metavar="cpu|cuda",
                         help="where the networks learn (default cpu); the missions always fly "
                              "on CPUs, with a copy of the actor")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_progress_flag(parser, "hide the progress bar")
     return parser
 
 
 def _positive_int(text: str) -> int:
+    # Its own wording ("expected ..."), kept: ipp-compare's positive_int says "must be ...".
     try:
         value = int(text)
     except ValueError:

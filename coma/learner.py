@@ -6,10 +6,10 @@ critic refreshed every ``target_update_transitions``), the advantage (``coma.adv
 the actor update (the paper's ``-log pi(u) A``, or with ``clip_ratio > 0`` PPO's clipped
 surrogate), then logging, validation (``coma.validation``) and checkpoints. An optional warm
 start (``coma.warm_start``) imitates a planner first. Hyper-parameters live in
-:class:`COMAConfig`; the mission in an :class:`EnvConfig`. This module owns :func:`update`
-(one COMA update) and :func:`train` (the run: start or resume, the update loop, logs,
-``best.pt`` and ``last.pt``); ``coma.cli`` is the ``ipp-train coma`` command around it and
-``coma.run_files`` keeps its progress log.
+:class:`COMAConfig`; the mission in an :class:`EnvConfig`. One COMA update is
+:mod:`coma.update_step`'s :func:`update` (re-exported here); this module owns :func:`train`
+(the run: start or resume, the update loop, logs, ``best.pt`` and ``last.pt``); ``coma.cli``
+is the ``ipp-train coma`` command around it and ``coma.run_files`` keeps its progress log.
 
 Reproducibility: mission k of a run always has the same terrain and sensor noise
 (``ipp_toolkit.world.seeding``) and samples its actions from its own stream
@@ -27,6 +27,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,18 +43,9 @@ from ipp_toolkit.runs.progress import progress_bar
 from ipp_toolkit.runs.run_folder import COMA_COMMAND, claim
 from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.sim.mission import MissionGeometry
-from ipp_toolkit.sim.team import N_ACTIONS
 
-from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
 from .config import COMAConfig, mission_settings
-from .networks import (
-    GainPriorActor,
-    bounded_softmax,
-    epsilon_at,
-    in_input_layout,
-    learning_forward,
-    mixed_precision,
-)
+from .networks import epsilon_at
 from .parallel import (
     RunSpec,
     Workers,
@@ -70,7 +62,6 @@ from .persistence import (
     load_state_into,
     save_policy,
 )
-from .rollout import Rollout
 from .run_files import (
     TrainResult,
     read_progress,
@@ -78,145 +69,13 @@ from .run_files import (
     saved_update,
     write_progress,
 )
+from .update_step import TrainingDiverged, update
 from .validation import reference_scores, validate, validation_settings
 from .warm_start import WarmStartConfig
 from .warm_start import warm_start as imitate
 
 __all__ = ["TrainingDiverged", "update", "make_optimisers", "setting_of_update",
            "to_channels_last", "train"]
-
-
-class TrainingDiverged(RuntimeError):
-    """A loss became NaN or infinite; the last good checkpoint is kept."""
-
-
-# --------------------------------------------------------------------------------------------
-# One update: critic(s) on TD(lambda) targets, then the actor on the advantage
-
-
-def _clip_step(optimiser: torch.optim.Optimizer, module: nn.Module, loss: torch.Tensor,
-               max_norm: float) -> float:
-    optimiser.zero_grad(set_to_none=True)
-    loss.backward()
-    norm = nn.utils.clip_grad_norm_(module.parameters(), max_norm)
-    optimiser.step()
-    return float(norm)
-
-
-def update(networks: COMANetworks, target_critic: nn.Module, optimisers: dict[str, Any],
-           rollout: Rollout, eps: float, generator: torch.Generator,
-           train_actor: bool = True) -> dict[str, float]:
-    """One COMA update on a rollout; returns the mean losses and diagnostics.
-
-    ``train_actor=False`` fits only the critic(s) (a critic warm-up): the actor, its
-    optimiser and its diagnostics are left alone. The update runs where the networks are: a
-    CPU rollout is moved to their device (on the CPU it is used as it is); ``generator``
-    (shuffling) is a CPU generator either way. The forward passes run in the config's
-    ``precision`` (:func:`~coma.networks.mixed_precision`); losses, advantages and targets
-    are float32.
-
-    Raises:
-        TrainingDiverged: a loss is not finite (the networks may be damaged: do not save).
-    """
-    cfg = networks.coma_config
-    precision = cfg.precision
-    device = next(networks.critic.parameters()).device
-    rollout = rollout.to(device)
-    e, n, t = rollout.actions.shape
-    actor_obs = in_input_layout(networks.actor, rollout.actor_obs.flatten(0, 2))
-    critic_obs = in_input_layout(networks.critic, rollout.critic_obs.flatten(0, 2))
-    value_obs = None
-    if rollout.value_obs is not None and networks.value is not None:
-        value_obs = in_input_layout(networks.value, rollout.value_obs.flatten(0, 2))
-    # TD(lambda) targets per agent and episode from the target critic.
-    with torch.no_grad():
-        q_target = learning_forward(target_critic, critic_obs, precision).view(e, n, t, N_ACTIONS)
-        q_target_taken = q_target.gather(-1, rollout.actions.unsqueeze(-1)).squeeze(-1)
-        next_values = torch.roll(q_target_taken, shifts=-1, dims=-1)  # Q'(s_{t+1}, u_{t+1})
-        terminal = torch.zeros(e, n, t, dtype=torch.bool, device=device)
-        terminal[..., -1] = True
-        rewards = rollout.rewards.unsqueeze(1).expand(e, n, t)
-        targets = td_lambda_targets(rewards, next_values, terminal, cfg.gamma, cfg.td_lambda)
-
-    masks = rollout.masks.flatten(0, 2)
-    actions = rollout.actions.flatten()
-    behaviour = rollout.behaviour_probs.flatten()
-    targets = targets.flatten()
-    samples = len(actions)
-    logs: dict[str, list[float]] = {k: [] for k in (
-        "critic_loss", "value_loss", "actor_loss", "advantage_std", "policy_entropy",
-        "critic_grad_norm", "actor_grad_norm")}
-    for _ in range(cfg.epochs):
-        order = torch.randperm(samples, generator=generator).to(device)
-        for start in range(0, samples, cfg.minibatch_size):
-            batch = order[start:start + cfg.minibatch_size]
-            q = learning_forward(networks.critic, critic_obs[batch], precision)
-            q_taken = q.gather(-1, actions[batch].unsqueeze(-1)).squeeze(-1)
-            critic_loss = torch.mean((q_taken - targets[batch]) ** 2)
-            _check_finite("critic loss", critic_loss)
-            logs["critic_grad_norm"].append(_clip_step(optimisers["critic"], networks.critic,
-                                                       critic_loss, cfg.max_grad_norm))
-            logs["critic_loss"].append(critic_loss.item())
-            if networks.value is not None:
-                v = learning_forward(networks.value, value_obs[batch], precision).squeeze(-1)
-                value_loss = torch.mean((v - targets[batch]) ** 2)
-                _check_finite("value loss", value_loss)
-                _clip_step(optimisers["value"], networks.value, value_loss, cfg.max_grad_norm)
-                logs["value_loss"].append(value_loss.item())
-            if not train_actor:
-                continue
-
-            penalty = None
-            if cfg.residual_penalty > 0 and isinstance(networks.actor, GainPriorActor):
-                with mixed_precision(precision, device):  # both parts float32 (the heads)
-                    residual, prior = networks.actor.parts(actor_obs[batch])
-                logits = residual + prior
-                valid = masks[batch].to(residual.dtype)
-                centred = residual - (residual * valid).sum(-1, keepdim=True) / valid.sum(
-                    -1, keepdim=True)
-                penalty = (centred ** 2 * valid).sum() / valid.sum()
-            else:
-                logits = learning_forward(networks.actor, actor_obs[batch], precision)
-            probs = bounded_softmax(logits, masks[batch], eps)
-            # The critic's pre-step Q serves the actor: one forward pass fewer per mini-batch.
-            q = q.detach()
-            with torch.no_grad():
-                if cfg.variant == "central_qv":
-                    v = learning_forward(networks.value, value_obs[batch],
-                                         precision).squeeze(-1)
-                    advantage = central_value_advantage(q, actions[batch], v)
-                else:
-                    advantage = counterfactual_advantage(q, actions[batch], probs.detach(),
-                                                         masks[batch])
-            raw_std = float(advantage.std()) if len(batch) > 1 else 0.0
-            if cfg.normalise_advantage and len(batch) > 1:
-                advantage = (advantage - advantage.mean()) / (advantage.std() + 1e-8)
-            taken = probs.gather(-1, actions[batch].unsqueeze(-1)).squeeze(-1)
-            if cfg.clip_ratio > 0:
-                ratio = taken / behaviour[batch].clamp_min(1e-12)
-                clipped = ratio.clamp(1.0 - cfg.clip_ratio, 1.0 + cfg.clip_ratio)
-                actor_loss = -torch.mean(torch.min(ratio * advantage, clipped * advantage))
-            else:
-                actor_loss = -torch.mean(torch.log(taken.clamp_min(1e-12)) * advantage)
-            if cfg.entropy_coef > 0:
-                entropy = -(probs * torch.log(probs.clamp_min(1e-12))).sum(-1).mean()
-                actor_loss = actor_loss - cfg.entropy_coef * entropy
-            if penalty is not None:
-                actor_loss = actor_loss + cfg.residual_penalty * penalty
-            _check_finite("actor loss", actor_loss)
-            logs["actor_grad_norm"].append(_clip_step(optimisers["actor"], networks.actor,
-                                                      actor_loss, cfg.max_grad_norm))
-            logs["actor_loss"].append(actor_loss.item())
-            logs["advantage_std"].append(raw_std)
-            with torch.no_grad():
-                p = probs.clamp_min(1e-12)
-                logs["policy_entropy"].append(float(-(probs * torch.log(p)).sum(-1).mean()))
-    return {k: float(np.mean(v)) for k, v in logs.items() if v}
-
-
-def _check_finite(what: str, value: torch.Tensor) -> None:
-    if not torch.isfinite(value):
-        raise TrainingDiverged(f"{what} is {value.item()}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -408,50 +267,75 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     learner_device = resolve_device(device)
     check_workers(workers, backend, address)
     out = Path(out_dir)
-    last_path = out / "last.pt"
+    settings, checks, known = _check_missions(coma_config, env_config)
+    # Held for the whole run: a second run into the folder is refused, naming this process.
+    with claim(out_dir, COMA_COMMAND):  # the given path: an empty one is refused
+        resumable = _check_folder(out, resume, coma_config, env_config)
+        if announce:
+            print(announce, file=sys.stderr)
+        reference = _fly_reference(coma_config, checks, workers, address)
+        spec = RunSpec(coma_config, env_config, tuple(settings), tuple(checks), coma_config.seed)
+        with make_workers(spec, workers, backend, address, known) as pool:
+            return _train_with(pool, coma_config, env_config, out, resumable, progress,
+                               tensorboard, max_updates, warm_start, learner_device, settings,
+                               checks, reference)
+
+
+def _check_missions(coma_config: COMAConfig, env_config: EnvConfig
+                    ) -> tuple[list[EnvConfig], list[EnvConfig],
+                               dict[tuple[str, int], MissionGeometry]]:
+    """The training settings, the validation checks and the workers' mission geometries
+    (built once here), refused (ValueError) before any worker starts or file is written."""
     if env_config.team.has_failures:
         raise ValueError("team.failures / team.random_failures: COMA does not train with UAV "
                          "failures yet (a failed UAV's transitions would be recorded); "
                          "evaluate a trained policy on them with ipp-compare instead")
     settings = mission_settings(coma_config, env_config)
-    check_network_size(coma_config, env_config)  # before any worker starts or file is written
+    check_network_size(coma_config, env_config)
     geometries = [MissionGeometry(config) for config in settings]
     checks = validation_settings(coma_config, settings)
+    # The checks' geometries are the settings' own objects where the checks are the settings.
     check_geometries = geometries if checks == settings else [
         MissionGeometry(config) for config in checks]
-    # Held for the whole run: a second run into the folder is refused, naming this process.
-    with claim(out_dir, COMA_COMMAND):  # the given path: an empty one is refused
-        if resume and not last_path.exists():
-            raise CheckpointError(f"nothing to resume: {str(last_path)!r} does not exist "
-                                  "(drop --resume to start a new run)")
-        existing = [name for name in _RUN_FILES if (out / name).exists()]
-        if existing and not resume:
-            how = ("pass resume=True (--resume) to continue it" if last_path.exists() else
-                   "it stopped before its first checkpoint (no last.pt), so it cannot be "
-                   "resumed; move those files away")
-            raise FileExistsError(f"{str(out)!r} already holds a run ({', '.join(existing)}): "
-                                  f"{how}, or choose another folder")
-        # A checkpoint of another run is refused before anything flies or any worker starts.
-        resumable = _resumable(last_path, coma_config, env_config) if resume else None
-        if announce:
-            print(announce, file=sys.stderr)
-        # IG's reference flies before the actors exist (they hold their CPUs for the whole run):
-        # on the cluster at --address, else in local processes (a local Ray of the run is not
-        # started yet, and would cost its start-up twice).
-        reference = None
-        if coma_config.selection == "worst_vs_ig":
-            # check_workers has refused an address without the ray backend.
-            reference = reference_scores(
-                checks, coma_config.seed, coma_config.eval_missions,
-                workers=workers if address is not None else min(workers, os.cpu_count() or 1),
-                backend="local" if address is None else "ray", address=address)
-        spec = RunSpec(coma_config, env_config, tuple(settings), tuple(checks), coma_config.seed)
-        known = {**{("train", k): g for k, g in enumerate(geometries)},
-                 **{("check", k): g for k, g in enumerate(check_geometries)}}
-        with make_workers(spec, workers, backend, address, known) as pool:
-            return _train_with(pool, coma_config, env_config, out, resumable, progress,
-                               tensorboard, max_updates, warm_start, learner_device, settings,
-                               checks, reference)
+    known = {**{("train", k): g for k, g in enumerate(geometries)},
+             **{("check", k): g for k, g in enumerate(check_geometries)}}
+    return settings, checks, known
+
+
+def _check_folder(out: Path, resume: bool, coma_config: COMAConfig, env_config: EnvConfig
+                  ) -> tuple[COMANetworks, dict[str, Any]] | None:
+    """Refuse a folder the run cannot go into (CheckpointError, FileExistsError); with
+    ``resume``, the checkpoint to continue from (:func:`_resumable`)."""
+    last_path = out / "last.pt"
+    if resume and not last_path.exists():
+        raise CheckpointError(f"nothing to resume: {str(last_path)!r} does not exist "
+                              "(drop --resume to start a new run)")
+    existing = [name for name in _RUN_FILES if (out / name).exists()]
+    if existing and not resume:
+        how = ("pass resume=True (--resume) to continue it" if last_path.exists() else
+               "it stopped before its first checkpoint (no last.pt), so it cannot be "
+               "resumed; move those files away")
+        raise FileExistsError(f"{str(out)!r} already holds a run ({', '.join(existing)}): "
+                              f"{how}, or choose another folder")
+    # A checkpoint of another run is refused before anything flies or any worker starts.
+    return _resumable(last_path, coma_config, env_config) if resume else None
+
+
+def _fly_reference(coma_config: COMAConfig, checks: list[EnvConfig], workers: int,
+                   address: str | None) -> list[float] | None:
+    """IG's final entropies on the validation missions, with ``selection = worst_vs_ig``.
+
+    IG's reference flies before the actors exist (they hold their CPUs for the whole run): on
+    the cluster at ``address``, else in local processes (a local Ray of the run is not started
+    yet, and would cost its start-up twice). check_workers has refused an address without
+    the ray backend.
+    """
+    if coma_config.selection != "worst_vs_ig":
+        return None
+    return reference_scores(
+        checks, coma_config.seed, coma_config.eval_missions,
+        workers=workers if address is not None else min(workers, os.cpu_count() or 1),
+        backend="local" if address is None else "ray", address=address)
 
 
 def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, out: Path,
@@ -463,154 +347,206 @@ def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, o
     """The run of :func:`train` once its inputs are checked: ``pool`` flies the missions of
     the training ``settings`` and the validation ``checks``, the networks learn on
     ``device``; ``resumable`` is the checkpoint to continue from (:func:`_resumable`), if any."""
-    last_path, best_path, csv_path = out / "last.pt", out / "best.pt", out / "progress.csv"
-    budget = env_config.team.budget
-
-    def criterion(scores: dict[str, float]) -> float:
-        """What best.pt minimises: the mean final entropy, or the worst gap to IG."""
-        return scores["gap_worst"] if reference is not None else scores[f"entropy_{budget}"]
-
-    def validate_now(networks: COMANetworks) -> dict[str, float]:
-        """The actor's validation scores, its missions flown by the pool's workers."""
-        networks.actor.eval()
-        try:
-            return validate(networks.actor, checks, None, coma_config.seed,
-                            coma_config.eval_missions, reference,
-                            fly=lambda k, n: pool.greedy(networks, k, n))
-        finally:
-            networks.actor.train()
-
+    run = _Run(pool, coma_config, env_config, out, settings, checks, reference)
     generator = torch.Generator().manual_seed(coma_config.seed)
-    history: list[dict[str, Any]] = []
     if resumable is not None:
-        networks, target_critic, optimisers, state, history = _resume(
-            resumable, last_path, csv_path, coma_config, generator, device)
+        learning = _Learning(*_resume(resumable, run.last_path, run.csv_path, coma_config,
+                                      generator, device), generator)
     else:
-        torch.manual_seed(coma_config.seed)
-        networks = build_networks(coma_config, env_config)
-        to_channels_last(networks)
-        state = {"update": 0, "missions": 0, "transitions": 0, "since_target": 0,
-                 "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
-        run_info: dict[str, Any] = {"coma": coma_config.to_dict(),
-                                    "env": config_to_dict(env_config)}
-        if reference is not None:
-            run_info["validation_reference"] = {
-                "planner": "ig", "terrains": [c.terrain.kind for c in checks],
-                "final_entropy": reference}
-
-        def score_start() -> dict[str, float]:
-            """Validate the starting networks; they are ``best.pt`` at update 0."""
-            validation = validate_now(networks)
-            state["best_entropy"] = criterion(validation)
-            save_policy(best_path, networks, {"validation": validation, "update": 0})
-            return {"validation_entropy": validation[f"entropy_{budget}"],
-                    "validation_f1": validation[f"f1_{budget}"]}
-
-        if warm_start is None and coma_config.warm_start.enabled:
-            warm_start = coma_config.warm_start
-        if coma_config.init_policy:
-            _initialise_from(networks, coma_config.init_policy)
-            run_info["init_policy"] = {"path": coma_config.init_policy, **score_start()}
-        elif warm_start is not None:
-            tick = time.perf_counter()
-            scores = imitate(networks, env_config, warm_start, coma_config.seed, generator,
-                             progress)
-            scores["seconds"] = time.perf_counter() - tick
-            scores.update(score_start())
-            save_policy(out / "warm_start.pt", networks, {"warm_start": scores})
-            run_info["warm_start"] = {**warm_start.to_dict(), "result": scores}
-        elif coma_config.gain_prior > 0:
-            # The gain-prior actor starts as a planner worth scoring (ig's choice).
-            run_info["gain_prior_start"] = score_start()
-        _move(networks, device)  # the warm start imitated on the CPU
-        target_critic = copy.deepcopy(networks.critic)
-        optimisers = make_optimisers(networks)
-        write_json(out / "config.json", run_info)
-
-    def save_checkpoint() -> None:
-        save_policy(last_path, networks, {
-            "target_critic": target_critic.state_dict(),
-            "optimisers": {k: o.state_dict() for k, o in optimisers.items()},
-            "generator": generator.get_state(),
-            "progress": dict(state),
-        })
-        write_progress(csv_path, history)
-
+        learning = run.start(warm_start, generator, device, progress)
     writer = None
     if tensorboard:
         from torch.utils.tensorboard import SummaryWriter
 
-        writer = SummaryWriter(str(out / "tb"), purge_step=state["update"] + 1)
-
-    per_update = coma_config.missions_per_update
-    total_updates = math.ceil(coma_config.missions / per_update)
+        writer = SummaryWriter(str(out / "tb"), purge_step=learning.state["update"] + 1)
+    total_updates = math.ceil(coma_config.missions / coma_config.missions_per_update)
     label = coma_config.variant + ("" if coma_config.precision == "float32"
                                    else f", {coma_config.precision}")
     bar = progress_bar(total_updates, f"COMA ({label})", "updates",
-                       initial=state["update"], disable=not progress)
-    updates_this_call = 0
+                       initial=learning.state["update"], disable=not progress)
     try:
+        run.loop(learning, total_updates, max_updates, writer, bar)
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.close()
+    state = learning.state
+    return TrainResult(out, run.best_path, run.last_path, state["update"], state["missions"],
+                       state["best_entropy"], learning.history)
+
+
+@dataclass
+class _Learning:
+    """What the run carries from update to update; ``last.pt`` holds all of it but the
+    ``history`` (``progress.csv``'s rows)."""
+
+    networks: COMANetworks
+    target_critic: nn.Module
+    optimisers: dict[str, torch.optim.Optimizer]
+    state: dict[str, Any]  # the progress counters
+    history: list[dict[str, Any]]
+    generator: torch.Generator  # mini-batch shuffling
+
+
+class _Run:
+    """The steps of a run whose inputs are checked: start, validate, update, checkpoint.
+
+    ``pool`` flies the missions of the training ``settings`` and the validation ``checks``;
+    ``reference`` is IG's validation scores with ``selection = worst_vs_ig``, else None.
+    """
+
+    def __init__(self, pool: Workers, coma_config: COMAConfig, env_config: EnvConfig,
+                 out: Path, settings: list[EnvConfig], checks: list[EnvConfig],
+                 reference: list[float] | None) -> None:
+        self.pool, self.coma_config, self.env_config = pool, coma_config, env_config
+        self.out = out
+        self.settings, self.checks, self.reference = settings, checks, reference
+        self.last_path, self.best_path = out / "last.pt", out / "best.pt"
+        self.csv_path = out / "progress.csv"
+        self.budget = env_config.team.budget
+
+    def criterion(self, scores: dict[str, float]) -> float:
+        """What best.pt minimises: the mean final entropy, or the worst gap to IG."""
+        return (scores["gap_worst"] if self.reference is not None
+                else scores[f"entropy_{self.budget}"])
+
+    def validate(self, networks: COMANetworks) -> dict[str, float]:
+        """The actor's validation scores, its missions flown by the pool's workers."""
+        cfg = self.coma_config
+        networks.actor.eval()
+        try:
+            return validate(networks.actor, self.checks, None, cfg.seed, cfg.eval_missions,
+                            self.reference, fly=lambda k, n: self.pool.greedy(networks, k, n))
+        finally:
+            networks.actor.train()
+
+    def start(self, warm_start: WarmStartConfig | None,
+              generator: torch.Generator, device: torch.device, progress: bool) -> _Learning:
+        """A fresh run: new networks, started from ``init_policy``, a warm start or the
+        gain prior as the config asks, on ``device``; writes ``config.json``."""
+        cfg, env_config = self.coma_config, self.env_config
+        torch.manual_seed(cfg.seed)
+        networks = build_networks(cfg, env_config)
+        to_channels_last(networks)
+        state = {"update": 0, "missions": 0, "transitions": 0, "since_target": 0,
+                 "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
+        run_info: dict[str, Any] = {"coma": cfg.to_dict(), "env": config_to_dict(env_config)}
+        if self.reference is not None:
+            run_info["validation_reference"] = {
+                "planner": "ig", "terrains": [c.terrain.kind for c in self.checks],
+                "final_entropy": self.reference}
+        if warm_start is None and cfg.warm_start.enabled:
+            warm_start = cfg.warm_start
+        if cfg.init_policy:
+            _initialise_from(networks, cfg.init_policy)
+            run_info["init_policy"] = {"path": cfg.init_policy,
+                                       **self.score_start(networks, state)}
+        elif warm_start is not None:
+            tick = time.perf_counter()
+            scores = imitate(networks, env_config, warm_start, cfg.seed, generator, progress)
+            scores["seconds"] = time.perf_counter() - tick
+            scores.update(self.score_start(networks, state))
+            save_policy(self.out / "warm_start.pt", networks, {"warm_start": scores})
+            run_info["warm_start"] = {**warm_start.to_dict(), "result": scores}
+        elif cfg.gain_prior > 0:
+            # The gain-prior actor starts as a planner worth scoring (ig's choice).
+            run_info["gain_prior_start"] = self.score_start(networks, state)
+        _move(networks, device)  # the warm start imitated on the CPU
+        target_critic = copy.deepcopy(networks.critic)
+        optimisers = make_optimisers(networks)
+        write_json(self.out / "config.json", run_info)
+        return _Learning(networks, target_critic, optimisers, state, [], generator)
+
+    def score_start(self, networks: COMANetworks, state: dict[str, Any]) -> dict[str, float]:
+        """Validate the starting networks; they are ``best.pt`` at update 0."""
+        validation = self.validate(networks)
+        state["best_entropy"] = self.criterion(validation)
+        save_policy(self.best_path, networks, {"validation": validation, "update": 0})
+        return {"validation_entropy": validation[f"entropy_{self.budget}"],
+                "validation_f1": validation[f"f1_{self.budget}"]}
+
+    def loop(self, learning: _Learning, total_updates: int, max_updates: int | None,
+             writer: Any, bar: Any) -> None:
+        """Update until ``total_updates`` (or ``max_updates`` in this call), validating every
+        ``eval_every`` and checkpointing every ``checkpoint_every`` updates and at the end."""
+        cfg, state = self.coma_config, learning.state
+        updates_this_call = 0
         while state["update"] < total_updates and (max_updates is None
                                                    or updates_this_call < max_updates):
-            tick = time.perf_counter()
-            eps = epsilon_at(state["missions"], coma_config.eps_start, coma_config.eps_end,
-                             coma_config.eps_anneal_missions)
-            if state["since_target"] >= coma_config.target_update_transitions:
-                target_critic.load_state_dict(networks.critic.state_dict())
-                state["since_target"] = 0
-            setting = setting_of_update(len(settings), coma_config.seed, state["update"])
-            rollout = pool.rollout(networks, setting, state["missions"], per_update, eps)
-            try:
-                losses = update(networks, target_critic, optimisers, rollout, eps, generator,
-                                train_actor=state["update"] >= coma_config.critic_warmup_updates)
-            except TrainingDiverged as error:
-                raise TrainingDiverged(
-                    f"{error} at update {state['update'] + 1}; training stopped. The last "
-                    f"good checkpoint is kept: {str(last_path)!r} (update "
-                    f"{saved_update(last_path)}); lower the learning rates or check the "
-                    "rewards") from None
-            elapsed = time.perf_counter() - tick
-            state["update"] += 1
-            state["missions"] += per_update
-            state["transitions"] += rollout.transitions
-            state["since_target"] += rollout.transitions
-            state["wall_s"] += elapsed
-            row: dict[str, Any] = {
-                "update": state["update"], "missions": state["missions"],
-                "transitions": state["transitions"], "eps": eps,
-                "return_mean": float(rollout.returns.mean()),
-                "final_entropy_mean": float(rollout.final_entropy.mean()),
-                **losses, "transitions_per_s": rollout.transitions / elapsed,
-                "wall_s": state["wall_s"], "n_agents": settings[setting].team.n_agents,
-                "comm_range": settings[setting].team.comm_range}
+            row = self.one_update(learning)
             last_update = state["update"] == total_updates
-            if state["update"] % coma_config.eval_every == 0 or last_update:
-                scores = validate_now(networks)
-                row.update(eval_return=scores["return"],
-                           eval_entropy_final=scores[f"entropy_{budget}"],
-                           eval_f1_final=scores[f"f1_{budget}"],
-                           eval_gap_worst=scores.get("gap_worst"))
-                if criterion(scores) < state["best_entropy"]:
-                    state["best_entropy"] = criterion(scores)
-                    state["best_update"] = state["update"]
-                    save_policy(best_path, networks, {"validation": scores,
-                                                      "update": state["update"]})
-            history.append(row)
+            if state["update"] % cfg.eval_every == 0 or last_update:
+                self.validate_update(learning, row)
+            learning.history.append(row)
             if writer is not None:
                 for key, value in row.items():
                     if key != "update" and value is not None:
                         writer.add_scalar(f"coma/{key}", value, state["update"])
             updates_this_call += 1
-            if state["update"] % coma_config.checkpoint_every == 0 or last_update:
-                save_checkpoint()
+            if state["update"] % cfg.checkpoint_every == 0 or last_update:
+                self.save_checkpoint(learning)
             bar.update(1)
-            bar.set_postfix(ret=f"{row['return_mean']:.2f}", eps=f"{eps:.2f}",
+            bar.set_postfix(ret=f"{row['return_mean']:.2f}", eps=f"{row['eps']:.2f}",
                             val_H=f"{state['best_entropy']:.3f}")
-        if updates_this_call and (state["update"] % coma_config.checkpoint_every):
-            save_checkpoint()
-    finally:
-        bar.close()
-        if writer is not None:
-            writer.close()
-    return TrainResult(out, best_path, last_path, state["update"], state["missions"],
-                       state["best_entropy"], history)
+        if updates_this_call and (state["update"] % cfg.checkpoint_every):
+            self.save_checkpoint(learning)
+
+    def one_update(self, learning: _Learning) -> dict[str, Any]:
+        """Fly one update's missions and learn on them; its ``progress.csv`` row."""
+        cfg, state, networks = self.coma_config, learning.state, learning.networks
+        tick = time.perf_counter()
+        eps = epsilon_at(state["missions"], cfg.eps_start, cfg.eps_end, cfg.eps_anneal_missions)
+        if state["since_target"] >= cfg.target_update_transitions:
+            learning.target_critic.load_state_dict(networks.critic.state_dict())
+            state["since_target"] = 0
+        setting = setting_of_update(len(self.settings), cfg.seed, state["update"])
+        rollout = self.pool.rollout(networks, setting, state["missions"],
+                                    cfg.missions_per_update, eps)
+        try:
+            losses = update(networks, learning.target_critic, learning.optimisers, rollout, eps,
+                            learning.generator,
+                            train_actor=state["update"] >= cfg.critic_warmup_updates)
+        except TrainingDiverged as error:
+            raise TrainingDiverged(
+                f"{error} at update {state['update'] + 1}; training stopped. The last "
+                f"good checkpoint is kept: {str(self.last_path)!r} (update "
+                f"{saved_update(self.last_path)}); lower the learning rates or check the "
+                "rewards") from None
+        elapsed = time.perf_counter() - tick
+        state["update"] += 1
+        state["missions"] += cfg.missions_per_update
+        state["transitions"] += rollout.transitions
+        state["since_target"] += rollout.transitions
+        state["wall_s"] += elapsed
+        return {"update": state["update"], "missions": state["missions"],
+                "transitions": state["transitions"], "eps": eps,
+                "return_mean": float(rollout.returns.mean()),
+                "final_entropy_mean": float(rollout.final_entropy.mean()),
+                **losses, "transitions_per_s": rollout.transitions / elapsed,
+                "wall_s": state["wall_s"], "n_agents": self.settings[setting].team.n_agents,
+                "comm_range": self.settings[setting].team.comm_range}
+
+    def validate_update(self, learning: _Learning, row: dict[str, Any]) -> None:
+        """Score the actor into ``row``; a new best is saved as ``best.pt``."""
+        state = learning.state
+        scores = self.validate(learning.networks)
+        row.update(eval_return=scores["return"],
+                   eval_entropy_final=scores[f"entropy_{self.budget}"],
+                   eval_f1_final=scores[f"f1_{self.budget}"],
+                   eval_gap_worst=scores.get("gap_worst"))
+        if self.criterion(scores) < state["best_entropy"]:
+            state["best_entropy"] = self.criterion(scores)
+            state["best_update"] = state["update"]
+            save_policy(self.best_path, learning.networks, {"validation": scores,
+                                                            "update": state["update"]})
+
+    def save_checkpoint(self, learning: _Learning) -> None:
+        """``last.pt`` (networks, target critic, optimisers, shuffling state, counters) and
+        ``progress.csv``."""
+        save_policy(self.last_path, learning.networks, {
+            "target_critic": learning.target_critic.state_dict(),
+            "optimisers": {k: o.state_dict() for k, o in learning.optimisers.items()},
+            "generator": learning.generator.get_state(),
+            "progress": dict(learning.state),
+        })
+        write_progress(self.csv_path, learning.history)

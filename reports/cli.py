@@ -20,7 +20,6 @@ import io
 import math
 import os
 import sys
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,24 +28,24 @@ from ipp_toolkit.config.settings import (
     build_env_config,
     comm_label,
     named_terrain_kinds,
-    parse_comm,
     setting_line,
 )
 from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.io import atomic_write
+from ipp_toolkit.runs.cli_flags import (
+    add_compute_flags,
+    add_progress_flag,
+    comm_range,
+    finite_float,
+    positive_float,
+    positive_int,
+)
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
-from ipp_toolkit.runs.ray_backend import RayUnavailableError, add_backend_flags, check_backend_flags
-from ipp_toolkit.runs.run_folder import check_out_path, claim
+from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
+from ipp_toolkit.runs.run_folder import check_out_path
 
 from .compare import DEFAULT_PLANNERS
-
-
-def _comm_range(text: str) -> float:
-    try:
-        return parse_comm(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _simulate_parser() -> argparse.ArgumentParser:
@@ -57,11 +56,11 @@ def _simulate_parser() -> argparse.ArgumentParser:
     )
     add_version(parser)
     parser.add_argument("--config", type=Path, help="YAML config (defaults: the paper's)")
-    parser.add_argument("--agents", type=_positive_int("agents"),
+    parser.add_argument("--agents", type=positive_int("agents"),
                         help="team size (overrides the config)")
-    parser.add_argument("--comm", type=_comm_range,
+    parser.add_argument("--comm", type=comm_range,
                         help="communication range in metres or 'inf' (overrides the config)")
-    parser.add_argument("--resolution", type=_positive_float, help="map resolution r_M in metres")
+    parser.add_argument("--resolution", type=positive_float, help="map resolution r_M in metres")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED", help="run seed")
     parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
     parser.add_argument("--out", default="results/simulate",
@@ -129,40 +128,6 @@ def simulate_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _positive_int(flag: str) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
-        return value
-
-    parse.__name__ = flag
-    return parse
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
-
-
-def _finite_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
-    return value
-
-
 DEFAULT_COMPARE_OUT = "results/compare-a{agents}-d{comm}"
 
 
@@ -177,10 +142,10 @@ def _compare_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
     )
     add_version(parser)
-    parser.add_argument("--agents", type=_positive_int("agents"), default=None, metavar="N",
+    parser.add_argument("--agents", type=positive_int("agents"), default=None, metavar="N",
                         help="team size N (default: the --config file's, else 4; teams "
                              "without fixed starts start at random cells)")
-    parser.add_argument("--comm", type=_comm_range, default=None, metavar="METRES|inf",
+    parser.add_argument("--comm", type=comm_range, default=None, metavar="METRES|inf",
                         help="communication range D in metres, or 'inf' (default: the "
                              "--config file's, else 25)")
     parser.add_argument("--planners", default="default", metavar="LIST",
@@ -189,7 +154,7 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "coma=shipped:NAME), each with an optional LABEL: prefix "
                              f"(mine:coma=PATH); 'default' = {','.join(DEFAULT_PLANNERS)}; "
                              "'all' = every registered planner that can be built")
-    parser.add_argument("--trials", type=_positive_int("trials"), default=50, metavar="N",
+    parser.add_argument("--trials", type=positive_int("trials"), default=50, metavar="N",
                         help="number of test missions (the same missions for every planner)")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED",
                         help="run seed of the test missions")
@@ -197,32 +162,34 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help=f"terrain kind ({', '.join(named_terrain_kinds())}) or a raster "
                              "FILE (.npy/.png/.tif; needs --threshold or --threshold-quantile); "
                              "default: the --config file's, else split")
-    parser.add_argument("--threshold", type=_finite_float, default=None, metavar="T",
+    parser.add_argument("--threshold", type=finite_float, default=None, metavar="T",
                         help="raster threshold in the raster's units: cells whose mean value "
                              "is >= T are interesting (required with a terrain FILE)")
-    parser.add_argument("--threshold-quantile", type=_finite_float, default=None, metavar="Q",
+    parser.add_argument("--threshold-quantile", type=finite_float, default=None, metavar="Q",
                         help="threshold as a quantile of the values instead (1 - Q of the "
                              "cells are interesting): a raster FILE, fractal or real")
-    parser.add_argument("--workers", type=_positive_int("workers"),
-                        default=min(2, os.cpu_count() or 1),
-                        metavar="N", help="parallel evaluation processes; min(2, CPU count) "
-                                          "(--backend ray: the CPUs of the local Ray)")
-    add_backend_flags(parser, "where the missions fly: processes on this machine, or Ray tasks",
-                      " (its CPUs fly the missions; results are written here, to --out)")
+    add_compute_flags(parser, workers_type=positive_int("workers"),
+                      workers_default=min(2, os.cpu_count() or 1), workers_metavar="N",
+                      workers_help="parallel evaluation processes; min(2, CPU count) "
+                                   "(--backend ray: the CPUs of the local Ray)",
+                      backend_help="where the missions fly: processes on this machine, or Ray "
+                                   "tasks",
+                      address_help=" (its CPUs fly the missions; results are written here, "
+                                   "to --out)")
     parser.add_argument("--out", default=DEFAULT_COMPARE_OUT, metavar="DIR",
                         help="output folder; rerunning into it resumes the same configuration "
                              "and refuses another one")
     parser.add_argument("--config", type=Path, default=None, metavar="YAML",
                         help="YAML config: it wins over the defaults, and every flag given "
                              "explicitly wins over it (None: the paper's configuration)")
-    parser.add_argument("--resolution", type=_positive_float, default=None,
+    parser.add_argument("--resolution", type=positive_float, default=None,
                         metavar="METRES",
                         help="map resolution r_M in metres (None: the config's, 0.1)")
-    parser.add_argument("--budget", type=_positive_int("budget"), default=None, metavar="STEPS",
+    parser.add_argument("--budget", type=positive_int("budget"), default=None, metavar="STEPS",
                         help="number of steps B (None: the config's, 15)")
-    parser.add_argument("--area-size", type=_positive_float, default=None, metavar="METRES",
+    parser.add_argument("--area-size", type=positive_float, default=None, metavar="METRES",
                         help="side of the square area in metres (None: the config's, 50)")
-    parser.add_argument("--grid-spacing", type=_positive_float, default=None, metavar="METRES",
+    parser.add_argument("--grid-spacing", type=positive_float, default=None, metavar="METRES",
                         help="distance between waypoints in metres (None: the config's, 5); "
                              "the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
                              "waypoints")
@@ -236,8 +203,7 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "'validate-')")
     parser.add_argument("--animate", action="store_true", default=False,
                         help="also write animations/<planner>.gif of mission 0 per planner")
-    parser.add_argument("--no-progress", action="store_true", default=False,
-                        help="hide the progress bar")
+    add_progress_flag(parser, "hide the progress bar")
     return parser
 
 
@@ -371,228 +337,9 @@ def _flag_value(argv: list[str], flag: str) -> str | None:
 
 def study_main(argv: list[str] | None = None) -> int:
     """Entry point of ``ipp-study robustness|credit|ablation|generalisation|sweep ...``; 0 ok,
-    2 bad input (checked before anything is written or trained).
-
-    Writes one ``ipp-compare`` folder per setting plus the study's table and figure; ``sweep``
-    (:mod:`reports.sweep`) its run folders, ``validation/``, ``sweep.md`` and ``sweep.csv``.
+    2 bad input (checked before anything is written or trained). The command lives in
+    :mod:`reports.study_cli`.
     """
-    parser = argparse.ArgumentParser(
-        prog="ipp-study", description="Regenerate the paper's studies into a folder.",
-        formatter_class=HelpFormatter)
-    add_version(parser)
-    parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation",
-                                          "sweep"],
-                        help="generalisation: planners x terrain families (real test rasters "
-                             "included) x team settings, paired differences to IG; "
-                             "robustness: paper Table I (team sizes x communication ranges); "
-                             "credit: COMA against its credit-assignment variants; ablation: "
-                             "COMA with one input plane, the masking or the centring toggled; "
-                             "each run trained alike, then compared on test missions; sweep: "
-                             "a grid of COMA runs (--sweep FIELD=V1,V2 x --seeds) scored on "
-                             "validation missions against IG")
-    parser.add_argument("--planners", default=None,
-                        help="planners, comma-separated (coma=PATH for your own policy, "
-                             "LABEL:coma=PATH to name it); default: coma,ig,coverage, and "
-                             f"for generalisation {','.join(DEFAULT_PLANNERS)}")
-    parser.add_argument("--agents", default=None,
-                        help="team sizes, comma-separated (default 2,4,8); sweep: the one "
-                             "team size of training and validation (default 4)")
-    parser.add_argument("--comm", default=None,
-                        help="ranges in metres, comma-separated (default 0,25,inf); sweep: "
-                             "the one range (default 25)")
-    parser.add_argument("--failures", default="0",
-                        help="robustness: numbers of UAVs failing at a random step, "
-                             "comma-separated (e.g. 0,1; beyond the paper)")
-    parser.add_argument("--trials", type=_positive_int("--trials"), default=50)
-    parser.add_argument("--seed", type=int, default=None,
-                        help="run seed of the missions flown (default 0; sweep: "
-                             "the validation missions of seed 10000, never a training seed)")
-    parser.add_argument("--workers", type=_positive_int("--workers"), default=1,
-                        help="evaluation processes and runs trained at once (--backend ray: "
-                             "the CPUs of the local Ray)")
-    add_backend_flags(parser, "where missions fly and runs train: processes on this machine, "
-                      "or Ray tasks on one Ray for the whole study",
-                      " (results are written here, to --out, a folder the nodes share for "
-                      "credit/ablation)")
-    parser.add_argument("--resolution", type=_positive_float, default=None)
-    parser.add_argument("--out", default=None, help="study folder (default results/STUDY)")
-    parser.add_argument("--variants", default="coma,central_qv,actor_independent,decentralised",
-                        help="credit: variants to train")
-    parser.add_argument("--ablations",
-                        default="own_position,centred,masking,other_actions,footprints",
-                        help="ablation: feature switches to toggle, or masking / centred")
-    parser.add_argument("--missions", type=_positive_int("--missions"), default=None,
-                        help="credit, ablation, sweep: training missions per run (default "
-                             "5000)")
-    parser.add_argument("--train-resolution", type=_positive_float, default=0.5,
-                        help="credit, ablation, sweep: map resolution of the training "
-                             "missions")
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="credit, ablation, sweep: a COMAConfig field for every run, read "
-                             "as ipp-train coma --set reads it (repeatable)")
-    parser.add_argument("--sweep", action="append", default=[], metavar="FIELD=V1,V2,...",
-                        help="sweep: a COMAConfig field and its values (repeatable: the grid "
-                             "is the product; a list field's items joined by +, e.g. "
-                             "team_sizes=2+4,4)")
-    parser.add_argument("--seeds", action="append", default=None, metavar="S,S,...",
-                        help="credit, ablation, sweep: training seeds; with several, each run "
-                             "is trained once per seed and the table gives mean and spread "
-                             "over seeds (default: one seed, 0)")
-    parser.add_argument("--families", default="split,blobs,fractal,real",
-                        help="generalisation: terrain families at 4 UAVs / 25 m (real: one cell "
-                             "per test raster)")
-    parser.add_argument("--team-families", default="split,blobs",
-                        help="generalisation: families flown in every --agents x --comm setting")
-    parser.add_argument("--budget", type=_positive_int("--budget"), default=None,
-                        help="generalisation: steps B (default: the protocol's 15)")
-    parser.add_argument("--reference", default="ig", metavar="LABEL",
-                        help="generalisation: the planner every other is compared with, "
-                             "paired, on the same missions")
-    parser.add_argument("--no-progress", action="store_true")
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exit_:
-        return exit_.code if isinstance(exit_.code, int) else 2
-    out = f"results/{args.study}" if args.out is None else args.out  # "" is refused
-    try:
-        check_backend_flags(args.backend, args.address)
-    except (ValueError, RayUnavailableError) as err:
-        print(f"ipp-study: error: {err}", file=sys.stderr)
-        return 2
-    backend = {"backend": args.backend, "address": args.address}
-    if args.sweep and args.study != "sweep":
-        print(f"ipp-study: error: --sweep is for ipp-study sweep, not {args.study}",
-              file=sys.stderr)
-        return 2
-    if args.seeds is not None and len(args.seeds) > 1:
-        print(f"ipp-study: error: --seeds is given {len(args.seeds)} times "
-              f"({' and '.join(args.seeds)}); give all seeds in one --seeds S,S,...",
-              file=sys.stderr)
-        return 2
-    seed = 0 if args.seed is None else args.seed
-    agents = "2,4,8" if args.agents is None else args.agents
-    comm = "0,25,inf" if args.comm is None else args.comm
-    try:
-        # The study's folder holds the folders of its runs: one study at a time.
-        with claim(out, f"ipp-study {args.study}"):
-            return _study(args, out, backend, seed, agents, comm)
-    except (ValueError, OSError, argparse.ArgumentTypeError) as err:
-        # OSError: ConnectionError (no Ray at --address) included
-        print(f"ipp-study: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return interrupted("ipp-study", Path(out))
+    from .study_cli import main
 
-
-def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], seed: int,
-           agents: str, comm: str) -> int:
-    """Run the study ``args.study`` into ``out`` (claimed); ValueError on bad input."""
-    from .studies import credit_assignment_study, robustness_study
-
-    if args.study != "sweep":  # the sweep takes one value of each, checked there
-        _distinct_items("--agents", agents)
-        _distinct_items("--comm", comm)
-    if args.study == "generalisation":
-        from .generalisation import generalisation_study, study_cells
-
-        planners = args.planners or ",".join(DEFAULT_PLANNERS)
-        settings = [(int(a), _comm_range(c)) for a in agents.split(",")
-                    for c in comm.split(",")]
-        cells = study_cells([f for f in args.families.split(",") if f],
-                            [f for f in args.team_families.split(",") if f], settings)
-        study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
-                                     out=out, workers=args.workers,
-                                     resolution=args.resolution, budget=args.budget,
-                                     reference=args.reference,
-                                     progress=not args.no_progress, **backend)
-        print(study.table)
-        print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
-    elif args.study == "robustness":
-        study = robustness_study(args.planners or "coma,ig,coverage",
-                                 [int(a) for a in agents.split(",")],
-                                 [_comm_range(c) for c in comm.split(",")],
-                                 trials=args.trials,
-                                 seed=seed, out=out, workers=args.workers,
-                                 resolution=args.resolution,
-                                 progress=not args.no_progress,
-                                 failures=[int(f) for f in args.failures.split(",")],
-                                 **backend)
-        print(study.table)
-        print(f"written: {out}/robustness.md, .csv, .png, .pdf")
-    elif args.study == "sweep":
-        return _sweep(args, out, backend)
-    else:
-        from coma.cli import int_list
-
-        from .studies import ablation_study
-        from .sweep import parse_assignments
-
-        overrides = parse_assignments(args.set)
-        seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
-        common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
-                      train_resolution=args.train_resolution, trials=args.trials,
-                      seed=seed, out=out, workers=args.workers,
-                      eval_resolution=args.resolution, progress=not args.no_progress,
-                      **backend)
-        if args.study == "credit":
-            result = credit_assignment_study([v for v in args.variants.split(",") if v],
-                                             **common)
-        else:
-            result = ablation_study([a for a in args.ablations.split(",") if a], **common)
-        print(result.table)
-        print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
-              "F1 per step)")
-    return 0
-
-
-def _distinct_items(flag: str, text: str) -> None:
-    """Refuse a list flag that names no value, an empty item or a value twice (a study would
-    silently fly its defaults or a duplicate row)."""
-    items = [item.strip() for item in text.split(",")]
-    if not text.strip() or any(not item for item in items):
-        raise ValueError(f"{flag} {text!r} has an empty value; give e.g. {flag} 2,4,8")
-    repeated = sorted({item for item in items if items.count(item) > 1})
-    if repeated:
-        raise ValueError(f"{flag} {text!r} gives {', '.join(repeated)} more than once")
-
-
-def _sweep(args: argparse.Namespace, out: str, backend: dict[str, str | None]) -> int:
-    """``ipp-study sweep``: the grid from --sweep/--set/--seeds, trained and scored
-    (ValueError on bad input, before anything is written)."""
-    from coma.cli import int_list
-
-    from .sweep import SCORING_SEED, parse_assignments, parse_sweep, sweep_study
-
-    if not args.sweep:
-        raise ValueError("ipp-study sweep needs at least one --sweep FIELD=V1,V2,...")
-    missions = args.missions
-    grid = parse_sweep(args.sweep)
-    overrides = parse_assignments(args.set)
-    if missions is not None and ("missions" in grid or "missions" in overrides):
-        raise ValueError("missions is given by --missions and by --sweep/--set; give it once")
-    if missions is None and "missions" not in grid:
-        missions = overrides.pop("missions", 5000)  # --set missions=N is --missions N
-    elif missions is None:
-        missions = 5000  # swept (sweep_grid refuses it in --set as well)
-    for flag, text in (("--agents", args.agents), ("--comm", args.comm)):
-        if text is not None and "," in text:
-            raise ValueError(f"sweep: {flag} takes one value (the training and validation "
-                             f"missions'), got {text!r}")
-    agents = None
-    if args.agents is not None:
-        try:
-            agents = int(args.agents)
-        except ValueError:
-            raise ValueError(f"--agents must be an integer >= 1, got {args.agents!r}") from None
-    study = sweep_study(
-        grid, seeds=[0] if args.seeds is None else int_list("--seeds", args.seeds[0]),
-        overrides=overrides, missions=missions, train_resolution=args.train_resolution,
-        agents=agents, comm=None if args.comm is None else parse_comm(args.comm),
-        trials=args.trials, seed=SCORING_SEED if args.seed is None else args.seed, out=out,
-        workers=args.workers, eval_resolution=args.resolution,
-        progress=not args.no_progress, **backend)
-    print(study.table)
-    print(f"best grid point: {study.best.label if study.best else 'none (no run has a policy)'}")
-    print(f"written: {out}/sweep.md, {out}/sweep.csv, {out}/runs/ (one folder per run), "
-          f"{out}/validation/ (the comparison on validation missions)")
-    return 0
+    return main(argv)

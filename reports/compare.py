@@ -386,13 +386,7 @@ def compare(agents: int | None = None, comm: float | None = None,
         ConnectionError: no Ray cluster answers at ``address``.
     """
     seed = check_int("seed", seed, 0)  # 1.5 is refused, not truncated
-    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
-        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
-    if isinstance(workers, bool) or int(workers) != workers or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
-    if namespace not in ("test", "validation"):
-        raise ValueError(f"namespace must be 'test' or 'validation', got {namespace!r}")
-    check_backend(backend, address)  # before the planners are built
+    _check_run_inputs(trials, workers, namespace, backend, address)
     env_config = build_env_config(config, agents=agents, comm=comm, terrain=terrain,
                                   threshold=threshold, resolution=resolution, budget=budget,
                                   area_size=area_size, grid_spacing=grid_spacing)
@@ -404,71 +398,132 @@ def compare(agents: int | None = None, comm: float | None = None,
             # Held until the tables and figures are written: a second run into the folder
             # (another seed, say) is refused instead of mixing its missions in.
             stack.enter_context(claim(out, EVALUATION_COMMAND))
-        pool = None
-        requested = _requested_specs(planners)
-        names = [spec.name for spec in requested]
-        for name in names:
-            # Here, before any worker starts: an unknown name's message lists the planners
-            # registered in this process too, which a spawned worker does not know.
-            check_planner_name(name)
-        if backend == "local" and workers > 1 and not _all_stored(out, requested, trials):
-            # The workers start and import the planners' modules at once; one of them builds
-            # and checks the planners, then the evaluation hands them their tasks. A run
-            # whose every mission is stored already has nothing to fly: no workers.
-            pool = WorkerPool(min(int(workers), int(trials) * max(len(names), 1)),
-                              planner_modules(names))
-            stack.callback(pool.close)  # stops them if the run ends before the evaluation
-        if pool is not None and not set(names) & set(planners_in_process()):
-            # A worker builds and checks the planners (the workers import torch and SB3
-            # anyway): this process never imports them, which on two cores is worth about
-            # a second of the start-up. Not for a planner registered in this process only.
-            specs, checkpoints, notes = pool.call(_checked_planners, planners, env_config)
-            for text in notes:
-                (note or _print_note)(text)
-        else:
-            specs, checkpoints, _ = _checked_planners(planners, env_config,
-                                                      note or _print_note)
-        labels = [spec.effective_label for spec in specs]
-        if reference is not None and reference not in labels:
-            raise ValueError(f"the reference planner {reference!r} is not among the planners "
-                             f"flown ({', '.join(labels)})")
+        pool, names = _start_workers(stack, planners, out, trials, workers, backend)
+        specs, checkpoints = _build_planners(pool, names, planners, env_config, note, reference)
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=False)  # before anything is written
-        from ipp_toolkit.runs.evaluation import evaluate
-
-        drawn: set[tuple[str, int]] = set()
-
-        def draw_now(label: str, mission: int, trajectory: dict[str, Any],
-                     rows: list[dict[str, Any]]) -> None:
-            # Drawn while the workers fly the other missions, not after all of them.
-            if out is not None:
-                draw_trajectory(Path(out), env_config, label, mission, trajectory,
-                                (float(rows[-1]["entropy"]), float(rows[-1]["f1"])))
-                drawn.add((label, mission))
-
-        result = evaluate(env_config, specs, missions=int(trials), seed=int(seed),
-                          workers=int(workers), out_dir=out, progress=progress, namespace=namespace,
-                          record_missions=(0,),
-                          on_recorded=draw_now if workers > 1 or backend == "ray" else None,
-                          backend=backend, address=address, pool=pool)
+        drawer = _TrajectoryDrawer(out, env_config)
+        result = _fly_missions(env_config, specs, trials, seed, workers, out, progress,
+                               namespace, backend, address, pool, drawer)
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=True)
-        summary = summarise(result.rows, reference=reference or "ig", checkpoints={
-            label: f"{record['checkpoint']} sha256:{record['sha256'][:16]}"
-            for label, record in checkpoints.items()})
-        comparison = Comparison(result=result, summary=summary)
+        comparison = Comparison(result=result,
+                                summary=_summary(result, reference, checkpoints))
         if out is not None:
-            comparison.write(out, drawn)
-            if animate:
-                from .animation import animate_mission
-
-                for spec in specs:
-                    planner = make_planner(spec.name, **spec.options)
-                    label = spec.effective_label
-                    animate_mission(env_config, planner,
-                                    Path(out) / "animations" / f"{safe_name(str(label))}.gif",
-                                    seed=int(seed), mission=0)
+            _write_outputs(comparison, Path(out), drawer.drawn, animate, specs, int(seed))
         return comparison
+
+
+def _check_run_inputs(trials: int, workers: int, namespace: str, backend: str,
+                      address: str | None) -> None:
+    """Refuse bad counts, namespace or backend (ValueError) before the planners are built."""
+    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
+        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
+    if isinstance(workers, bool) or int(workers) != workers or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if namespace not in ("test", "validation"):
+        raise ValueError(f"namespace must be 'test' or 'validation', got {namespace!r}")
+    check_backend(backend, address)
+
+
+def _start_workers(stack: contextlib.ExitStack, planners: str | Sequence[str | PlannerSpec]
+                   | None, out: str | os.PathLike[str] | None, trials: int, workers: int,
+                   backend: str) -> tuple[WorkerPool | None, list[str]]:
+    """The worker processes of a local run with ``workers > 1`` (closed by ``stack``), or
+    None; and the names of the planners asked for, each checked to be registered."""
+    pool = None
+    requested = _requested_specs(planners)
+    names = [spec.name for spec in requested]
+    for name in names:
+        # Here, before any worker starts: an unknown name's message lists the planners
+        # registered in this process too, which a spawned worker does not know.
+        check_planner_name(name)
+    if backend == "local" and workers > 1 and not _all_stored(out, requested, trials):
+        # The workers start and import the planners' modules at once; one of them builds
+        # and checks the planners, then the evaluation hands them their tasks. A run
+        # whose every mission is stored already has nothing to fly: no workers.
+        pool = WorkerPool(min(int(workers), int(trials) * max(len(names), 1)),
+                          planner_modules(names))
+        stack.callback(pool.close)  # stops them if the run ends before the evaluation
+    return pool, names
+
+
+def _build_planners(pool: WorkerPool | None, names: list[str],
+                    planners: str | Sequence[str | PlannerSpec] | None, env_config: EnvConfig,
+                    note: Callable[[str], None] | None, reference: str | None
+                    ) -> tuple[list[PlannerSpec], dict[str, dict[str, str]]]:
+    """Build and check every planner (in a worker where there are workers), and the
+    reference among them; their specs and the checkpoints they load."""
+    if pool is not None and not set(names) & set(planners_in_process()):
+        # A worker builds and checks the planners (the workers import torch and SB3
+        # anyway): this process never imports them, which on two cores is worth about
+        # a second of the start-up. Not for a planner registered in this process only.
+        specs, checkpoints, notes = pool.call(_checked_planners, planners, env_config)
+        for text in notes:
+            (note or _print_note)(text)
+    else:
+        specs, checkpoints, _ = _checked_planners(planners, env_config, note or _print_note)
+    labels = [spec.effective_label for spec in specs]
+    if reference is not None and reference not in labels:
+        raise ValueError(f"the reference planner {reference!r} is not among the planners "
+                         f"flown ({', '.join(labels)})")
+    return specs, checkpoints
+
+
+class _TrajectoryDrawer:
+    """Draws each recorded mission into ``out`` as soon as it has flown, while the workers
+    fly the other missions, not after all of them; ``drawn`` names what it drew."""
+
+    def __init__(self, out: str | os.PathLike[str] | None, env_config: EnvConfig) -> None:
+        self.out, self.env_config = out, env_config
+        self.drawn: set[tuple[str, int]] = set()
+
+    def __call__(self, label: str, mission: int, trajectory: dict[str, Any],
+                 rows: list[dict[str, Any]]) -> None:
+        if self.out is not None:
+            draw_trajectory(Path(self.out), self.env_config, label, mission, trajectory,
+                            (float(rows[-1]["entropy"]), float(rows[-1]["f1"])))
+            self.drawn.add((label, mission))
+
+
+def _fly_missions(env_config: EnvConfig, specs: list[PlannerSpec], trials: int, seed: int,
+                  workers: int, out: str | os.PathLike[str] | None, progress: bool,
+                  namespace: str, backend: str, address: str | None, pool: WorkerPool | None,
+                  drawer: _TrajectoryDrawer) -> EvaluationResult:
+    """Evaluate the planners; with workers or Ray, ``drawer`` draws mission 0 as it lands."""
+    from ipp_toolkit.runs.evaluation import evaluate
+
+    return evaluate(env_config, specs, missions=int(trials), seed=int(seed),
+                    workers=int(workers), out_dir=out, progress=progress, namespace=namespace,
+                    record_missions=(0,),
+                    on_recorded=drawer if workers > 1 or backend == "ray" else None,
+                    backend=backend, address=address, pool=pool)
+
+
+def _summary(result: EvaluationResult, reference: str | None,
+             checkpoints: dict[str, dict[str, str]]) -> Summary:
+    """The summary of the rows: paired with ``reference`` (default ig), naming the weights."""
+    return summarise(result.rows, reference=reference or "ig", checkpoints={
+        label: f"{record['checkpoint']} sha256:{record['sha256'][:16]}"
+        for label, record in checkpoints.items()})
+
+
+def _write_outputs(comparison: Comparison, out: Path, drawn: set[tuple[str, int]],
+                   animate: bool, specs: list[PlannerSpec], seed: int) -> None:
+    """The tables and figures (the trajectories not ``drawn`` yet) and, with ``animate``,
+    ``animations/<planner>.gif``: mission 0 of every planner, flown again."""
+    comparison.write(out, drawn)
+    if not animate:
+        return
+    from .animation import animate_mission
+
+    env_config = comparison.result.config
+    for spec in specs:
+        planner = make_planner(spec.name, **spec.options)
+        label = spec.effective_label
+        animate_mission(env_config, planner,
+                        out / "animations" / f"{safe_name(str(label))}.gif",
+                        seed=seed, mission=0)
 
 
 def _requested_specs(planners: str | Sequence[str | PlannerSpec] | None) -> list[PlannerSpec]:

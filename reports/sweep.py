@@ -45,7 +45,7 @@ from ipp_toolkit.config.settings import build_env_config, describe_config, safe_
 from ipp_toolkit.io import write_json
 from ipp_toolkit.runs.ray_backend import check_backend
 
-from .compare import compare
+from .compare import Comparison, compare
 from .studies import (
     TrainTask,
     backend_session,
@@ -53,7 +53,7 @@ from .studies import (
     train_runs,
     training_mission,
 )
-from .tables import atomic_write_text
+from .tables import Summary, atomic_write_text
 
 __all__ = ["SCORING_SEED", "GridPoint", "SweepRun", "SweepStudy", "parse_assignments",
            "parse_sweep", "sweep_grid", "sweep_study", "sweep_table"]
@@ -473,66 +473,25 @@ def sweep_study(sweep: Mapping[str, Sequence[tuple[str, Any]]] | Sequence[str],
         ValueError: bad input (see :func:`sweep_grid`; a scoring seed among the training
             seeds, a run folder holding another run), checked before anything is written.
     """
-    from ipp_toolkit.planners.specs import PlannerSpec
-
     grid_values = parse_sweep(sweep) if _is_items(sweep) else dict(sweep)  # type: ignore[arg-type]
     seeds = list(seeds)
     grid = sweep_grid(grid_values, dict(overrides or {}), seeds, missions)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    if seed in seeds:
-        raise ValueError(f"the validation missions of seed {seed} are those the seed-{seed} "
-                         "runs select their best.pt on; score on another --seed (default "
-                         f"{SCORING_SEED})")
-    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
-        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
+    _check_scoring(seed, seeds, trials)
     check_backend(backend, address)
     env = build_env_config(training_mission(train_resolution), agents=agents, comm=comm)
     validation = build_env_config(None, agents=env.team.n_agents, comm=env.team.comm_range,
                                   resolution=eval_resolution)
     out = Path(out)
-    runs: list[SweepRun] = []
-    tasks: list[TrainTask] = []
-    env_values = config_to_dict(env)
-    for point, config in grid:
-        try:
-            _check_training(config, env)
-        except ValueError as err:
-            raise ValueError(f"grid point {point.label}: {err}") from None
-        for training_seed in seeds:
-            folder = out / "runs" / point.folder / f"s{training_seed}"
-            seeded = config.replace(seed=training_seed)
-            _check_folder(folder, seeded, env)
-            runs.append(SweepRun(point, training_seed, folder))
-            if not _finished(folder, seeded):
-                # The checked config itself, every field (the worker applies it to "cpu").
-                tasks.append((runs[-1].label, seeded.to_dict(), env_values, str(folder),
-                              progress and workers == 1))
+    runs, tasks = _plan_runs(grid, seeds, env, out, progress and workers == 1)
     points = [point for point, _ in grid]
     with backend_session(backend, address, workers) as cluster:
         if tasks:
             train_runs(tasks, workers, cluster, progress, run)
         runs = [dataclasses.replace(r, diverged=(r.folder / DIVERGED).is_file()) for r in runs]
-        flown = [r for r in runs if (r.folder / "best.pt").is_file()]
-        specs = [PlannerSpec("ig", label="ig")] + [
-            PlannerSpec("coma", {"checkpoint": str(r.folder / "best.pt")}, label=r.label)
-            for r in flown]
-        comparison = compare(planners=specs, trials=trials, seed=seed, workers=workers,
-                             out=out / "validation", config=validation, progress=progress,
-                             namespace="validation", backend=backend, address=address)
-    summary = comparison.summary
-    budget = summary.budget
-    scored = []
-    for r in runs:
-        paired = summary.paired.get(r.label)
-        if paired is None:
-            scored.append(r)
-            continue
-        scored.append(dataclasses.replace(
-            r, entropy=summary.stat(r.label, "entropy", budget).mean,
-            f1=summary.stat(r.label, "f1", budget).mean, gap=paired.mean, gap_se=paired.se,
-            win_rate=paired.win_rate, missions=paired.n))
-    ig = summary.stat("ig", "entropy", budget)
+        comparison = _validate_runs(runs, trials, seed, workers, out, validation, progress,
+                                    backend, address)
+    scored = _scored(runs, comparison.summary)
+    ig = comparison.summary.stat("ig", "entropy", comparison.summary.budget)
     fixed = ", ".join(f"{k} = {_text(v)}" for k, v in (overrides or {}).items()) or "none"
     seed_text = ", ".join(map(str, seeds))
     caption = (
@@ -549,6 +508,74 @@ def sweep_study(sweep: Mapping[str, Sequence[tuple[str, Any]]] | Sequence[str],
     atomic_write_text(out / "sweep.md", table)
     atomic_write_text(out / "sweep.csv", _csv(scored, ig.mean, out))
     return SweepStudy(points, seeds, scored, ig.mean, table, out)
+
+
+def _check_scoring(seed: int, seeds: list[int], trials: int) -> None:
+    """Refuse a scoring seed that is no non-negative integer or is a training seed, and bad
+    ``trials`` (ValueError)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if seed in seeds:
+        raise ValueError(f"the validation missions of seed {seed} are those the seed-{seed} "
+                         "runs select their best.pt on; score on another --seed (default "
+                         f"{SCORING_SEED})")
+    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
+        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
+
+
+def _plan_runs(grid: list[tuple[GridPoint, Any]], seeds: list[int], env: EnvConfig, out: Path,
+               bars: bool) -> tuple[list[SweepRun], list[TrainTask]]:
+    """Every run of the grid (point x seed) and the training tasks of those not finished,
+    each checked against the training mission and its folder (ValueError)."""
+    runs: list[SweepRun] = []
+    tasks: list[TrainTask] = []
+    env_values = config_to_dict(env)
+    for point, config in grid:
+        try:
+            _check_training(config, env)
+        except ValueError as err:
+            raise ValueError(f"grid point {point.label}: {err}") from None
+        for training_seed in seeds:
+            folder = out / "runs" / point.folder / f"s{training_seed}"
+            seeded = config.replace(seed=training_seed)
+            _check_folder(folder, seeded, env)
+            runs.append(SweepRun(point, training_seed, folder))
+            if not _finished(folder, seeded):
+                # The checked config itself, every field (the worker applies it to "cpu").
+                tasks.append((runs[-1].label, seeded.to_dict(), env_values, str(folder),
+                              bars))
+    return runs, tasks
+
+
+def _validate_runs(runs: list[SweepRun], trials: int, seed: int, workers: int, out: Path,
+                   validation: EnvConfig, progress: bool, backend: str,
+                   address: str | None) -> Comparison:
+    """IG and every run with a ``best.pt``, flown on the same validation missions."""
+    from ipp_toolkit.planners.specs import PlannerSpec
+
+    flown = [r for r in runs if (r.folder / "best.pt").is_file()]
+    specs = [PlannerSpec("ig", label="ig")] + [
+        PlannerSpec("coma", {"checkpoint": str(r.folder / "best.pt")}, label=r.label)
+        for r in flown]
+    return compare(planners=specs, trials=trials, seed=seed, workers=workers,
+                   out=out / "validation", config=validation, progress=progress,
+                   namespace="validation", backend=backend, address=address)
+
+
+def _scored(runs: list[SweepRun], summary: Summary) -> list[SweepRun]:
+    """The runs with their validation scores (a run without a policy as it is)."""
+    budget = summary.budget
+    scored = []
+    for r in runs:
+        paired = summary.paired.get(r.label)
+        if paired is None:
+            scored.append(r)
+            continue
+        scored.append(dataclasses.replace(
+            r, entropy=summary.stat(r.label, "entropy", budget).mean,
+            f1=summary.stat(r.label, "f1", budget).mean, gap=paired.mean, gap_se=paired.se,
+            win_rate=paired.win_rate, missions=paired.n))
+    return scored
 
 
 def _is_items(sweep: Any) -> bool:

@@ -167,16 +167,44 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
             unreadable terrain file, a threshold without a raster or a raster without one, or
             an invalid resulting configuration.
     """
-    if isinstance(config, EnvConfig):
-        given: dict[str, Any] = config_to_dict(config)
-        source = "the given config"
-    elif config is not None:
-        given = read_config_file(config)
-        source = f"config file {os.fspath(config)!r}"
-    else:
-        given = {}
-        source = ""
+    given, source = _given_sections(config)
     layered = merge_sections(defaults or {}, given)
+    flags = _flag_sections(layered, agents=agents, comm=comm, terrain=terrain,
+                           threshold=threshold, threshold_quantile=threshold_quantile,
+                           resolution=resolution, budget=budget, area_size=area_size,
+                           features=features, grid_spacing=grid_spacing)
+    layered = merge_sections(layered, flags)
+    try:
+        draft = config_from_dict(_with_team_rules(layered, team_from_flag=agents is not None,
+                                                  start_given="start" in given.get("team", {})))
+    except ValueError as err:
+        raise ValueError(f"{err} (in {source})" if source and "(in " not in str(err)
+                         else str(err)) from None
+    if threshold is not None and draft.terrain.kind != "raster":
+        raise ValueError(f"threshold {threshold!r} is in a raster's units, but the terrain is "
+                         f"{draft.terrain.kind!r}; give a raster FILE as terrain or drop the "
+                         "threshold")
+    return draft
+
+
+def _given_sections(config: EnvConfig | str | os.PathLike[str] | None
+                    ) -> tuple[dict[str, Any], str]:
+    """The sections ``config`` sets, and where they come from (for error messages)."""
+    if isinstance(config, EnvConfig):
+        return config_to_dict(config), "the given config"
+    if config is not None:
+        return read_config_file(config), f"config file {os.fspath(config)!r}"
+    return {}, ""
+
+
+def _flag_sections(layered: dict[str, Any], *, agents: int | None, comm: float | None,
+                   terrain: str | os.PathLike[str] | None, threshold: float | None,
+                   threshold_quantile: float | None, resolution: float | None,
+                   budget: int | None, area_size: float | None,
+                   features: Mapping[str, bool | int | float] | None,
+                   grid_spacing: float | None) -> dict[str, dict[str, Any]]:
+    """The sections the explicit keywords of :func:`build_env_config` set, checked; the
+    terrain's read against ``layered`` (the defaults under the config)."""
     if agents is not None and (isinstance(agents, bool) or int(agents) != agents or agents < 1):
         raise ValueError(f"agents must be an integer >= 1, got {agents!r}")
     if comm is not None:
@@ -207,18 +235,7 @@ def build_env_config(config: EnvConfig | str | os.PathLike[str] | None = None, *
         terrain_section["threshold_quantile"] = None
     if terrain_section:
         flags["terrain"] = terrain_section
-    layered = merge_sections(layered, flags)
-    try:
-        draft = config_from_dict(_with_team_rules(layered, team_from_flag=agents is not None,
-                                                  start_given="start" in given.get("team", {})))
-    except ValueError as err:
-        raise ValueError(f"{err} (in {source})" if source and "(in " not in str(err)
-                         else str(err)) from None
-    if threshold is not None and draft.terrain.kind != "raster":
-        raise ValueError(f"threshold {threshold!r} is in a raster's units, but the terrain is "
-                         f"{draft.terrain.kind!r}; give a raster FILE as terrain or drop the "
-                         "threshold")
-    return draft
+    return flags
 
 
 def _with_team_rules(layered: dict[str, Any], team_from_flag: bool,

@@ -8,11 +8,12 @@ derived from ``(namespace, seed, k)`` only.
 
 With ``out_dir`` every finished mission is stored at once as a shard, written atomically, so an
 interrupted run resumes where it stopped, and a folder grows when other planners are flown
-into it (the layout: :mod:`ipp_toolkit.runs.result_store`).
+into it (the layout and reading stored missions back: :mod:`ipp_toolkit.runs.result_store`).
 
 Results are tidy rows, one per (planner, mission, step) with the columns
 :data:`RESULT_COLUMNS`; :meth:`EvaluationResult.curves` turns them into (missions, B + 1)
-arrays. :func:`load_results` reads a folder back.
+arrays. :func:`load_results` reads a folder back (both live in
+:mod:`ipp_toolkit.runs.evaluation_result`, importable from here).
 
 This module owns one planner's mission (:func:`run_mission`: its views, its timed ``act``,
 its rows), the task runner that flies one (planner label, mission) with cached planners, and
@@ -32,15 +33,13 @@ import gc
 import math
 import os
 import time
-import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..config.files import config_from_dict
 from ..config.limits import check_mission, check_result_rows
 from ..config.schema import EnvConfig, check_int
 from ..config.settings import safe_name
@@ -56,6 +55,7 @@ from ..planners.specs import PlannerSpec, as_specs
 from ..sim.driver import fly_missions, start_missions
 from ..sim.mission import MissionGeometry, MissionState
 from ..world.seeding import check_namespace, planner_seed
+from .evaluation_result import METRICS, EvaluationResult, load_results
 from .process_pool import (
     WorkerPool,
     limit_blas_threads,
@@ -71,11 +71,7 @@ from .result_store import (
     check_folder,
     check_label,
     folder_identity,
-    read_identity,
-    read_results_csv,
-    read_shard,
-    read_trajectory,
-    shard_path,
+    read_stored_missions,
     stored_planners,
     trajectory_path,
     write_results_csv,
@@ -93,10 +89,6 @@ __all__ = [
     "evaluate",
     "load_results",
 ]
-
-METRICS = ("entropy", "f1", "rmse", "reward", "plan_ms")
-"""The numeric per-step columns that :meth:`EvaluationResult.curves` accepts."""
-
 
 
 # --------------------------------------------------------------------------------------------
@@ -264,104 +256,6 @@ class _Runner:
 
 
 # --------------------------------------------------------------------------------------------
-# Results
-
-
-@dataclass
-class EvaluationResult:
-    """The outcome of :func:`evaluate` (or of :func:`load_results`).
-
-    Attributes:
-        config: the configuration of every mission.
-        seed: the run seed.
-        rows: one dict per (planner, mission, step) with the keys :data:`RESULT_COLUMNS`,
-            ordered by planner (as given), mission, step.
-        labels: planner labels in order.
-        trajectories: ``(label, mission) -> dict`` of the recorded missions: ``ground_truth``
-            (H, W) bool, ``final_prob`` (H, W) float16, ``positions`` (B + 1, N, 3) float
-            metres, ``footprints`` (B + 1, N, 4) int, ``area_size`` and ``resolution`` floats.
-        out_dir: the results folder, or None for an in-memory evaluation.
-        namespace: the random-stream namespace of the missions.
-    """
-
-    config: EnvConfig
-    seed: int
-    rows: list[dict[str, Any]]
-    labels: list[str]
-    trajectories: dict[tuple[str, int], dict[str, Any]] = field(default_factory=dict)
-    out_dir: Path | None = None
-    namespace: str = "test"
-
-    @property
-    def missions(self) -> list[int]:
-        """Sorted indices of the missions in the rows."""
-        return sorted({int(row["mission"]) for row in self.rows})
-
-    def curves(self, metric: str) -> dict[str, np.ndarray]:
-        """Per planner label, a (missions, B + 1) float array of ``metric`` over the steps.
-
-        Rows are the planner's missions in increasing index; missing cells are NaN.
-
-        Args:
-            metric: one of :data:`METRICS` (``entropy``, ``f1``, ``rmse``, ``reward``,
-                ``plan_ms``).
-        """
-        if metric not in METRICS:
-            raise ValueError(f"unknown metric {metric!r}; choose one of {METRICS}")
-        steps = self.config.team.budget + 1
-        per_label: dict[str, dict[int, np.ndarray]] = {label: {} for label in self.labels}
-        for row in self.rows:
-            curves = per_label.setdefault(str(row["planner"]), {})
-            curve = curves.get(int(row["mission"]))
-            if curve is None:
-                curve = curves[int(row["mission"])] = np.full(steps, np.nan)
-            step = int(row["step"])
-            if 0 <= step < steps:
-                curve[step] = float(row[metric])
-        return {label: (np.stack([curves[k] for k in sorted(curves)]) if curves
-                        else np.zeros((0, steps)))
-                for label, curves in per_label.items()}
-
-
-def load_results(out_dir: str | os.PathLike[str]) -> EvaluationResult:
-    """Read an evaluation folder back: ``config.json``, ``results.csv`` and the trajectories.
-
-    Raises:
-        EvaluationError: the folder has no (or a malformed) ``config.json`` or
-            ``results.csv``; the message names the file.
-    """
-    folder = Path(out_dir)
-    stored = read_identity(folder)
-    try:
-        config = config_from_dict(stored["config"])
-        seed = int(stored["seed"])
-        namespace = str(stored["namespace"])
-    except (TypeError, ValueError) as err:
-        raise EvaluationError(f"{str(folder / 'config.json')!r} is malformed: {err}") from None
-    rows = read_results_csv(folder / "results.csv")
-    labels: list[str] = []
-    missions: dict[str, set[int]] = {}
-    for row in rows:
-        label = str(row["planner"])
-        if label not in missions:
-            labels.append(label)
-            missions[label] = set()
-        missions[label].add(int(row["mission"]))
-    trajectories: dict[tuple[str, int], dict[str, Any]] = {}
-    for label in labels:
-        for mission in sorted(missions[label]):
-            path = trajectory_path(folder, label, mission)
-            if path.exists():
-                try:
-                    trajectories[(label, mission)] = read_trajectory(path)
-                except (OSError, ValueError, EOFError) as err:
-                    warnings.warn(f"skipping unreadable trajectory {str(path)!r}: {err}",
-                                  stacklevel=2)
-    return EvaluationResult(config=config, seed=seed, rows=rows, labels=labels,
-                            trajectories=trajectories, out_dir=folder, namespace=namespace)
-
-
-# --------------------------------------------------------------------------------------------
 # The runner
 
 
@@ -421,6 +315,35 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
             (an ImportError; the message gives the install command).
         ConnectionError: no Ray cluster answers at ``address`` (within seconds).
     """
+    inputs = _check_inputs(config, planners, missions, seed, workers, namespace, backend,
+                           address, record_missions)
+    folder = Path(out_dir) if out_dir is not None else None
+    with contextlib.ExitStack() as stack:
+        if folder is not None:
+            # Held until the results are written: a second run into the folder is refused.
+            # The given path: an empty one is refused, not taken as the current folder.
+            stack.enter_context(claim(out_dir, EVALUATION_COMMAND, "out_dir"))
+        return _evaluate_claimed(config, inputs, folder, progress, namespace, on_recorded,
+                                 backend, address, pool)
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """:func:`evaluate`'s inputs once checked."""
+
+    specs: list[PlannerSpec]
+    labels: list[str]
+    missions: int
+    seed: int
+    workers: int
+    record: frozenset[int]
+
+
+def _check_inputs(config: EnvConfig, planners: str | Sequence[str | PlannerSpec],
+                  missions: int, seed: int, workers: int, namespace: str, backend: str,
+                  address: str | None, record_missions: Sequence[int]) -> _Inputs:
+    """Every input of :func:`evaluate` checked (ValueError naming the value), before any
+    folder is touched."""
     if not isinstance(config, EnvConfig):
         raise ValueError(f"config must be an EnvConfig, got {type(config).__name__}")
     missions = check_int("missions", missions, 1)
@@ -436,6 +359,15 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
     for spec in specs:
         check_planner_name(spec.name)  # an unknown name: refused, listing the registered ones
     labels = [spec.effective_label for spec in specs]
+    _check_labels(labels)
+    # Sizes that cannot fit are refused before any folder is touched.
+    check_result_rows(config.team.budget, missions, len(specs))
+    check_mission(config, at_once=min(workers, missions * len(specs)))
+    return _Inputs(specs, labels, missions, seed, workers, record)
+
+
+def _check_labels(labels: list[str]) -> None:
+    """Refuse a label given twice, two labels of one file name, or a label no file can have."""
     stems: dict[str, str] = {}
     for label in labels:
         if label in stems.values():
@@ -446,142 +378,146 @@ def evaluate(config: EnvConfig, planners: str | Sequence[str | PlannerSpec], mis
                              f"name {safe_name(label)!r}; rename one")
         stems[safe_name(label)] = label
         check_label(label)
-    # Sizes that cannot fit are refused before any folder is touched.
-    check_result_rows(config.team.budget, missions, len(specs))
-    check_mission(config, at_once=min(workers, missions * len(specs)))
-    folder = Path(out_dir) if out_dir is not None else None
-    with contextlib.ExitStack() as stack:
-        if folder is not None:
-            # Held until the results are written: a second run into the folder is refused.
-            # The given path: an empty one is refused, not taken as the current folder.
-            stack.enter_context(claim(out_dir, EVALUATION_COMMAND, "out_dir"))
-        return _evaluate_claimed(config, specs, labels, missions, seed, workers, folder,
-                                 progress, namespace, record, on_recorded, backend, address,
-                                 pool)
 
 
-def _evaluate_claimed(config: EnvConfig, specs: list[PlannerSpec], labels: list[str],
-                      missions: int, seed: int, workers: int, folder: Path | None,
-                      progress: bool, namespace: str, record: frozenset[int],
+def _evaluate_claimed(config: EnvConfig, inputs: _Inputs, folder: Path | None, progress: bool,
+                      namespace: str,
                       on_recorded: Callable[[str, int, dict[str, Any], list[dict[str, Any]]],
                                             None] | None, backend: str,
                       address: str | None, pool: WorkerPool | None) -> EvaluationResult:
-    """:func:`evaluate` once its inputs are checked and ``folder`` (if any) is claimed."""
-    identity = folder_identity(config, seed, namespace)
+    """:func:`evaluate` once its inputs are checked and ``folder`` (if any) is claimed:
+    read what the folder holds, fly the rest, write results.csv."""
+    labels, missions = inputs.labels, inputs.missions
+    identity = folder_identity(config, inputs.seed, namespace)
     # The folder's config.json matches identity (else refused); shards are checked against it.
-    has_identity = check_folder(folder, identity, specs) if folder is not None else False
-
-    spec_of = dict(zip(labels, specs, strict=True))
-    done: dict[tuple[str, int], list[dict[str, Any]]] = {}
-    trajectories: dict[tuple[str, int], dict[str, Any]] = {}
+    has_identity = check_folder(folder, identity, inputs.specs) if folder is not None else False
+    store = _Store(folder, identity, has_identity, inputs.specs, on_recorded)
     if folder is not None and has_identity:
-        for label in labels:
-            for mission in range(missions):
-                path = shard_path(folder, label, mission)
-                if not path.exists():
-                    continue
-                try:
-                    rows = read_shard(path, label, mission, config.team.budget,
-                                      identity)
-                except (OSError, UnicodeDecodeError, ValueError, KeyError) as err:
-                    warnings.warn(f"shard {str(path)!r} is corrupt or of another run ({err}); "
-                                  f"flying mission {mission} of planner {label!r} again",
-                                  stacklevel=2)
-                    continue
-                if mission in record:
-                    npz = trajectory_path(folder, label, mission)
-                    try:
-                        trajectories[(label, mission)] = read_trajectory(npz)
-                    except FileNotFoundError:
-                        continue  # stored without its trajectory: fly it again to record it
-                    except (OSError, ValueError, EOFError) as err:
-                        warnings.warn(f"trajectory {str(npz)!r} is unreadable ({err}); flying "
-                                      f"mission {mission} of planner {label!r} again",
-                                      stacklevel=2)
-                        continue
-                done[(label, mission)] = rows
+        store.done, store.trajectories = read_stored_missions(
+            folder, labels, missions, inputs.record, config.team.budget, identity)
     tasks = [(label, mission) for mission in range(missions) for label in labels
-             if (label, mission) not in done]
-    n_workers = min(workers, len(tasks))
-
-    entries = {label: _Entry(spec_of[label]) for label in labels}
-    local_runner: _Runner | None = None
-    if backend == "local" and n_workers <= 1 and tasks:
-        local_runner = _Runner(config, seed, namespace, entries, record)
-        for label in dict.fromkeys(label for label, _ in tasks):
-            local_runner.planner(label)  # a planner that cannot be built fails before writing
-    elif tasks:
-        for label in dict.fromkeys(label for label, _ in tasks):
-            entries[label].factory = transferable_factory(spec_of[label])
+             if (label, mission) not in store.done]
+    n_workers = min(inputs.workers, len(tasks))
+    local = backend == "local" and n_workers <= 1
+    runner = _prepare_runner(config, inputs, namespace, tasks, local)
     cluster = None
     if backend == "ray" and tasks:
         from .ray_backend import connect
 
         cluster = connect(address, n_workers)  # starts or reaches Ray before anything is written
-
-    prepared = False
-
-    def prepare() -> None:
-        """Write the folder's identity and planner specs, once: when the first mission has
-        flown (or nothing is left to fly), so input that fails on the first mission (a
-        missing raster, a grid that does not fit, a planner that cannot act) leaves nothing
-        behind."""
-        nonlocal prepared
-        if folder is None or prepared:
-            return
-        if not has_identity:
-            write_json(folder / "config.json", identity)
-        for spec in specs:
-            path = folder / "shards" / safe_name(spec.effective_label) / "planner.json"
-            if not path.exists():
-                write_json(path, spec.to_dict())
-        prepared = True
-
-    def finish(label: str, mission: int, result: dict[str, Any]) -> None:
-        if folder is not None:
-            prepare()
-            if result["trajectory"] is not None:
-                write_trajectory(trajectory_path(folder, label, mission), result["trajectory"])
-            write_shard(folder, spec_of[label], mission, result, identity)
-        done[(label, mission)] = result["rows"]
-        if result["trajectory"] is not None:
-            trajectories[(label, mission)] = result["trajectory"]
-            if on_recorded is not None:
-                on_recorded(label, mission, result["trajectory"], result["rows"])
-
     try:
         with progress_bar(len(labels) * missions, "evaluate", "missions",
                           initial=len(labels) * missions - len(tasks),
                           disable=not progress) as bar:
-            if local_runner is not None:
-                with limit_blas_threads():
-                    for label, mission in tasks:
-                        finish(*local_runner.run(label, mission))
-                        bar.update(1)
-            elif cluster is not None:
-                from .ray_backend import run_ray
-
-                run_ray(cluster, _Runner(config, seed, namespace, entries, record), tasks,
-                        finish, bar)
-            elif tasks:
-                runner = _Runner(config, seed, namespace, entries, record)
-                run_parallel(runner, tasks, n_workers, finish, bar, pool)
+            _fly(runner, tasks, local, cluster, n_workers, pool, store.finish, bar)
     finally:
         if cluster is not None:
             cluster.close()
+    store.prepare()
+    return _results(config, inputs, store, folder, namespace)
 
-    prepare()
-    rows = [row for label in labels for mission in range(missions)
-            for row in done[(label, mission)]]
+
+def _prepare_runner(config: EnvConfig, inputs: _Inputs, namespace: str,
+                    tasks: list[tuple[str, int]], local: bool) -> _Runner:
+    """The runner of the ``tasks``. In this process (``local``) its planners are built now,
+    so one that cannot be built fails before anything is written; for workers each planner
+    travels as a factory they can rebuild."""
+    spec_of = dict(zip(inputs.labels, inputs.specs, strict=True))
+    entries = {label: _Entry(spec_of[label]) for label in inputs.labels}
+    flown = dict.fromkeys(label for label, _ in tasks)
+    if not local:
+        for label in flown:
+            entries[label].factory = transferable_factory(spec_of[label])
+        return _Runner(config, inputs.seed, namespace, entries, inputs.record)
+    runner = _Runner(config, inputs.seed, namespace, entries, inputs.record)
+    for label in flown:
+        runner.planner(label)
+    return runner
+
+
+def _fly(runner: _Runner, tasks: list[tuple[str, int]], local: bool, cluster: Any,
+         n_workers: int, pool: WorkerPool | None,
+         finish: Callable[[str, int, dict[str, Any]], None], bar: Any) -> None:
+    """Fly the ``tasks`` in this process, as Ray tasks on ``cluster``, or in worker
+    processes; ``finish`` stores each flown mission."""
+    if not tasks:
+        return
+    if local:
+        with limit_blas_threads():
+            for label, mission in tasks:
+                finish(*runner.run(label, mission))
+                bar.update(1)
+    elif cluster is not None:
+        from .ray_backend import run_ray
+
+        run_ray(cluster, runner, tasks, finish, bar)
+    else:
+        run_parallel(runner, tasks, n_workers, finish, bar, pool)
+
+
+class _Store:
+    """Where flown missions go: rows and trajectories in memory and, with a folder, its
+    shards, trajectories and (once) its identity and planner specs."""
+
+    def __init__(self, folder: Path | None, identity: dict[str, Any], has_identity: bool,
+                 specs: list[PlannerSpec],
+                 on_recorded: Callable[[str, int, dict[str, Any], list[dict[str, Any]]],
+                                       None] | None) -> None:
+        self.folder, self.identity, self.has_identity = folder, identity, has_identity
+        self.specs = specs
+        self.spec_of = {spec.effective_label: spec for spec in specs}
+        self.on_recorded = on_recorded
+        self.done: dict[tuple[str, int], list[dict[str, Any]]] = {}
+        self.trajectories: dict[tuple[str, int], dict[str, Any]] = {}
+        self.prepared = False
+
+    def prepare(self) -> None:
+        """Write the folder's identity and planner specs, once: when the first mission has
+        flown (or nothing is left to fly), so input that fails on the first mission (a
+        missing raster, a grid that does not fit, a planner that cannot act) leaves nothing
+        behind."""
+        if self.folder is None or self.prepared:
+            return
+        if not self.has_identity:
+            write_json(self.folder / "config.json", self.identity)
+        for spec in self.specs:
+            path = self.folder / "shards" / safe_name(spec.effective_label) / "planner.json"
+            if not path.exists():
+                write_json(path, spec.to_dict())
+        self.prepared = True
+
+    def finish(self, label: str, mission: int, result: dict[str, Any]) -> None:
+        """Keep one flown mission (and store it in the folder, if any)."""
+        if self.folder is not None:
+            self.prepare()
+            if result["trajectory"] is not None:
+                write_trajectory(trajectory_path(self.folder, label, mission),
+                                 result["trajectory"])
+            write_shard(self.folder, self.spec_of[label], mission, result, self.identity)
+        self.done[(label, mission)] = result["rows"]
+        if result["trajectory"] is not None:
+            self.trajectories[(label, mission)] = result["trajectory"]
+            if self.on_recorded is not None:
+                self.on_recorded(label, mission, result["trajectory"], result["rows"])
+
+
+def _results(config: EnvConfig, inputs: _Inputs, store: _Store, folder: Path | None,
+             namespace: str) -> EvaluationResult:
+    """The rows of every requested mission, with a folder also those of the planners stored
+    in it before (written to results.csv)."""
+    labels = inputs.labels
+    rows = [row for label in labels for mission in range(inputs.missions)
+            for row in store.done[(label, mission)]]
     if folder is not None:
         # A result folder is a growing set: planners flown into it before keep their rows.
-        stored = stored_planners(folder, labels, missions, config.team.budget, identity)
+        stored = stored_planners(folder, labels, inputs.missions, config.team.budget,
+                                 store.identity)
         labels = labels + list(stored)
         rows += [row for label_rows in stored.values() for row in label_rows]
         write_results_csv(folder / "results.csv", rows)
-    return EvaluationResult(config=config, seed=seed, rows=rows, labels=labels,
+    trajectories = store.trajectories
+    return EvaluationResult(config=config, seed=inputs.seed, rows=rows, labels=labels,
                             trajectories={key: trajectories[key] for key in sorted(
                                 trajectories, key=lambda k: (labels.index(k[0]), k[1]))
-                                if key[1] in record},
+                                if key[1] in inputs.record},
                             out_dir=folder, namespace=namespace)
-

@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
            "check_folder", "check_label", "run_key", "shard_path", "trajectory_path",
-           "stored_planners", "read_shard",
+           "stored_planners", "read_shard", "read_stored_missions",
            "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
            "read_results_csv"]
 
@@ -235,6 +235,44 @@ def read_shard(path: Path, label: str, mission: int, budget: int,
         raise ValueError("the shard belongs to another run (config, seed or namespace) than "
                          "the folder's config.json")
     return _check_rows(shard.get("rows"), label, mission, budget, identity["seed"])
+
+
+def read_stored_missions(folder: Path, labels: Sequence[str], missions: int,
+                         record: frozenset[int], budget: int, identity: Mapping[str, Any]
+                         ) -> tuple[dict[tuple[str, int], list[dict[str, Any]]],
+                                    dict[tuple[str, int], dict[str, Any]]]:
+    """The missions 0..missions-1 of ``labels`` stored in ``folder`` (of the run
+    ``identity``): their rows and, for the ``record`` missions, their trajectories, by
+    ``(label, mission)``. A corrupt shard or an unreadable trajectory is warned about and left
+    out (the mission flies again), as is a recorded mission stored without its trajectory."""
+    done: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    trajectories: dict[tuple[str, int], dict[str, Any]] = {}
+    for label in labels:
+        for mission in range(missions):
+            path = shard_path(folder, label, mission)
+            if not path.exists():
+                continue
+            try:
+                rows = read_shard(path, label, mission, budget, identity)
+            except (OSError, UnicodeDecodeError, ValueError, KeyError) as err:
+                # stacklevel 3: the warning points at evaluate (evaluation.py), two calls up.
+                warnings.warn(f"shard {str(path)!r} is corrupt or of another run ({err}); "
+                              f"flying mission {mission} of planner {label!r} again",
+                              stacklevel=3)
+                continue
+            if mission in record:
+                npz = trajectory_path(folder, label, mission)
+                try:
+                    trajectories[(label, mission)] = read_trajectory(npz)
+                except FileNotFoundError:
+                    continue  # stored without its trajectory: fly it again to record it
+                except (OSError, ValueError, EOFError) as err:
+                    warnings.warn(f"trajectory {str(npz)!r} is unreadable ({err}); flying "
+                                  f"mission {mission} of planner {label!r} again",
+                                  stacklevel=3)
+                    continue
+            done[(label, mission)] = rows
+    return done, trajectories
 
 
 def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any],

@@ -24,6 +24,7 @@ import math
 import os
 import tempfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -293,61 +294,109 @@ def render_mission(
         ground_truth, global_prob, local_probs, positions, footprints, area_size, altitudes,
         panel_px, step, budget,
     )
-    p = int(panel_px)
-    n = lp.shape[0]
-    hw = (gt.shape[0], gt.shape[1])
-    sep = max(2, p // 60)
-    width = 2 * p + 3 * sep
-    small = (width - (SMALL_PER_ROW + 1) * sep) // SMALL_PER_ROW
-    small_rows = -(-n // SMALL_PER_ROW)
-    bar_h = max(4, p // 30)
-    show_bar = step is not None and budget is not None
-    height = sep + p + sep + small_rows * (small + sep) + ((bar_h + sep) if show_bar else 0)
-
-    img = np.empty((height, width, 3), dtype=np.uint8)
+    layout = _Layout.of(int(panel_px), lp.shape[0], step is not None and budget is not None)
+    img = np.empty((layout.height, layout.width, 3), dtype=np.uint8)
     img[:] = BACKGROUND
+    n = lp.shape[0]
+    marks = _Marks(pos=pos, footprints=fp, area_size=area_size, hw=(gt.shape[0], gt.shape[1]),
+                   alt_idx=np.abs(pos[:, 2:3] - alts[None, :]).argmin(axis=1),
+                   colors=PALETTE[np.arange(n) % len(PALETTE)])
+    _draw_big_panels(img, gt, gp, marks, layout)
+    _draw_local_panels(img, lp, marks, layout)
+    if layout.show_bar:
+        assert step is not None and budget is not None
+        _draw_progress(img, step / budget, layout)
+    return img
 
-    scale = p / 240.0
-    alt_idx = np.abs(pos[:, 2:3] - alts[None, :]).argmin(axis=1)
-    colors = PALETTE[np.arange(n) % len(PALETTE)]
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where the panels of :func:`render_mission` go: ``p`` the side of a big panel, ``sep``
+    the separator, ``small`` the side of a UAV's panel (with its border), ``bar_h`` the
+    progress bar's height; ``scale`` sizes the lines and markers to the 240 px design."""
+
+    p: int
+    sep: int
+    width: int
+    height: int
+    small: int
+    bar_h: int
+    show_bar: bool
+    scale: float
+
+    @classmethod
+    def of(cls, p: int, n: int, show_bar: bool) -> _Layout:
+        sep = max(2, p // 60)
+        width = 2 * p + 3 * sep
+        small = (width - (SMALL_PER_ROW + 1) * sep) // SMALL_PER_ROW
+        small_rows = -(-n // SMALL_PER_ROW)
+        bar_h = max(4, p // 30)
+        height = sep + p + sep + small_rows * (small + sep) + ((bar_h + sep) if show_bar else 0)
+        return cls(p, sep, width, height, small, bar_h, show_bar, p / 240.0)
+
+
+@dataclass(frozen=True)
+class _Marks:
+    """What is drawn over the maps: each UAV's position, footprint, altitude level and
+    colour, on a map of ``hw`` cells covering ``area_size`` metres."""
+
+    pos: np.ndarray
+    footprints: np.ndarray
+    area_size: float
+    hw: tuple[int, int]
+    alt_idx: np.ndarray
+    colors: np.ndarray
+
+
+def _draw_big_panels(img: np.ndarray, gt: np.ndarray, gp: np.ndarray, marks: _Marks,
+                     layout: _Layout) -> None:
+    """Top row: ground truth and global map, with every UAV's footprint and marker."""
+    p, sep, scale = layout.p, layout.sep, layout.scale
     line_t = max(1, round(2 * scale))
-
-    # Top row: ground truth and global map, with every UAV's footprint and marker.
     gt_panel = np.take(_GT_LUT, _lut_index(_area_resample(gt, p, p)), axis=0)
     gp_panel = prob_to_rgb(_area_resample(gp, p, p))
+    n = len(marks.colors)  # one per UAV
     for panel in (gt_panel, gp_panel):
         for i in range(n):
-            _draw_footprint(panel, fp[i], hw, colors[i], line_t)
+            _draw_footprint(panel, marks.footprints[i], marks.hw, marks.colors[i], line_t)
         for i in range(n):
-            half = _marker_half(int(alt_idx[i]), scale)
-            _draw_marker(panel, pos[i], area_size, half, colors[i], max(1, round(scale)))
+            half = _marker_half(int(marks.alt_idx[i]), scale)
+            _draw_marker(panel, marks.pos[i], marks.area_size, half, marks.colors[i],
+                         max(1, round(scale)))
     img[sep:sep + p, sep:sep + p] = gt_panel
     img[sep:sep + p, 2 * sep + p:2 * sep + 2 * p] = gp_panel
 
-    # Small panels: each UAV's local map, bordered in its colour, with its own footprint/marker.
-    border = max(2, round(3 * scale))
-    inner = small - 2 * border
-    if inner > 0:
-        small_scale = inner / 240.0
-        for i in range(n):
-            row, col = divmod(i, SMALL_PER_ROW)
-            y0 = 2 * sep + p + row * (small + sep)
-            x0 = sep + col * (small + sep)
-            panel = prob_to_rgb(_area_resample(lp[i], inner, inner))
-            _draw_footprint(panel, fp[i], hw, colors[i], 1)
-            half = _marker_half(int(alt_idx[i]), 1.5 * small_scale)
-            _draw_marker(panel, pos[i], area_size, half, colors[i], 1)
-            img[y0:y0 + small, x0:x0 + small] = colors[i]
-            img[y0 + border:y0 + border + inner, x0 + border:x0 + border + inner] = panel
 
-    if show_bar:
-        assert step is not None and budget is not None
-        y0 = height - sep - bar_h
-        bar_w = width - 2 * sep
-        filled = round(bar_w * min(max(step / budget, 0.0), 1.0))
-        img[y0:y0 + bar_h, sep:sep + bar_w] = BAR_EMPTY
-        img[y0:y0 + bar_h, sep:sep + filled] = BAR_FULL
-    return img
+def _draw_local_panels(img: np.ndarray, lp: np.ndarray, marks: _Marks,
+                       layout: _Layout) -> None:
+    """Small panels: each UAV's local map, bordered in its colour, with its own footprint
+    and marker (none where the panel is too small for a map inside its border)."""
+    p, sep, small = layout.p, layout.sep, layout.small
+    border = max(2, round(3 * layout.scale))
+    inner = small - 2 * border
+    if inner <= 0:
+        return
+    small_scale = inner / 240.0
+    for i in range(lp.shape[0]):
+        row, col = divmod(i, SMALL_PER_ROW)
+        y0 = 2 * sep + p + row * (small + sep)
+        x0 = sep + col * (small + sep)
+        panel = prob_to_rgb(_area_resample(lp[i], inner, inner))
+        _draw_footprint(panel, marks.footprints[i], marks.hw, marks.colors[i], 1)
+        half = _marker_half(int(marks.alt_idx[i]), 1.5 * small_scale)
+        _draw_marker(panel, marks.pos[i], marks.area_size, half, marks.colors[i], 1)
+        img[y0:y0 + small, x0:x0 + small] = marks.colors[i]
+        img[y0 + border:y0 + border + inner, x0 + border:x0 + border + inner] = panel
+
+
+def _draw_progress(img: np.ndarray, fraction: float, layout: _Layout) -> None:
+    """The progress bar along the bottom, filled to ``fraction`` (clipped to [0, 1])."""
+    sep = layout.sep
+    y0 = layout.height - sep - layout.bar_h
+    bar_w = layout.width - 2 * sep
+    filled = round(bar_w * min(max(fraction, 0.0), 1.0))
+    img[y0:y0 + layout.bar_h, sep:sep + bar_w] = BAR_EMPTY
+    img[y0:y0 + layout.bar_h, sep:sep + filled] = BAR_FULL
 
 
 def save_png(rgb: np.ndarray, path: str | os.PathLike[str]) -> None:

@@ -1,0 +1,109 @@
+"""The flags the commands share, one owner for their spelling and their values.
+
+``ipp-compare``, ``ipp-study``, ``ipp-simulate`` (:mod:`reports.cli`) and ``ipp-train coma``
+(:mod:`coma.cli`) parse some of the same flags. This module owns
+
+* the value types of their flags: :func:`positive_int`, :func:`positive_float`,
+  :func:`finite_float` and :func:`comm_range` (argparse prints their message after
+  ``argument --flag:``);
+* the flags themselves where both command modules parse them: where the missions fly
+  (:func:`add_compute_flags`: ``--workers``, ``--backend``, ``--address``), ``--set
+  FIELD=VALUE`` (:func:`add_set_flag`) and ``--no-progress`` (:func:`add_progress_flag`).
+
+Each command keeps its own help text, since the same flag does a different job in each
+(``--workers`` flies an evaluation's missions, or a training's updates).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from typing import Any
+
+from ..config.settings import parse_comm
+from .ray_backend import add_backend_flags
+
+__all__ = ["positive_int", "positive_float", "finite_float", "comm_range", "add_compute_flags",
+           "add_set_flag", "add_progress_flag"]
+
+
+def positive_int(flag: str) -> Callable[[str], int]:
+    """The value type of an integer flag >= 1 (``flag`` names it in tracebacks)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+        return value
+
+    parse.__name__ = flag
+    return parse
+
+
+def positive_float(text: str) -> float:
+    """The value type of a positive, finite number (a resolution, a size in metres)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def finite_float(text: str) -> float:
+    """The value type of any finite number (a raster threshold)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def comm_range(text: str) -> float:
+    """The value type of a communication range: metres >= 0, or ``inf``
+    (:func:`~ipp_toolkit.config.settings.parse_comm`)."""
+    try:
+        return parse_comm(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def add_compute_flags(parser: argparse.ArgumentParser, *, workers_help: str,
+                      workers_type: Callable[[str], int], backend_help: str,
+                      address_help: str, workers_default: int = 1,
+                      workers_metavar: str | None = None) -> None:
+    """``--workers``, then ``--backend local|ray`` and ``--address HOST:PORT``
+    (:func:`~ipp_toolkit.runs.ray_backend.add_backend_flags`): where a command's missions fly.
+
+    Args:
+        parser: the command's parser.
+        workers_help: what the workers do in this command.
+        workers_type: the value type of ``--workers`` (an integer >= 1).
+        backend_help, address_help: as :func:`~ipp_toolkit.runs.ray_backend.add_backend_flags`
+            takes them.
+        workers_default: the number of workers without the flag.
+        workers_metavar: the value's name in the help (default: WORKERS).
+    """
+    parser.add_argument("--workers", type=workers_type, default=workers_default,
+                        metavar=workers_metavar, help=workers_help)
+    add_backend_flags(parser, backend_help, address_help)
+
+
+def add_set_flag(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--set FIELD=VALUE`` (repeatable): a :class:`~coma.config.COMAConfig` field, its
+    value read by ``coma.cli.coerce_value``."""
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help=help)
+
+
+def add_progress_flag(parser: argparse.ArgumentParser, help: str | None) -> None:
+    """``--no-progress``: no progress bar (``args.no_progress``)."""
+    kwargs: dict[str, Any] = {} if help is None else {"help": help}
+    parser.add_argument("--no-progress", action="store_true", **kwargs)

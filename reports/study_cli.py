@@ -1,0 +1,277 @@
+"""The ``ipp-study`` command: its flags, their checks, then one study of :mod:`reports.studies`,
+:mod:`reports.generalisation` or :mod:`reports.sweep` (``reports.cli.study_main`` runs it).
+
+Writes one ``ipp-compare`` folder per setting plus the study's table and figure; ``sweep``
+(:mod:`reports.sweep`) its run folders, ``validation/``, ``sweep.md`` and ``sweep.csv``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ipp_toolkit.config.settings import parse_comm
+from ipp_toolkit.runs.cli_flags import (
+    add_compute_flags,
+    add_progress_flag,
+    add_set_flag,
+    comm_range,
+    positive_float,
+    positive_int,
+)
+from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
+from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
+from ipp_toolkit.runs.run_folder import claim
+
+from .cli import interrupted
+from .compare import DEFAULT_PLANNERS
+
+__all__ = ["main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``ipp-study robustness|credit|ablation|generalisation|sweep ...``; 0 ok, 2 bad input
+    (checked before anything is written or trained)."""
+    try:
+        args = _study_parser().parse_args(argv)
+    except SystemExit as exit_:
+        return exit_.code if isinstance(exit_.code, int) else 2
+    out = f"results/{args.study}" if args.out is None else args.out  # "" is refused
+    try:
+        _check_flags(args)
+    except (ValueError, RayUnavailableError) as err:
+        print(f"ipp-study: error: {err}", file=sys.stderr)
+        return 2
+    backend = {"backend": args.backend, "address": args.address}
+    seed = 0 if args.seed is None else args.seed
+    agents = "2,4,8" if args.agents is None else args.agents
+    comm = "0,25,inf" if args.comm is None else args.comm
+    try:
+        # The study's folder holds the folders of its runs: one study at a time.
+        with claim(out, f"ipp-study {args.study}"):
+            return _study(args, out, backend, seed, agents, comm)
+    except (ValueError, OSError, argparse.ArgumentTypeError) as err:
+        # OSError: ConnectionError (no Ray at --address) included
+        print(f"ipp-study: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return interrupted("ipp-study", Path(out))
+
+
+def _check_flags(args: argparse.Namespace) -> None:
+    """Refuse flags that do not go together (ValueError, RayUnavailableError) before the
+    study's folder is claimed."""
+    check_backend_flags(args.backend, args.address)
+    if args.sweep and args.study != "sweep":
+        raise ValueError(f"--sweep is for ipp-study sweep, not {args.study}")
+    if args.seeds is not None and len(args.seeds) > 1:
+        raise ValueError(f"--seeds is given {len(args.seeds)} times "
+                         f"({' and '.join(args.seeds)}); give all seeds in one --seeds S,S,...")
+
+
+def _study_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ipp-study", description="Regenerate the paper's studies into a folder.",
+        formatter_class=HelpFormatter)
+    add_version(parser)
+    parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation",
+                                          "sweep"],
+                        help="generalisation: planners x terrain families (real test rasters "
+                             "included) x team settings, paired differences to IG; "
+                             "robustness: paper Table I (team sizes x communication ranges); "
+                             "credit: COMA against its credit-assignment variants; ablation: "
+                             "COMA with one input plane, the masking or the centring toggled; "
+                             "each run trained alike, then compared on test missions; sweep: "
+                             "a grid of COMA runs (--sweep FIELD=V1,V2 x --seeds) scored on "
+                             "validation missions against IG")
+    parser.add_argument("--planners", default=None,
+                        help="planners, comma-separated (coma=PATH for your own policy, "
+                             "LABEL:coma=PATH to name it); default: coma,ig,coverage, and "
+                             f"for generalisation {','.join(DEFAULT_PLANNERS)}")
+    parser.add_argument("--agents", default=None,
+                        help="team sizes, comma-separated (default 2,4,8); sweep: the one "
+                             "team size of training and validation (default 4)")
+    parser.add_argument("--comm", default=None,
+                        help="ranges in metres, comma-separated (default 0,25,inf); sweep: "
+                             "the one range (default 25)")
+    parser.add_argument("--failures", default="0",
+                        help="robustness: numbers of UAVs failing at a random step, "
+                             "comma-separated (e.g. 0,1; beyond the paper)")
+    parser.add_argument("--trials", type=positive_int("--trials"), default=50)
+    parser.add_argument("--seed", type=int, default=None,
+                        help="run seed of the missions flown (default 0; sweep: "
+                             "the validation missions of seed 10000, never a training seed)")
+    add_compute_flags(parser, workers_type=positive_int("--workers"),
+                      workers_help="evaluation processes and runs trained at once (--backend "
+                                   "ray: the CPUs of the local Ray)",
+                      backend_help="where missions fly and runs train: processes on this "
+                                   "machine, or Ray tasks on one Ray for the whole study",
+                      address_help=" (results are written here, to --out, a folder the nodes "
+                                   "share for credit/ablation)")
+    parser.add_argument("--resolution", type=positive_float, default=None)
+    parser.add_argument("--out", default=None, help="study folder (default results/STUDY)")
+    parser.add_argument("--variants", default="coma,central_qv,actor_independent,decentralised",
+                        help="credit: variants to train")
+    parser.add_argument("--ablations",
+                        default="own_position,centred,masking,other_actions,footprints",
+                        help="ablation: feature switches to toggle, or masking / centred")
+    parser.add_argument("--missions", type=positive_int("--missions"), default=None,
+                        help="credit, ablation, sweep: training missions per run (default "
+                             "5000)")
+    parser.add_argument("--train-resolution", type=positive_float, default=0.5,
+                        help="credit, ablation, sweep: map resolution of the training "
+                             "missions")
+    add_set_flag(parser, "credit, ablation, sweep: a COMAConfig field for every run, read as "
+                 "ipp-train coma --set reads it (repeatable)")
+    parser.add_argument("--sweep", action="append", default=[], metavar="FIELD=V1,V2,...",
+                        help="sweep: a COMAConfig field and its values (repeatable: the grid "
+                             "is the product; a list field's items joined by +, e.g. "
+                             "team_sizes=2+4,4)")
+    parser.add_argument("--seeds", action="append", default=None, metavar="S,S,...",
+                        help="credit, ablation, sweep: training seeds; with several, each run "
+                             "is trained once per seed and the table gives mean and spread "
+                             "over seeds (default: one seed, 0)")
+    parser.add_argument("--families", default="split,blobs,fractal,real",
+                        help="generalisation: terrain families at 4 UAVs / 25 m (real: one cell "
+                             "per test raster)")
+    parser.add_argument("--team-families", default="split,blobs",
+                        help="generalisation: families flown in every --agents x --comm setting")
+    parser.add_argument("--budget", type=positive_int("--budget"), default=None,
+                        help="generalisation: steps B (default: the protocol's 15)")
+    parser.add_argument("--reference", default="ig", metavar="LABEL",
+                        help="generalisation: the planner every other is compared with, "
+                             "paired, on the same missions")
+    add_progress_flag(parser, None)
+    return parser
+
+
+def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], seed: int,
+           agents: str, comm: str) -> int:
+    """Run the study ``args.study`` into ``out`` (claimed); ValueError on bad input."""
+    if args.study == "sweep":  # the sweep takes one value of each, checked there
+        return _sweep(args, out, backend)
+    _distinct_items("--agents", agents)
+    _distinct_items("--comm", comm)
+    if args.study == "generalisation":
+        _generalisation(args, out, backend, seed, agents, comm)
+    elif args.study == "robustness":
+        _robustness(args, out, backend, seed, agents, comm)
+    else:
+        _training_study(args, out, backend, seed)
+    return 0
+
+
+def _generalisation(args: argparse.Namespace, out: str, backend: dict[str, str | None],
+                    seed: int, agents: str, comm: str) -> None:
+    """``ipp-study generalisation``: planners x terrain families x team settings."""
+    from .generalisation import generalisation_study, study_cells
+
+    planners = args.planners or ",".join(DEFAULT_PLANNERS)
+    settings = [(int(a), comm_range(c)) for a in agents.split(",")
+                for c in comm.split(",")]
+    cells = study_cells([f for f in args.families.split(",") if f],
+                        [f for f in args.team_families.split(",") if f], settings)
+    study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
+                                 out=out, workers=args.workers,
+                                 resolution=args.resolution, budget=args.budget,
+                                 reference=args.reference,
+                                 progress=not args.no_progress, **backend)
+    print(study.table)
+    print(f"written: {out}/generalisation.md, .csv, .tex, .png, .pdf")
+
+
+def _robustness(args: argparse.Namespace, out: str, backend: dict[str, str | None],
+                seed: int, agents: str, comm: str) -> None:
+    """``ipp-study robustness``: paper Table I (team sizes x communication ranges)."""
+    from .studies import robustness_study
+
+    study = robustness_study(args.planners or "coma,ig,coverage",
+                             [int(a) for a in agents.split(",")],
+                             [comm_range(c) for c in comm.split(",")],
+                             trials=args.trials,
+                             seed=seed, out=out, workers=args.workers,
+                             resolution=args.resolution,
+                             progress=not args.no_progress,
+                             failures=[int(f) for f in args.failures.split(",")],
+                             **backend)
+    print(study.table)
+    print(f"written: {out}/robustness.md, .csv, .png, .pdf")
+
+
+def _training_study(args: argparse.Namespace, out: str, backend: dict[str, str | None],
+                    seed: int) -> None:
+    """``ipp-study credit`` or ``ablation``: COMA runs trained alike, then compared."""
+    from coma.cli import int_list
+
+    from .studies import ablation_study, credit_assignment_study
+    from .sweep import parse_assignments
+
+    overrides = parse_assignments(args.set)
+    seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
+    common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
+                  train_resolution=args.train_resolution, trials=args.trials,
+                  seed=seed, out=out, workers=args.workers,
+                  eval_resolution=args.resolution, progress=not args.no_progress,
+                  **backend)
+    if args.study == "credit":
+        result = credit_assignment_study([v for v in args.variants.split(",") if v],
+                                         **common)
+    else:
+        result = ablation_study([a for a in args.ablations.split(",") if a], **common)
+    print(result.table)
+    print(f"written: {out}/{args.study}.md, {out}/compare/ (curves.png: entropy and "
+          "F1 per step)")
+
+
+def _distinct_items(flag: str, text: str) -> None:
+    """Refuse a list flag that names no value, an empty item or a value twice (a study would
+    silently fly its defaults or a duplicate row)."""
+    items = [item.strip() for item in text.split(",")]
+    if not text.strip() or any(not item for item in items):
+        raise ValueError(f"{flag} {text!r} has an empty value; give e.g. {flag} 2,4,8")
+    repeated = sorted({item for item in items if items.count(item) > 1})
+    if repeated:
+        raise ValueError(f"{flag} {text!r} gives {', '.join(repeated)} more than once")
+
+
+def _sweep(args: argparse.Namespace, out: str, backend: dict[str, str | None]) -> int:
+    """``ipp-study sweep``: the grid from --sweep/--set/--seeds, trained and scored
+    (ValueError on bad input, before anything is written)."""
+    from coma.cli import int_list
+
+    from .sweep import SCORING_SEED, parse_assignments, parse_sweep, sweep_study
+
+    if not args.sweep:
+        raise ValueError("ipp-study sweep needs at least one --sweep FIELD=V1,V2,...")
+    missions = args.missions
+    grid = parse_sweep(args.sweep)
+    overrides = parse_assignments(args.set)
+    if missions is not None and ("missions" in grid or "missions" in overrides):
+        raise ValueError("missions is given by --missions and by --sweep/--set; give it once")
+    if missions is None and "missions" not in grid:
+        missions = overrides.pop("missions", 5000)  # --set missions=N is --missions N
+    elif missions is None:
+        missions = 5000  # swept (sweep_grid refuses it in --set as well)
+    for flag, text in (("--agents", args.agents), ("--comm", args.comm)):
+        if text is not None and "," in text:
+            raise ValueError(f"sweep: {flag} takes one value (the training and validation "
+                             f"missions'), got {text!r}")
+    agents = None
+    if args.agents is not None:
+        try:
+            agents = int(args.agents)
+        except ValueError:
+            raise ValueError(f"--agents must be an integer >= 1, got {args.agents!r}") from None
+    study = sweep_study(
+        grid, seeds=[0] if args.seeds is None else int_list("--seeds", args.seeds[0]),
+        overrides=overrides, missions=missions, train_resolution=args.train_resolution,
+        agents=agents, comm=None if args.comm is None else parse_comm(args.comm),
+        trials=args.trials, seed=SCORING_SEED if args.seed is None else args.seed, out=out,
+        workers=args.workers, eval_resolution=args.resolution,
+        progress=not args.no_progress, **backend)
+    print(study.table)
+    print(f"best grid point: {study.best.label if study.best else 'none (no run has a policy)'}")
+    print(f"written: {out}/sweep.md, {out}/sweep.csv, {out}/runs/ (one folder per run), "
+          f"{out}/validation/ (the comparison on validation missions)")
+    return 0
