@@ -18,7 +18,7 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
-from ipp_toolkit.sim.team import ACTION_DELTAS, unclaimed_options
+from ipp_toolkit.sim.team import choose_in_order
 
 from .config import mission_settings
 from .networks import masked_logits
@@ -86,15 +86,12 @@ class COMAPlanner(Planner):
         come from one batched forward pass)."""
         observations = np.stack([view.observation for view in views])
         masks = np.stack([view.mask for view in views]).astype(bool)
-        logits = masked_logits(self.actor, observations, masks)
-        actions = np.empty(len(views), dtype=np.int64)
-        targets = np.empty((len(views), 3), dtype=np.int64)
+        heard = np.zeros((len(views), len(views)), dtype=bool)
         for k, view in enumerate(views):
-            mates = view.teammates[view.teammates < k]
-            allowed = unclaimed_options(view.position, masks[k], targets[mates])
-            actions[k] = int(np.argmax(np.where(allowed, logits[k], -np.inf)))
-            targets[k] = view.position + ACTION_DELTAS[actions[k]]
-        return actions
+            heard[k, view.teammates] = True
+        positions = np.stack([view.position for view in views])
+        return choose_in_order(masked_logits(self.actor, observations, masks), positions,
+                               masks, heard)
 
 
 class COMAPriorPlanner(COMAPlanner):

@@ -22,10 +22,10 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.sim.features import actor_observations
 from ipp_toolkit.sim.mission import MissionGeometry, MissionState
-from ipp_toolkit.sim.team import N_ACTIONS
+from ipp_toolkit.sim.team import N_ACTIONS, choose_in_order
 
 from .config import COMAConfig
-from .networks import greedy_actions
+from .networks import masked_logits
 from .rollout import actor_batches
 
 __all__ = ["GreedyFlights", "fly_greedy", "evaluate_greedy", "validate", "validation_settings",
@@ -80,10 +80,13 @@ def fly_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometr
         """(E, N) greedy actions of this step."""
         obs = np.stack([actor_observations(s, features) for s in states])
         masks = np.stack([s.masks() for s in states])
-        return np.concatenate([
-            greedy_actions(actor, obs[a:b].reshape(-1, *obs.shape[2:]),
-                           masks[a:b].reshape(-1, N_ACTIONS)).reshape(b - a, -1)
+        logits = np.concatenate([
+            masked_logits(actor, obs[a:b].reshape(-1, *obs.shape[2:]),
+                          masks[a:b].reshape(-1, N_ACTIONS)).reshape(b - a, -1, N_ACTIONS)
             for a, b in groups])
+        # As the coma planner flies: in agent order, avoiding heard teammates' targets.
+        return np.stack([choose_in_order(scores, s.positions, mask, s.heard)
+                         for scores, s, mask in zip(logits, states, masks, strict=True)])
 
     flight = fly_missions(start_missions(env_config, seed, first_mission, n_missions,
                                          namespace, geometry), act)

@@ -137,3 +137,23 @@ def test_unclaimed_options_on_a_hand_sized_case():
     only_east = np.array([name == "east" for name in ACTION_NAMES])
     assert unclaimed_options(position, only_east, np.array([[3, 2, 0]])).tolist() == \
         only_east.tolist()
+
+
+def test_choose_in_order_on_a_hand_sized_case():
+    from ipp_toolkit.sim.team import ACTION_NAMES, choose_in_order
+
+    east, north = ACTION_NAMES.index("east"), ACTION_NAMES.index("north")
+    # Agents at (1, 2) and (3, 2) both like the cell (2, 2) between them most.
+    positions = np.array([[1, 2, 1], [3, 2, 1]])
+    scores = np.zeros((2, 6))
+    scores[0, east] = 2.0
+    scores[1, ACTION_NAMES.index("west")] = 2.0
+    scores[1, north] = 1.0
+    masks = np.ones((2, 6), dtype=bool)
+    hears = np.ones((2, 2), dtype=bool)
+    # Agent 1 hears agent 0's choice: it takes its second best.
+    assert choose_in_order(scores, positions, masks, hears).tolist() == [east, north]
+    # Out of range: both go for the cell (the same-target rule will settle it).
+    alone = np.eye(2, dtype=bool)
+    assert choose_in_order(scores, positions, masks, alone).tolist() == [
+        east, ACTION_NAMES.index("west")]

@@ -14,6 +14,7 @@ __all__ = [
     "N_ACTIONS",
     "action_masks",
     "unclaimed_options",
+    "choose_in_order",
     "resolve_moves",
     "communication_matrix",
     "positions_in_metres",
@@ -89,6 +90,31 @@ def unclaimed_options(position: np.ndarray, mask: np.ndarray,
                ).all(-1).any(-1)
     allowed = mask & ~claimed
     return allowed if allowed.any() else mask
+
+
+def choose_in_order(scores: np.ndarray, positions: np.ndarray, masks: np.ndarray,
+                    heard: np.ndarray) -> np.ndarray:
+    """Each agent's best option, chosen in agent order under :func:`unclaimed_options`.
+
+    Args:
+        scores: (N, 6) values of the options (e.g. a policy's logits); higher is better.
+        positions: (N, 3) int waypoints.
+        masks: (N, 6) valid actions.
+        heard: (N, N) bool, ``heard[k, i]``: agent k hears agent i.
+
+    Returns:
+        (N,) int64 actions, each valid; ties go to the lowest action index.
+    """
+    n = len(scores)
+    masks = np.asarray(masks).astype(bool)
+    actions = np.empty(n, dtype=np.int64)
+    targets = np.empty((n, 3), dtype=np.int64)
+    for k in range(n):
+        mates = np.flatnonzero(heard[k, :k])  # heard and already decided
+        allowed = unclaimed_options(positions[k], masks[k], targets[mates])
+        actions[k] = int(np.argmax(np.where(allowed, scores[k], -np.inf)))
+        targets[k] = positions[k] + ACTION_DELTAS[actions[k]]
+    return actions
 
 
 def resolve_moves(positions: np.ndarray, actions: np.ndarray,
