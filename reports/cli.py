@@ -4,8 +4,9 @@
 the metrics after every step and write the per-step metrics (CSV) and the final frame (PNG).
 
 ``ipp-compare``: evaluate planners on the test missions of one configuration, print the
-Markdown table (Table I style) and the planning time per step, and write the tables, the
-figures and the raw results (see :func:`compare_main`).
+Markdown table (Table I style, with a paired column per reference planner: ``ig`` and
+``ig_spatial`` by default) and the planning time per step, and write the tables, the figures
+and the raw results (see :func:`compare_main`).
 
 ``ipp-train coma|ppo|sb3``: train a learned planner (see :func:`train_main`); ``sb3 --algo
 ALGO`` trains any supported SB3 algorithm (``ppo`` is its PPO case).
@@ -193,10 +194,11 @@ def _compare_parser() -> argparse.ArgumentParser:
                         help="distance between waypoints in metres (None: the config's, 5); "
                              "the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
                              "waypoints")
-    parser.add_argument("--reference", default=None, metavar="LABEL",
-                        help="the planner of the summary's paired column (final entropy "
-                             "minus its on the same missions; default ig), e.g. ig_spatial "
-                             "to see what a learned planner adds over the best heuristic")
+    parser.add_argument("--reference", default=None, metavar="LABEL[,LABEL...]",
+                        help="the planners of the summary's paired columns, one column each "
+                             "(final entropy minus theirs on the same missions); each named "
+                             "one must be flown. Default: ig (the paper's baseline) and "
+                             "ig_spatial (the best heuristic), each where flown")
     parser.add_argument("--namespace", choices=("test", "validation"), default="test",
                         help="fly the held-out test missions, or the validation missions to "
                              "select policies on (the default --out then starts with "

@@ -10,7 +10,8 @@ Example (a notebook)::
 :func:`ipp_toolkit.config.settings.build_env_config`: keyword > config file > defaults),
 checks and builds every planner (:func:`resolve_planners`) before anything is written, runs
 :func:`ipp_toolkit.runs.evaluation.evaluate` and summarises the rows; with ``out`` it also writes
-the tables and figures next to the raw results.
+the tables and figures next to the raw results. The summary pairs every planner with each
+reference planner on the same missions (by default ``ig`` and ``ig_spatial``, where flown).
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from ipp_toolkit.runs.ray_backend import check_backend
 from ipp_toolkit.runs.result_store import shard_path, trajectory_path
 from ipp_toolkit.runs.run_folder import EVALUATION_COMMAND, claim
 
-from .tables import Summary, summarise, to_markdown, write_tables
+from .tables import Summary, flown_references, summarise, to_markdown, write_tables
 
 if TYPE_CHECKING:
     from ipp_toolkit.planners.specs import PlannerSpec
@@ -343,8 +344,8 @@ def compare(agents: int | None = None, comm: float | None = None,
             progress: bool = True, area_size: float | None = None,
             grid_spacing: float | None = None,
             note: Callable[[str], None] | None = None, animate: bool = False,
-            reference: str | None = None, namespace: str = "test", backend: str = "local",
-            address: str | None = None) -> Comparison:
+            reference: str | Sequence[str] | None = None, namespace: str = "test",
+            backend: str = "local", address: str | None = None) -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
@@ -363,9 +364,10 @@ def compare(agents: int | None = None, comm: float | None = None,
         progress: show a progress bar.
         note: receives notes about skipped default planners (default: stderr).
         animate: with ``out``, also write ``animations/<planner>.gif`` of mission 0.
-        reference: the label of the planner of the summary's paired column (final entropy
-            minus its on the same missions, with its standard error and win rate); refused
-            when it is not flown. None: ``ig``, and no column when ``ig`` is not flown.
+        reference: the planners of the summary's paired columns, one column each (final
+            entropy minus theirs on the same missions, with its standard error and win
+            rate): a label, comma-separated labels or a sequence; each must be flown. None:
+            ``ig`` and ``ig_spatial``, each that is not flown left out.
         namespace: ``test`` (the held-out missions) or ``validation`` (the missions to select
             policies and settings on; never select on test missions).
         backend: ``"local"`` (processes on this machine) or ``"ray"`` (one Ray task per
@@ -450,10 +452,11 @@ def _start_workers(stack: contextlib.ExitStack, planners: str | Sequence[str | P
 
 def _build_planners(pool: WorkerPool | None, names: list[str],
                     planners: str | Sequence[str | PlannerSpec] | None, env_config: EnvConfig,
-                    note: Callable[[str], None] | None, reference: str | None
+                    note: Callable[[str], None] | None,
+                    reference: str | Sequence[str] | None
                     ) -> tuple[list[PlannerSpec], dict[str, dict[str, str]]]:
     """Build and check every planner (in a worker where there are workers), and the
-    reference among them; their specs and the checkpoints they load."""
+    references named among them; their specs and the checkpoints they load."""
     if pool is not None and not set(names) & set(planners_in_process()):
         # A worker builds and checks the planners (the workers import torch and SB3
         # anyway): this process never imports them, which on two cores is worth about
@@ -464,9 +467,7 @@ def _build_planners(pool: WorkerPool | None, names: list[str],
     else:
         specs, checkpoints, _ = _checked_planners(planners, env_config, note or _print_note)
     labels = [spec.effective_label for spec in specs]
-    if reference is not None and reference not in labels:
-        raise ValueError(f"the reference planner {reference!r} is not among the planners "
-                         f"flown ({', '.join(labels)})")
+    flown_references(reference, labels)  # a named reference that is not flown is refused
     return specs, checkpoints
 
 
@@ -500,10 +501,11 @@ def _fly_missions(env_config: EnvConfig, specs: list[PlannerSpec], trials: int, 
                     backend=backend, address=address, pool=pool)
 
 
-def _summary(result: EvaluationResult, reference: str | None,
+def _summary(result: EvaluationResult, reference: str | Sequence[str] | None,
              checkpoints: dict[str, dict[str, str]]) -> Summary:
-    """The summary of the rows: paired with ``reference`` (default ig), naming the weights."""
-    return summarise(result.rows, reference=reference or "ig", checkpoints={
+    """The summary of the rows: paired with each reference (default ig and ig_spatial, where
+    flown), naming the weights."""
+    return summarise(result.rows, reference=reference, checkpoints={
         label: f"{record['checkpoint']} sha256:{record['sha256'][:16]}"
         for label, record in checkpoints.items()})
 

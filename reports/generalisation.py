@@ -10,9 +10,11 @@ Every planner flies the same test missions in a grid of cells:
 
 A cell is an ``ipp-compare`` folder (resumable); the study writes ``generalisation.md``,
 ``.csv``, ``.tex`` and ``generalisation.png/.pdf``: mean final entropy per planner and the
-paired difference of every other planner to the reference (IG): mean ± standard error over
-missions and the share of missions ahead. A difference is **bold** where the planner is
-ahead by two standard errors (mean <= -2 SE).
+paired difference of every other planner to each reference planner (by default IG, the
+paper's baseline, and ``ig_spatial``, the best heuristic, where flown): mean ± standard error
+over missions and the share of missions ahead. A difference is **bold** where the planner is
+ahead by two standard errors (mean <= -2 SE). The figure plots the differences to the first
+reference only.
 
 With ``backend="ray"`` every cell's missions fly as Ray tasks, on one Ray for the whole study
 (:func:`reports.studies.backend_session`).
@@ -36,7 +38,7 @@ from ipp_toolkit.world.families import real_raster_names
 from .compare import DEFAULT_PLANNERS, compare
 from .plots import _colour, _new_figure, save_figure
 from .studies import backend_session
-from .tables import Paired, Summary, atomic_write_text
+from .tables import DEFAULT_REFERENCES, Paired, Summary, atomic_write_text, flown_references
 
 __all__ = ["Cell", "GeneralisationStudy", "generalisation_study", "study_cells"]
 
@@ -68,9 +70,10 @@ class GeneralisationStudy:
     Attributes:
         cells: the cells in table order.
         planners: planner labels.
-        reference: the reference planner of the paired columns.
+        reference: the first reference planner (the figure's).
         summaries: the per-cell :class:`~reports.tables.Summary`.
         table: the Markdown table.
+        references: every reference planner, one set of paired columns each.
     """
 
     cells: list[Cell]
@@ -78,6 +81,7 @@ class GeneralisationStudy:
     reference: str
     summaries: dict[Cell, Summary]
     table: str
+    references: tuple[str, ...] = ()
 
 
 def study_cells(families: Sequence[str] = ("split", "blobs", "fractal", "real"),
@@ -107,14 +111,17 @@ def _paired_text(paired: Paired | None) -> str:
     return f"**{text}**" if math.isfinite(paired.se) and paired.mean <= -2 * paired.se else text
 
 
-def _tables(cells: list[Cell], planners: list[str], reference: str,
+def _tables(cells: list[Cell], planners: list[str], references: Sequence[str],
             summaries: dict[Cell, Summary]) -> tuple[str, str, str]:
-    others = [p for p in planners if p != reference]
-    header = (["terrain", "UAVs", "D"] + [f"{p} H" for p in planners]
-              + [f"{p} − {reference}" for p in others])
+    header = ["terrain", "UAVs", "D"] + [f"{p} H" for p in planners] + [
+        f"{p} − {r}" for r in references for p in planners if p != r]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * 3 + "---:|" * (len(header) - 3)]
+    # The first reference's columns keep their names and places, and later ones go at the
+    # end, so readers of the one-reference file keep working.
+    first = references[0]
     csv_rows = ["terrain,agents,comm,planner,entropy_final_mean,entropy_final_std,"
-                f"minus_{reference}_mean,minus_{reference}_se,win_rate,missions"]
+                f"minus_{first}_mean,minus_{first}_se,win_rate,missions" + "".join(
+                    f",minus_{r}_mean,minus_{r}_se,win_rate_vs_{r}" for r in references[1:])]
     tex_rows = []
     for cell in cells:
         summary = summaries[cell]
@@ -125,23 +132,29 @@ def _tables(cells: list[Cell], planners: list[str], reference: str,
         for p in planners:
             text = f"{means[p].mean:.3f}"
             cells_text.append(f"**{text}**" if means[p].mean == best else text)
-        cells_text += [_paired_text(summary.paired.get(p)) for p in others]
+        pairs = {r: summary.paired_to.get(r, {}) for r in references}
+        cells_text += [_paired_text(pairs[r].get(p)) for r in references
+                       for p in planners if p != r]
         lines.append("| " + " | ".join(cells_text) + " |")
         tex_rows.append(" & ".join(c.replace("**", "").replace("%", r"\%").replace("_", r"\_")
                                    .replace("±", r"$\pm$") for c in cells_text) + r" \\")
         for p in planners:
-            paired = summary.paired.get(p)
-            values = ("", "", "") if paired is None else (f"{paired.mean:.6g}",
-                                                          f"{paired.se:.6g}",
-                                                          f"{paired.win_rate:.6g}")
+            values = [_paired_csv(pairs[r].get(p)) for r in references]
             csv_rows.append(f"{cell.label},{cell.agents},{comm_label(cell.comm)},{p},"
-                            f"{means[p].mean:.6g},{means[p].std:.6g},{','.join(values)},"
-                            f"{means[p].n}")
+                            f"{means[p].mean:.6g},{means[p].std:.6g},{values[0]},"
+                            f"{means[p].n}" + "".join(f",{v}" for v in values[1:]))
     tex = "\n".join([r"% requires \usepackage{booktabs}", r"\begin{tabular}{lrr"
                      + "r" * (len(header) - 3) + "}", r"\toprule",
                      " & ".join(h.replace("_", r"\_").replace("−", "$-$") for h in header)
                      + r" \\", r"\midrule", *tex_rows, r"\bottomrule", r"\end{tabular}"])
     return "\n".join(lines) + "\n", "\n".join(csv_rows) + "\n", tex + "\n"
+
+
+def _paired_csv(paired: Paired | None) -> str:
+    """Mean, SE and win rate as three CSV fields (empty for the reference's own row)."""
+    if paired is None:
+        return ",,"
+    return f"{paired.mean:.6g},{paired.se:.6g},{paired.win_rate:.6g}"
 
 
 def _figure(cells: list[Cell], planners: list[str], reference: str,
@@ -152,7 +165,7 @@ def _figure(cells: list[Cell], planners: list[str], reference: str,
     x = np.arange(len(cells))
     width = 0.8 / max(len(others), 1)
     for k, planner in enumerate(others):
-        paired = [summaries[c].paired.get(planner) for c in cells]
+        paired = [summaries[c].paired_to.get(reference, {}).get(planner) for c in cells]
         means = [p.mean if p else np.nan for p in paired]
         errors = [2 * p.se if p and math.isfinite(p.se) else 0.0 for p in paired]
         ax.bar(x + (k - (len(others) - 1) / 2) * width, means, width, yerr=errors,
@@ -169,21 +182,25 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
                          cells: Sequence[Cell] | None = None, trials: int = 50, seed: int = 0,
                          out: str | os.PathLike[str] = "results/generalisation",
                          workers: int = 1, resolution: float | None = None,
-                         budget: int | None = None, reference: str = "ig",
+                         budget: int | None = None,
+                         reference: str | Sequence[str] | None = None,
                          progress: bool = True,
                          note: Callable[[str], None] | None = None, backend: str = "local",
                          address: str | None = None) -> GeneralisationStudy:
     """Fly every planner in every cell and write the study's tables and figure into ``out``.
 
     Args:
-        planners: comma-separated names or specs; must include ``reference``.
+        planners: comma-separated names or specs; must include a reference.
         cells: the grid (default :func:`study_cells`).
         trials: test missions per cell (each ``real`` mission a different map).
         seed: run seed of the missions.
         out: the study folder; one resumable ``ipp-compare`` folder per cell inside.
         workers: evaluation processes.
         resolution, budget: overrides of the protocol's r_M = 0.1 m and B = 15.
-        reference: the planner the paired columns compare with.
+        reference: the planners the paired columns compare with, one set of columns each:
+            a label, comma-separated labels or a sequence, each of which must be flown. None:
+            ``ig`` and ``ig_spatial``, each that is not flown left out (at least one must
+            be). The figure compares with the first.
         progress: show progress bars.
         note: receives notes (skipped planners); default stderr.
         backend: ``"local"`` or ``"ray"``: every mission a Ray task, on one Ray for the
@@ -192,8 +209,8 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
             local Ray with ``workers`` CPUs.
 
     Raises:
-        ValueError: bad input (an unknown planner, no reference among the planners), checked
-            on the first cell before anything is written.
+        ValueError: bad input (an unknown planner, a named reference not among the
+            planners, or no default one), checked before anything is written.
         ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
         ConnectionError: no Ray cluster answers at ``address``.
     """
@@ -201,9 +218,8 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
 
     check_backend(backend, address)
     names = planners.split(",") if isinstance(planners, str) else list(planners)
-    if reference not in [PlannerSpec.parse(n).effective_label for n in names if n.strip()]:
-        raise ValueError(f"the reference planner {reference!r} is not among the planners "
-                         f"{planners!r}")
+    references = _study_references(
+        reference, planners, [PlannerSpec.parse(n).effective_label for n in names if n.strip()])
     out = Path(out)
     cells = list(study_cells() if cells is None else cells)
     if backend == "ray":
@@ -222,17 +238,31 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
                                  trials=trials, seed=seed, workers=workers,
                                  out=out / cell.folder, config=config, resolution=resolution,
                                  budget=budget, progress=progress, note=note,
-                                 reference=reference, backend=backend, address=address)
+                                 reference=references, backend=backend, address=address)
             summaries[cell] = comparison.summary
             labels = list(comparison.summary.planners)
-    markdown, csv_text, tex = _tables(cells, labels, reference, summaries)
+    markdown, csv_text, tex = _tables(cells, labels, references, summaries)
+    first = references[0]
     caption = (f"Final entropy (mean over {trials} test missions per cell, seed {seed}; lower "
-               f"is better) and each planner's paired difference to {reference} on the same "
-               "missions: mean ± standard error (share of missions ahead); bold where ahead by "
-               "two standard errors. real:NAME cells: crops of one test raster never trained "
-               "on, one map per mission.\n\n")
+               f"is better) and each planner's paired difference to {' and to '.join(references)}"
+               " on the same missions: mean ± standard error (share of missions ahead); bold "
+               "where ahead by two standard errors. real:NAME cells: crops of one test raster "
+               f"never trained on, one map per mission. generalisation.png plots the differences"
+               f" to {first} only.\n\n")
     atomic_write_text(out / "generalisation.md", caption + markdown)
     atomic_write_text(out / "generalisation.csv", csv_text)
     atomic_write_text(out / "generalisation.tex", tex)
-    _figure(cells, labels, reference, summaries, out / "generalisation")
-    return GeneralisationStudy(cells, labels, reference, summaries, caption + markdown)
+    _figure(cells, labels, first, summaries, out / "generalisation")
+    return GeneralisationStudy(cells, labels, first, summaries, caption + markdown, references)
+
+
+def _study_references(reference: str | Sequence[str] | None, planners: str | Sequence[str],
+                      labels: list[str]) -> tuple[str, ...]:
+    """The reference planners of the study (see :func:`reports.tables.flown_references`);
+    without names, at least one default must be flown: the study is about beating one."""
+    flown = flown_references(reference, labels)
+    if not flown:
+        raise ValueError(f"the reference planner {DEFAULT_REFERENCES[0]!r} is not among the "
+                         f"planners {planners!r} (nor is {DEFAULT_REFERENCES[1]!r}); name one "
+                         "that is flown with reference")
+    return flown

@@ -78,7 +78,8 @@ def _study_parser() -> argparse.ArgumentParser:
     parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation",
                                           "sweep"],
                         help="generalisation: planners x terrain families (real test rasters "
-                             "included) x team settings, paired differences to IG; "
+                             "included) x team settings, paired differences to IG and "
+                             "ig_spatial; "
                              "robustness: paper Table I (team sizes x communication ranges); "
                              "credit: COMA against its credit-assignment variants; ablation: "
                              "COMA with one input plane, the masking or the centring toggled; "
@@ -139,9 +140,11 @@ def _study_parser() -> argparse.ArgumentParser:
                         help="generalisation: families flown in every --agents x --comm setting")
     parser.add_argument("--budget", type=positive_int("--budget"), default=None,
                         help="generalisation: steps B (default: the protocol's 15)")
-    parser.add_argument("--reference", default="ig", metavar="LABEL",
-                        help="generalisation: the planner every other is compared with, "
-                             "paired, on the same missions")
+    parser.add_argument("--reference", default=None, metavar="LABEL[,LABEL...]",
+                        help="generalisation: the planners every other is compared with, "
+                             "paired, on the same missions, one set of columns each; each "
+                             "named one must be flown (the figure uses the first). Default: "
+                             "ig and ig_spatial, each where flown")
     add_progress_flag(parser, None)
     return parser
 

@@ -9,7 +9,11 @@ three atomically.
 Table layout: one row per planner, one column per (metric, budget fraction), cells
 ``mean ± std`` over missions (sample standard deviation, ddof = 1; 0 for a single mission), the
 best mean of every column in bold (lowest entropy / RMSE, highest F1 / reward; ties at the
-printed precision are all bold), and a last column with the mean planning time per step.
+printed precision are all bold), one paired column per reference planner (final entropy
+minus the reference's on the same missions: mean ± paired standard error and the share of
+missions ahead; by default against ``ig``, the paper's baseline, and ``ig_spatial``, the best
+heuristic, each where it is in the rows), and a last column with the mean planning time per
+step.
 """
 
 from __future__ import annotations
@@ -32,6 +36,9 @@ __all__ = [
     "Stat",
     "Paired",
     "paired_differences",
+    "DEFAULT_REFERENCES",
+    "reference_labels",
+    "flown_references",
     "Summary",
     "summarise",
     "budget_steps",
@@ -53,6 +60,10 @@ METRIC_NAMES: dict[str, str] = {"entropy": "Entropy", "f1": "F1", "rmse": "RMSE"
 
 DIGITS = 3
 """Decimals of the means and standard deviations in Markdown and LaTeX."""
+
+DEFAULT_REFERENCES: tuple[str, ...] = ("ig", "ig_spatial")
+"""The planners of the paired columns when none is named: IG (the paper's baseline) and
+``ig_spatial`` (the best heuristic), so a table shows what a learned planner adds over both."""
 
 
 @dataclass(frozen=True)
@@ -133,6 +144,43 @@ def paired_differences(rows: Iterable[Mapping[str, Any]] | Any, reference: str,
     return result
 
 
+def reference_labels(reference: str | Sequence[str] | None) -> tuple[str, ...]:
+    """The reference planners named by ``reference``, in order, repeats and blanks dropped.
+
+    Args:
+        reference: one label, comma-separated labels (``"ig,ig_spatial"``, as the command
+            lines take them) or a sequence of labels; None: :data:`DEFAULT_REFERENCES`.
+    """
+    if reference is None:
+        return DEFAULT_REFERENCES
+    items = reference.split(",") if isinstance(reference, str) else list(reference)
+    return tuple(dict.fromkeys(str(item).strip() for item in items if str(item).strip()))
+
+
+def flown_references(reference: str | Sequence[str] | None,
+                     labels: Sequence[str]) -> tuple[str, ...]:
+    """The reference planners among the planners flown (``labels``), in order.
+
+    Every planner ``reference`` names must be flown: a paired column the user asked for never
+    vanishes silently. None's defaults (:data:`DEFAULT_REFERENCES`) that are not flown are
+    left out.
+
+    Raises:
+        ValueError: a named reference is not flown (the message names it), or ``reference``
+            names none.
+    """
+    if reference is None:
+        return tuple(r for r in DEFAULT_REFERENCES if r in labels)
+    named = reference_labels(reference)
+    if not named:
+        raise ValueError(f"the reference names no planner: {reference!r}")
+    for label in named:
+        if label not in labels:
+            raise ValueError(f"the reference planner {label!r} is not among the planners "
+                             f"flown ({', '.join(labels)})")
+    return named
+
+
 @dataclass(frozen=True)
 class Summary:
     """Per-planner statistics of an evaluation at a few steps of the budget.
@@ -148,10 +196,12 @@ class Summary:
         agents: distinct team sizes in the rows (one value for a single evaluation).
         comm: distinct communication ranges in metres (``inf`` allowed).
         terrain: distinct terrain kinds.
-        reference: the planner the paired column compares with ("" when it is not in the
-            rows).
-        paired: final-entropy :class:`Paired` difference of each other planner to it.
+        reference: the first planner with a paired column ("" when there is none).
+        paired: final-entropy :class:`Paired` difference of each other planner to
+            ``reference`` (``paired_to[reference]``).
         checkpoints: ``{planner: "name sha256:HEX"}`` of the learned planners' weights.
+        paired_to: ``{reference: {planner: Paired}}``, one paired column per reference in
+            table order; a summary built with only ``reference`` and ``paired`` gets that one.
     """
 
     planners: tuple[str, ...]
@@ -167,6 +217,22 @@ class Summary:
     reference: str = ""
     paired: Mapping[str, Paired] = field(default_factory=dict)
     checkpoints: Mapping[str, str] = field(default_factory=dict)
+    paired_to: Mapping[str, Mapping[str, Paired]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        # Either spelling builds the same summary, so the writers read ``paired_to`` only
+        # and code that knows one reference keeps reading ``reference`` and ``paired``.
+        if not self.paired_to and self.reference and self.paired:
+            object.__setattr__(self, "paired_to", {self.reference: self.paired})
+        elif self.paired_to and not self.reference:
+            first = next(iter(self.paired_to))
+            object.__setattr__(self, "reference", first)
+            object.__setattr__(self, "paired", self.paired_to[first])
+
+    @property
+    def references(self) -> tuple[str, ...]:
+        """The planners with a paired column, in table order."""
+        return tuple(self.paired_to)
 
     def stat(self, planner: str, metric: str, step: int) -> Stat:
         """The :class:`Stat` of one cell (NaN, n = 0 when the rows had none)."""
@@ -205,13 +271,22 @@ class Summary:
         directions = ", ".join(
             f"{'lowest' if LOWER_IS_BETTER.get(m, False) else 'highest'} {_metric_word(m)}"
             for m in self.metrics)
-        paired = (f" Δ vs {self.reference}: final entropy minus {self.reference}'s on the same "
-                  "missions, mean ± standard error (share of missions ahead)."
-                  if self.reference and self.paired else "")
         return (f"Mean ± std over {self.missions} mission{'s' if self.missions != 1 else ''} "
                 f"at {fractions} % of the budget ({', '.join(parts)}). "
-                f"Bold: best per column ({directions}).{paired} "
+                f"Bold: best per column ({directions}).{self._paired_caption()} "
                 "ms/step: mean planning time per step.")
+
+    def _paired_caption(self) -> str:
+        """The sentence explaining the paired columns ("" without any)."""
+        if not self.paired_to:
+            return ""
+        if len(self.paired_to) == 1:
+            whose = f"{self.reference}'s"
+        else:
+            whose = "that planner's"
+        columns = ", ".join(f"Δ vs {r}" for r in self.paired_to)
+        return (f" {columns}: final entropy minus {whose} on the same missions, mean ± "
+                "standard error (share of missions ahead).")
 
 
 def _metric_word(metric: str) -> str:
@@ -258,7 +333,8 @@ def _distinct(values: Iterable[Any]) -> tuple[Any, ...]:
 
 
 def summarise(rows: Iterable[Mapping[str, Any]] | Any, steps: Sequence[int] | None = None,
-              metrics: Sequence[str] = ("entropy", "f1"), reference: str = "ig",
+              metrics: Sequence[str] = ("entropy", "f1"),
+              reference: str | Sequence[str] | None = DEFAULT_REFERENCES,
               checkpoints: Mapping[str, str] | None = None) -> Summary:
     """Reduce tidy per-step rows to a :class:`Summary`.
 
@@ -269,8 +345,9 @@ def summarise(rows: Iterable[Mapping[str, Any]] | Any, steps: Sequence[int] | No
             and the caption.
         steps: steps to summarise; default :func:`budget_steps` of the largest step.
         metrics: metric columns, each summarised at every step.
-        reference: the planner of the paired column (final entropy minus its, per mission);
-            no column when it is not in the rows.
+        reference: the planners of the paired columns (final entropy minus theirs, per
+            mission), a label, comma-separated labels or a sequence (None: the default
+            ``ig`` and ``ig_spatial``); no column for one that is not in the rows.
         checkpoints: ``{planner: "name sha256:HEX"}`` to print under the table.
 
     Returns:
@@ -315,11 +392,15 @@ def summarise(rows: Iterable[Mapping[str, Any]] | Any, steps: Sequence[int] | No
     agents = tuple(sorted({int(float(r["agents"])) for r in table if _has(r, "agents")}))
     comm = tuple(sorted({_float(r["comm"]) for r in table if _has(r, "comm")}))
     terrain = _distinct(str(r["terrain"]) for r in table if _has(r, "terrain"))
-    paired = paired_differences(table, reference, "entropy", budget)
+    paired_to = {}
+    for label in reference_labels(reference):
+        paired = paired_differences(table, label, "entropy", budget)
+        if paired:  # a reference that was not flown (or flew alone) has no column
+            paired_to[label] = paired
     return Summary(planners=planners, metrics=tuple(metrics), steps=chosen, budget=budget,
                    stats=stats, plan_ms=plan_ms, missions=len(missions), agents=agents,
-                   comm=comm, terrain=terrain, reference=reference if paired else "",
-                   paired=paired, checkpoints=dict(checkpoints or {}))
+                   comm=comm, terrain=terrain, checkpoints=dict(checkpoints or {}),
+                   paired_to=paired_to)
 
 
 def _has(row: Mapping[str, Any], key: str) -> bool:
@@ -345,7 +426,7 @@ def to_markdown(summary: Summary) -> str:
     columns = _columns(summary)
     header = ["Planner"] + [
         f"{METRIC_NAMES.get(m, m)} {summary.fraction(s)} (s={s})" for m, s in columns
-    ] + ([f"Δ vs {summary.reference}"] if summary.paired else []) + ["ms/step"]
+    ] + [f"Δ vs {r}" for r in summary.paired_to] + ["ms/step"]
     lines = [summary.caption(), "",
              "| " + " | ".join(header) + " |",
              "|" + "|".join([":---"] + ["---:"] * (len(header) - 1)) + "|"]
@@ -355,8 +436,8 @@ def to_markdown(summary: Summary) -> str:
         for m, s in columns:
             text = _cell(summary.stat(planner, m, s), " ± ")
             cells.append(f"**{text}**" if planner in best[(m, s)] else text)
-        if summary.paired:
-            cells.append(_paired_cell(summary.paired.get(planner), " ± ", "%"))
+        cells += [_paired_cell(pairs.get(planner), " ± ", "%")
+                  for pairs in summary.paired_to.values()]
         cells.append(_ms(summary.plan_ms.get(planner, math.nan)))
         lines.append("| " + " | ".join(cells) + " |")
     if summary.checkpoints:
@@ -380,8 +461,11 @@ def to_csv(summary: Summary) -> str:
     """The summary as CSV: one row per planner, a mean and a std column per table cell.
 
     Columns: ``planner``, then ``{metric}_{pct}pct_s{step}_mean`` / ``..._std`` for every
-    metric and step, then ``missions`` and ``plan_ms_per_step``. Numbers at full precision,
-    empty where unknown.
+    metric and step, then ``missions`` and ``plan_ms_per_step``, then per reference planner R
+    ``entropy_final_minus_R_mean``, ``entropy_final_minus_R_se`` and ``win_rate_vs_R`` (the
+    first reference's first, as before there were several), then ``checkpoint`` where the
+    summary names weights. Numbers at full precision, empty where unknown (a reference's
+    own row).
     """
     columns = _columns(summary)
     header = ["planner"]
@@ -389,10 +473,9 @@ def to_csv(summary: Summary) -> str:
         pct = f"{100.0 * s / summary.budget:.0f}" if summary.budget else "0"
         header += [f"{m}_{pct}pct_s{s}_mean", f"{m}_{pct}pct_s{s}_std"]
     header += ["missions", "plan_ms_per_step"]
-    if summary.paired:
-        header += [f"entropy_final_minus_{summary.reference}_mean",
-                   f"entropy_final_minus_{summary.reference}_se",
-                   f"win_rate_vs_{summary.reference}"]
+    for reference in summary.paired_to:
+        header += [f"entropy_final_minus_{reference}_mean",
+                   f"entropy_final_minus_{reference}_se", f"win_rate_vs_{reference}"]
     if summary.checkpoints:
         header += ["checkpoint"]
     buffer = io.StringIO()
@@ -405,8 +488,8 @@ def to_csv(summary: Summary) -> str:
             row += [_csv_number(stat.mean), _csv_number(stat.std)]
         n = max((summary.stat(planner, m, s).n for m, s in columns), default=0)
         row += [str(n), _csv_number(summary.plan_ms.get(planner, math.nan))]
-        if summary.paired:
-            paired = summary.paired.get(planner)
+        for pairs in summary.paired_to.values():
+            paired = pairs.get(planner)
             row += ["", "", ""] if paired is None else [
                 _csv_number(paired.mean), _csv_number(paired.se), _csv_number(paired.win_rate)]
         if summary.checkpoints:
@@ -429,8 +512,8 @@ def to_latex(summary: Summary, label: str = "tab:compare") -> str:
     columns = _columns(summary)
     k = len(summary.steps)
     spec = "l" + "".join(" " + "c" * k for _ in summary.metrics) + \
-        (" r" if summary.paired else "") + " r"
-    delta = rf"$\Delta$ vs {_latex_escape(summary.reference)} & " if summary.paired else ""
+        " r" * len(summary.paired_to) + " r"
+    delta = "".join(rf"$\Delta$ vs {_latex_escape(r)} & " for r in summary.paired_to)
     groups = " & ".join(
         rf"\multicolumn{{{k}}}{{c}}{{{_latex_escape(METRIC_NAMES.get(m, m))}}}"
         for m in summary.metrics)
@@ -447,7 +530,7 @@ def to_latex(summary: Summary, label: str = "tab:compare") -> str:
         rf"\label{{{label}}}",
         rf"\begin{{tabular}}{{{spec}}}",
         r"\toprule",
-        rf" & {groups} & {'& ' if summary.paired else ''}\\",
+        rf" & {groups} & {'& ' * len(summary.paired_to)}\\",
         rules,
         rf"Planner & {fractions} & {delta}ms/step \\",
         r"\midrule",
@@ -457,8 +540,8 @@ def to_latex(summary: Summary, label: str = "tab:compare") -> str:
         for m, s in columns:
             text = _cell(summary.stat(planner, m, s), r" $\pm$ ")
             cells.append(rf"\textbf{{{text}}}" if planner in best[(m, s)] else text)
-        if summary.paired:
-            cells.append(_paired_cell(summary.paired.get(planner), r" $\pm$ ", r"\%"))
+        cells += [_paired_cell(pairs.get(planner), r" $\pm$ ", r"\%")
+                  for pairs in summary.paired_to.values()]
         cells.append(_ms(summary.plan_ms.get(planner, math.nan)))
         lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]

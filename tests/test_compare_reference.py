@@ -1,7 +1,10 @@
-"""--reference of ipp-compare and ipp-study generalisation: the paired column against any
-planner flown, refused otherwise."""
+"""--reference of ipp-compare and ipp-study generalisation: a paired column against each
+planner named (ig and ig_spatial by default, where flown), refused when one named is not
+flown."""
 
 from __future__ import annotations
+
+import pytest
 
 from reports.cli import compare_main
 
@@ -36,3 +39,79 @@ def test_the_generalisation_study_refuses_a_reference_it_does_not_fly(tmp_path, 
                        "--out", str(out), "--no-progress"]) == 2
     assert "reference planner 'ig_spatial' is not among the planners" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_by_default_ig_is_paired_and_an_unflown_ig_spatial_is_left_out(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert compare_main(["--planners", "ig,random", "--out", str(out), *SMALL]) == 0
+    summary = (out / "summary.md").read_text()
+    assert "Δ vs ig" in summary and "Δ vs ig_spatial" not in summary
+    header = (out / "summary.csv").read_text().splitlines()[0]
+    assert header.endswith(",entropy_final_minus_ig_mean,entropy_final_minus_ig_se,"
+                           "win_rate_vs_ig")
+
+
+def test_each_reference_named_gets_its_column(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert compare_main(["--planners", "ig,random", "--reference", "random,ig",
+                         "--out", str(out), *SMALL]) == 0
+    summary = (out / "summary.md").read_text()
+    assert "| Δ vs random | Δ vs ig | ms/step |" in summary
+    header = (out / "summary.csv").read_text().splitlines()[0]
+    assert header.index("win_rate_vs_random") < header.index("entropy_final_minus_ig_mean")
+
+
+def test_a_named_reference_not_flown_is_refused_in_a_list(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert compare_main(["--planners", "ig,random", "--reference", "ig,ig_spatial",
+                         "--out", str(out), *SMALL]) == 2
+    assert "reference planner 'ig_spatial' is not among the planners flown" in \
+        capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_the_generalisation_study_refuses_a_list_naming_an_unflown_reference(tmp_path, capsys):
+    from reports.cli import study_main
+
+    out = tmp_path / "study"
+    assert study_main(["generalisation", "--planners", "ig,random", "--reference",
+                       "ig,ig_learned", "--families", "split", "--team-families", "",
+                       "--trials", "1", "--out", str(out), "--no-progress"]) == 2
+    assert "reference planner 'ig_learned' is not among the planners" in \
+        capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_the_generalisation_study_needs_a_default_reference_without_names(tmp_path):
+    from reports.generalisation import Cell, generalisation_study
+
+    with pytest.raises(ValueError, match="reference planner 'ig' is not among the planners"):
+        generalisation_study("random,coverage", [Cell("split", 2, 0.0)], trials=1,
+                             out=tmp_path / "x", progress=False)
+    assert not (tmp_path / "x").exists()
+
+
+def test_the_generalisation_tables_pair_with_ig_and_ig_spatial_by_default(tmp_path):
+    import csv
+
+    from reports.generalisation import Cell, generalisation_study
+
+    study = generalisation_study("ig,ig_spatial,random", [Cell("split", 2, 0.0)], trials=2,
+                                 out=tmp_path, resolution=2.0, budget=3, progress=False)
+    assert study.reference == "ig" and study.references == ("ig", "ig_spatial")
+    header = study.table.split("\n\n", 1)[1].splitlines()[0]
+    assert header.endswith("| ig_spatial − ig | random − ig | ig − ig_spatial "
+                           "| random − ig_spatial |")
+    assert "plots the differences to ig only" in study.table
+    with open(tmp_path / "generalisation.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert list(rows[0])[6:] == ["minus_ig_mean", "minus_ig_se", "win_rate", "missions",
+                                 "minus_ig_spatial_mean", "minus_ig_spatial_se",
+                                 "win_rate_vs_ig_spatial"]
+    by_planner = {row["planner"]: row for row in rows}
+    paired = study.summaries[Cell("split", 2, 0.0)].paired_to
+    assert float(by_planner["random"]["minus_ig_spatial_mean"]) == pytest.approx(
+        paired["ig_spatial"]["random"].mean, rel=1e-5)
+    assert by_planner["ig_spatial"]["minus_ig_spatial_mean"] == ""  # its own column
+    assert by_planner["ig"]["minus_ig_mean"] == "" and by_planner["ig"]["minus_ig_spatial_mean"]
+    assert r"ig\_spatial $-$ ig" in (tmp_path / "generalisation.tex").read_text()
