@@ -138,10 +138,12 @@ class SensorConfig:
 def terrain_kinds() -> tuple[str, ...]:
     """Every terrain kind: the names of the terrain registry
     (:data:`ipp_toolkit.world.terrain.TERRAIN_GENERATORS`, the one owner of them; the
-    built-in kinds and every kind added with ``register_terrain``)."""
-    from ..world.terrain import TERRAIN_GENERATORS  # terrain imports this module: look up lazily
+    built-in kinds, every kind added with ``register_terrain`` and those of installed packages'
+    entry points, ``ipp_toolkit.terrains``)."""
+    from ..world import terrain  # terrain imports this module: look up lazily
 
-    return tuple(TERRAIN_GENERATORS)
+    terrain.load_entry_point_terrains()
+    return tuple(terrain.TERRAIN_GENERATORS)
 
 
 @dataclass(frozen=True)
