@@ -156,7 +156,8 @@ class TerrainConfig:
             (thresholded random field with a power-law spectrum: hotspots of many sizes),
             ``real`` (crops of the bundled real rasters, :mod:`ipp_toolkit.world.families`),
             ``mixture`` (one of several kinds per mission, see ``mixture``), ``raster`` (one
-            raster file), or a kind added with :func:`ipp_toolkit.world.terrain.register_terrain`.
+            raster file), or a kind added with :func:`ipp_toolkit.world.terrain.register_terrain`
+            or by an installed package (entry-point group ``ipp_toolkit.terrains``).
         share_min, share_max: range of the interesting share for ``split``/``blobs``.
         blob_scale: correlation length of the ``blobs`` field in metres.
         raster: path of a .npy/.png/.tif file for ``raster`` (or pass an array to the
