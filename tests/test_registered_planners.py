@@ -57,3 +57,13 @@ def test_a_registered_planner_flies_valid_repeatable_missions(name):
     assert _fly(planner, seed=3) == first, f"{name}: a third reset does not replay the first"
     assert _fly(_build(name), seed=3) == first, f"{name}: not deterministic given the seed"
     assert len(second) == CONFIG.team.budget
+
+
+def test_a_removed_name_is_refused_with_the_note_its_package_declared(monkeypatch):
+    from ipp_toolkit.planners import REMOVED_NAMES, register_removed_name
+
+    monkeypatch.setattr("ipp_toolkit.planners.REMOVED_NAMES", dict(REMOVED_NAMES))
+    register_removed_name("old-greedy", "removed 2030-01-01: use ig")
+    with pytest.raises(ValueError, match="planner 'old-greedy' was removed 2030-01-01: use ig"):
+        make_planner("old-greedy")
+    assert "old-greedy" not in available_planners()
