@@ -7,7 +7,7 @@ from functools import partial
 
 import numpy as np
 
-from ipp_toolkit.belief.gain import CellGain, gains_by_altitude
+from ipp_toolkit.belief.gain import cell_objective, footprint_sums_in_box, gains_by_altitude
 from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig
@@ -64,6 +64,11 @@ class InformationGainPlanner(Planner):
     ignoring teammates' cells entirely (0.0) throws away real gain, while 1.0 ignores the
     teammates' choices altogether.
 
+    The family's extension point is :meth:`cell_gains`, the per-cell value of a reading: a
+    subclass that changes it keeps the footprint sums, the coordination and the valid-action
+    rules (``ig_spatial`` multiplies it by a probability of interest, see
+    ``SpatialGainPlanner.interest_blocks``; docs/extending.md).
+
     Args:
         overlap_discount: factor in [0, 1] on the gain of cells a heard lower-index teammate
             will already observe (0 = ignore them, 1 = no coordination).
@@ -74,6 +79,10 @@ class InformationGainPlanner(Planner):
 
     name = "ig"
     needs_observations = False
+    #: The per-cell objective looked up on the local map
+    #: (:data:`ipp_toolkit.belief.gain.OBJECTIVES`, built by
+    #: :func:`~ipp_toolkit.belief.gain.cell_objective`).
+    objective: str = "ig"
 
     def __init__(self, overlap_discount: float = 0.5,
                  outcome_weighting: str = "predictive") -> None:
@@ -95,22 +104,24 @@ class InformationGainPlanner(Planner):
             weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
             derive = partial(gains_by_altitude, accuracy=camera.accuracy,
                              delta_logodds=camera.delta_logodds,
-                             cell_gain=self._cell_objective(weights))
+                             cell_gain=cell_objective(self.objective, weights,
+                                                      self.outcome_weighting))
             self._gains = ValueTable(derive, [f"altitude_{z}" for z in
                                               range(len(camera.accuracy))])
             self._camera, self._config = camera, config
 
-    def _cell_objective(self, weights: tuple[float, float]) -> CellGain:
-        """The per-cell gain function of this planner (subclasses change it)."""
-        return partial(expected_gain, weight_interesting=weights[0],
-                       weight_uninteresting=weights[1], outcome_weighting=self.outcome_weighting)
+    @property
+    def camera(self) -> Camera:
+        """The footprints and sensor model of the mission config of the last :meth:`reset`."""
+        if self._camera is None:
+            raise RuntimeError("call reset(config, seed) first")
+        return self._camera
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) int64 greedy actions, chosen in agent order; each valid under its mask."""
         camera, config = self._camera, self._config
         if camera is None or config is None:
             raise RuntimeError("call reset(config, seed) before act()")
-        weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
         n = len(views)
         actions = np.empty(n, dtype=np.int64)
         targets = np.empty((n, 3), dtype=np.int64)  # chosen next waypoint of each agent
@@ -126,22 +137,21 @@ class InformationGainPlanner(Planner):
             allowed = unclaimed_options(view.position, mask, targets[mates])
             mate_rects = camera.rects[targets[mates, 2], targets[mates, 1],
                                       targets[mates, 0]]  # (K, 4)
-            values = self._action_values(view, camera, weights, candidates, allowed, mate_rects)
+            values = self._action_values(view, camera, candidates, allowed, mate_rects)
             # argmax returns the first maximum: ties go to the lowest action index.
             action = int(np.argmax(np.where(allowed, values, -np.inf)))
             actions[k] = action
             targets[k] = candidates[action]
         return actions
 
-    def _action_values(self, view: AgentView, camera: Camera, weights: tuple[float, float],
-                       candidates: np.ndarray, allowed: np.ndarray,
-                       mate_rects: np.ndarray) -> np.ndarray:
-        """(6,) float64 expected gain of each allowed action (0 for the others).
+    def _action_values(self, view: AgentView, camera: Camera, candidates: np.ndarray,
+                       allowed: np.ndarray, mate_rects: np.ndarray) -> np.ndarray:
+        """(6,) float64 expected gain of each allowed action (0 for the others): the sums of
+        :meth:`cell_gains` over the actions' footprints, teammates' cells discounted.
 
         Args:
             view: the deciding agent's view.
             camera: footprints and sensor model of the config.
-            weights: the reward's class weights (interesting, uninteresting).
             candidates: (6, 3) int target waypoint of each action.
             allowed: (6,) bool actions to evaluate.
             mate_rects: (K, 4) int footprints already claimed by lower-index teammates.
@@ -158,21 +168,31 @@ class InformationGainPlanner(Planner):
             box = _bounding_box(rects)
             r0, r1, c0, c1 = box
             cells = (slice(r0, r1), slice(c0, c1))
-            gain = self._cell_gains(view, camera, weights, altitude, cells)
+            gain = self.cell_gains(view, altitude, cells)
             self._discount(gain, box, mate_rects)
-            for a, (q0, q1, s0, s1) in zip(group, rects.tolist(), strict=True):
-                values[a] = gain[q0 - r0:q1 - r0, s0 - c0:s1 - c0].sum(dtype=np.float64)
+            values[group] = footprint_sums_in_box(gain, box, rects)
         return values
 
-    def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
-                    altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
-        """(h, w) float32 per-cell value of a reading at ``altitude`` over the ``cells`` box.
+    def cell_gains(self, view: AgentView, altitude: int,
+                   cells: tuple[slice, slice]) -> np.ndarray:
+        """(h, w) float32 value of a reading at ``altitude`` of each cell in the ``cells`` box.
 
-        The planner's per-cell objective (:meth:`_cell_objective`, here ``expected_gain``)
-        on the agent's local map, looked up by log-odds. The result is a fresh array (it is
-        discounted in place).
+        The extension point of the ``ig`` family: the planner ranks each candidate move by the
+        sum of these values over its footprint (teammates' cells discounted). Here the
+        planner's :attr:`objective` (``expected_gain``, with its ``outcome_weighting``) on the
+        agent's local map, looked up by log-odds; a subclass may scale or replace it
+        (``ig_spatial`` multiplies it by the probability that each cell is interesting).
+
+        Args:
+            view: the deciding agent's view (its local map; read-only).
+            altitude: the altitude index of the reading (``self.camera.accuracy[altitude]``).
+            cells: (rows, columns) slices of the box in map cells.
+
+        Returns:
+            a fresh (h, w) float32 array: the planner discounts it in place.
         """
-        assert self._gains is not None
+        if self._gains is None:
+            raise RuntimeError("call reset(config, seed) before act()")
         index = self._gains.indices(view.local_logodds[cells])
         return self._gains.column(f"altitude_{altitude}")[index]
 

@@ -6,12 +6,9 @@ import math
 
 import numpy as np
 
-from ipp_toolkit.belief.gain import CellGain
 from ipp_toolkit.belief.interest import InterestSmoother, interest_smoother
-from ipp_toolkit.belief.mapping import interesting_gain
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView
-from ipp_toolkit.world.sensor import Camera
 
 from .information_gain import InformationGainPlanner
 
@@ -61,6 +58,7 @@ class SpatialGainPlanner(InformationGainPlanner):
     """
 
     name = "ig_spatial"
+    objective = "interesting"  # interesting_gain: weighted by interest_blocks in cell_gains
 
     def __init__(self, sigma: float = 5.0, overlap_discount: float = 0.5) -> None:
         if not sigma > 0 or not math.isfinite(sigma):
@@ -91,15 +89,15 @@ class SpatialGainPlanner(InformationGainPlanner):
         assert self._smoother is not None
         return self._smoother.block_values(view.local_prob)
 
-    def _cell_objective(self, weights: tuple[float, float]) -> CellGain:
-        return interesting_gain
-
-    def _cell_gains(self, view: AgentView, camera: Camera, weights: tuple[float, float],
-                    altitude: int, cells: tuple[slice, slice]) -> np.ndarray:
+    def cell_gains(self, view: AgentView, altitude: int,
+                   cells: tuple[slice, slice]) -> np.ndarray:
+        """``interesting_gain`` of a reading at ``altitude`` over the ``cells`` box times the
+        probability that each cell is interesting (:meth:`interest_blocks`); see
+        :meth:`InformationGainPlanner.cell_gains`."""
         # One estimate per agent and decision: the up, down and level boxes share it.
         if self._interest is None or self._interest[0] is not view:
             self._interest = (view, self.interest_blocks(view))
         assert self._smoother is not None
-        gain = super()._cell_gains(view, camera, weights, altitude, cells)
+        gain = super().cell_gains(view, altitude, cells)
         gain *= self._smoother.window(self._interest[1], *cells)
         return gain

@@ -1,1 +1,15 @@
-"""The COMA learner (centralised critic, counterfactual baseline) built on :mod:`ipp_toolkit`."""
+"""The COMA learner (centralised critic, counterfactual baseline) built on :mod:`ipp_toolkit`.
+
+Importing this package (not its modules: no torch) declares the names of COMA planners and
+policies that were removed, so that asking for one says what to use instead
+(:func:`ipp_toolkit.planners.removed_name` imports it for that).
+"""
+
+from ipp_toolkit.planners import register_removed_name
+
+_MIXED_GONE = ("removed 2026-12-01: dominated by the default coma on validation missions, "
+               "see docs/generalisation.md; use coma (its default policy)")
+
+# The mixed-team fine-tuning: its planner alias and its shipped policy (and so its recipe).
+register_removed_name("coma_mixed", _MIXED_GONE)
+register_removed_name("coma=shipped:mixed", _MIXED_GONE)

@@ -35,7 +35,7 @@ from ipp_toolkit.config.settings import (
     setting_line,
 )
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import REMOVED_NAMES
+from ipp_toolkit.planners import removed_name
 from ipp_toolkit.runs.cli_flags import add_compute_flags, add_progress_flag, add_set_flag
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
@@ -74,7 +74,7 @@ PAPER_TRAINING_DEFAULTS = {"world": {"resolution": 0.5}}
 def _preset_name(value: str) -> str:
     """``--preset``'s value; the recipe of a removed shipped policy is refused with what to use
     instead (argparse then checks the name against the presets and recipes)."""
-    removed = REMOVED_NAMES.get(f"coma=shipped:{value}")
+    removed = removed_name(f"coma=shipped:{value}")
     if removed is not None:
         raise argparse.ArgumentTypeError(f"the recipe of shipped:{value} was {removed}")
     return value

@@ -138,10 +138,12 @@ class SensorConfig:
 def terrain_kinds() -> tuple[str, ...]:
     """Every terrain kind: the names of the terrain registry
     (:data:`ipp_toolkit.world.terrain.TERRAIN_GENERATORS`, the one owner of them; the
-    built-in kinds and every kind added with ``register_terrain``)."""
-    from ..world.terrain import TERRAIN_GENERATORS  # terrain imports this module: look up lazily
+    built-in kinds, every kind added with ``register_terrain`` and those of installed packages'
+    entry points, ``ipp_toolkit.terrains``)."""
+    from ..world import terrain  # terrain imports this module: look up lazily
 
-    return tuple(TERRAIN_GENERATORS)
+    terrain.load_entry_point_terrains()
+    return tuple(terrain.TERRAIN_GENERATORS)
 
 
 @dataclass(frozen=True)
@@ -154,7 +156,8 @@ class TerrainConfig:
             (thresholded random field with a power-law spectrum: hotspots of many sizes),
             ``real`` (crops of the bundled real rasters, :mod:`ipp_toolkit.world.families`),
             ``mixture`` (one of several kinds per mission, see ``mixture``), ``raster`` (one
-            raster file), or a kind added with :func:`ipp_toolkit.world.terrain.register_terrain`.
+            raster file), or a kind added with :func:`ipp_toolkit.world.terrain.register_terrain`
+            or by an installed package (entry-point group ``ipp_toolkit.terrains``).
         share_min, share_max: range of the interesting share for ``split``/``blobs``.
         blob_scale: correlation length of the ``blobs`` field in metres.
         raster: path of a .npy/.png/.tif file for ``raster`` (or pass an array to the

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import importlib
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -54,22 +55,52 @@ __all__ = [
     "resolve_shipped",
     "ENTRY_POINT_GROUP",
     "REMOVED_NAMES",
+    "register_removed_name",
+    "removed_name",
 ]
 
 ENTRY_POINT_GROUP = "ipp_toolkit.planners"
 
-_COMA_MIXED_GONE = ("removed 2026-12-01: dominated by the default coma on validation missions, "
-                    "see docs/generalisation.md; use coma (its default policy)")
-
 #: Names that earlier versions accepted and that were removed, with when, why and what to use
-#: instead: a planner name (``coma_mixed``) or a shipped policy as ``PLANNER=shipped:NAME``.
-#: :func:`planner_factory` and :func:`resolve_shipped` consult it before refusing a name as
-#: unknown, so an old command fails with the way forward. Names only: the planners' packages
-#: are not imported for it.
-REMOVED_NAMES: dict[str, str] = {
-    "coma_mixed": _COMA_MIXED_GONE,
-    "coma=shipped:mixed": _COMA_MIXED_GONE,
-}
+#: instead: a planner name (``old_name``) or a shipped policy as ``PLANNER=shipped:NAME``. The
+#: package that owned a name declares it (:func:`register_removed_name`, on import of its
+#: top-level package); :func:`planner_factory` and :func:`resolve_shipped` consult it through
+#: :func:`removed_name` before refusing a name as unknown, so an old command fails with the way
+#: forward.
+REMOVED_NAMES: dict[str, str] = {}
+
+
+def register_removed_name(name: str, note: str) -> None:
+    """Declare that ``name`` was removed: a planner name, or ``PLANNER=shipped:NAME``.
+
+    ``note`` completes "planner NAME was ..." (or "shipped policy ... was ..."): when, why and
+    what to use instead, e.g. ``"removed 2026-12-01: ...; use coma (its default policy)"``.
+    Call it in the ``__init__`` of the package that owned the name: that module is what
+    :func:`removed_name` imports to find it, not the planners' own (heavier) modules.
+    """
+    REMOVED_NAMES[name] = note
+
+
+def _planner_packages() -> list[str]:
+    """The top-level packages of the entry-point planners, each once."""
+    return list(dict.fromkeys(entry.module.partition(".")[0]
+                              for entry in _entry_points().values()))
+
+
+def removed_name(name: str) -> str | None:
+    """The note of a removed ``name`` (:data:`REMOVED_NAMES`), or None.
+
+    A name not declared in this process yet may belong to a package not imported yet: the
+    top-level packages of the entry-point planners are imported first (their ``__init__``
+    declares what they removed; the planners' modules, torch for a learned one, are not).
+    """
+    if name not in REMOVED_NAMES:
+        for package in _planner_packages():
+            try:
+                importlib.import_module(package)
+            except Exception:  # noqa: BLE001 - a broken package: the name is then just unknown
+                continue
+    return REMOVED_NAMES.get(name)
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -262,13 +293,14 @@ def planner_factory(name: str) -> PlannerFactory:
 
     Raises:
         ValueError: an unknown name (the message lists the registered ones) or a removed one
-            (the message says what to use instead, :data:`REMOVED_NAMES`).
+            (the message says what to use instead, :func:`removed_name`).
     """
     if name not in _REGISTRY:
         entry = _entry_points().get(name)
         if entry is None:
-            if name in REMOVED_NAMES:
-                raise ValueError(f"planner {name!r} was {REMOVED_NAMES[name]}")
+            removed = removed_name(name)
+            if removed is not None:
+                raise ValueError(f"planner {name!r} was {removed}")
             raise ValueError(f"unknown planner {name!r}; registered planners: "
                              f"{', '.join(available_planners()) or 'none'}")
         factory = entry.load()
@@ -336,14 +368,14 @@ def resolve_shipped(policy: str | os.PathLike[str], shipped: Mapping[str, Path],
 
     Raises:
         ValueError: ``shipped:`` with an unknown name (the message lists ``planner``'s names)
-            or a removed one (the message says what to use instead, :data:`REMOVED_NAMES`).
+            or a removed one (the message says what to use instead, :func:`removed_name`).
     """
     text = os.fspath(policy)
     if not text.startswith("shipped:"):
         return Path(text)
     name = text.removeprefix("shipped:")
     if name not in shipped:
-        removed = REMOVED_NAMES.get(f"{planner}={text}")
+        removed = removed_name(f"{planner}={text}")
         if removed is not None:
             raise ValueError(f"shipped policy {text!r} of the {planner} planner was {removed}")
         raise ValueError(f"unknown shipped policy {name!r}; shipped policies: "

@@ -7,7 +7,8 @@ metres for the map resolution r. ``True`` means interesting.
 Every random terrain is defined in metres and only sampled at the cell centres, so the same
 random stream gives the same terrain at any map resolution (up to the cells the boundary
 crosses). Kinds are dispatched through :data:`TERRAIN_GENERATORS`; :func:`register_terrain`
-adds one.
+adds one, and installed packages add theirs by entry point in the group
+:data:`ENTRY_POINT_GROUP` (``name = module:function``), read on a process's first lookup.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +29,9 @@ from ..config.limits import LimitError, check_raster_cells
 from ..config.schema import NAN_POLICIES, TerrainConfig, WorldConfig
 
 __all__ = [
+    "ENTRY_POINT_GROUP",
     "TERRAIN_GENERATORS",
+    "load_entry_point_terrains",
     "TerrainGenerator",
     "register_terrain",
     "generate_terrain",
@@ -48,6 +52,9 @@ TerrainGenerator = Callable[
 
 TERRAIN_GENERATORS: dict[str, TerrainGenerator] = {}
 """Terrain kind -> generator; :func:`generate_terrain` dispatches on ``config.kind``."""
+
+ENTRY_POINT_GROUP = "ipp_toolkit.terrains"
+"""The entry-point group of terrains from installed packages: ``kind = module:function``."""
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 TIFF_SUFFIXES = (".tif", ".tiff")
@@ -87,6 +94,40 @@ def register_terrain(name: str, *, replace: bool = False, namespaced: bool = Fal
 
 
 _NAMESPACED: set[str] = set()
+_ENTRY_POINTS_READ = False
+
+
+def load_entry_point_terrains() -> None:
+    """Register the terrains of the entry-point group :data:`ENTRY_POINT_GROUP`, once per
+    process (every lookup of the kinds calls it: :func:`ipp_toolkit.config.schema.terrain_kinds`,
+    :func:`generate_terrain`).
+
+    This is what makes a package's terrain known in worker processes, which never run the
+    script that registered one by decorator. Each entry point's module is imported; its
+    object is registered under the entry point's name unless the module registered it
+    already (with :func:`register_terrain`, e.g. ``namespaced=True``). A module that fails
+    to import, or a name taken by another generator, is skipped with a warning: the other
+    kinds stay usable.
+    """
+    global _ENTRY_POINTS_READ
+    if _ENTRY_POINTS_READ:
+        return
+    _ENTRY_POINTS_READ = True  # first: a module that builds a config looks the kinds up again
+    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            generator = entry.load()
+        except Exception as err:  # noqa: BLE001 - one broken package must not hide the others
+            warnings.warn(f"terrain entry point {entry.name!r} ({entry.value}) cannot be "
+                          f"loaded: {err}", RuntimeWarning, stacklevel=2)
+            continue
+        registered = TERRAIN_GENERATORS.get(entry.name)
+        if registered is None:
+            register_terrain(entry.name)(generator)
+        elif registered is not generator:
+            owner = (f"{getattr(registered, '__module__', '?')}."
+                     f"{getattr(registered, '__qualname__', registered)}")
+            warnings.warn(f"terrain entry point {entry.name!r} ({entry.value}) is skipped: "
+                          f"the kind is registered by {owner}", RuntimeWarning, stacklevel=2)
 
 
 def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Generator,
@@ -108,6 +149,7 @@ def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.G
     Raises:
         ValueError: unknown kind, bad raster, or a map without any interesting cell.
     """
+    load_entry_point_terrains()
     try:
         generator = TERRAIN_GENERATORS[config.kind]
     except KeyError:
