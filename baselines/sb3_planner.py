@@ -31,6 +31,11 @@ from .sb3_policies import (
 __all__ = ["SB3Planner", "PPOPlanner"]
 
 
+#: The transfer note of an SB3 zip, which records no mission setting.
+_UNKNOWN_SETTING = ("an SB3 zip records no training setting: it observes with this mission's "
+                    "feature planes, and whether it was trained on such missions is unknown")
+
+
 class SB3Planner(Planner):
     """Greedy shared SB3 policy for every agent (one batched forward per step).
 
@@ -89,7 +94,7 @@ class SB3Planner(Planner):
                 f"{self.algo} policy {str(self.checkpoint)!r} was trained on observations of "
                 f"shape {self.obs_shape}; missions of this config give {mission_shape} "
                 "(another planning grid)")
-        self.transfer_notes = [] if self.meta.env_config is None else \
+        self.transfer_notes = [_UNKNOWN_SETTING] if self.meta.env_config is None else \
             check_policy_transfer(self.meta.env_config, config, str(self.checkpoint))
         self._lstm_states = None
 

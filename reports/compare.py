@@ -288,13 +288,19 @@ def _checked_planners(planners: str | Sequence[str | PlannerSpec] | None, env_co
             team, refused here, before anything is written, not when its first mission flies.
     """
     notes: list[str] = []
-    built = _built_planners(planners, note or notes.append)
+    say = note or notes.append
+    built = _built_planners(planners, say)
     for spec, planner in built:
         try:
             planner.reset(env_config, seed=0)
         except ValueError as err:
             raise ValueError(f"planner {spec.effective_label!r} cannot fly this "
                              f"configuration: {err}") from err
+        # A learned policy flown off its training setting says so (a transfer, not an error).
+        transfer = getattr(planner, "transfer_notes", None) or []
+        if transfer:
+            say(f"note: planner {spec.effective_label!r} flies off its training setting: "
+                + "; ".join(transfer))
     return [spec for spec, _ in built], planner_checkpoints(built), notes
 
 

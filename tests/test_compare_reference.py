@@ -4,8 +4,11 @@ flown."""
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
+from ipp_toolkit.config.schema import EnvConfig
 from reports.cli import compare_main
 
 SMALL = ["--resolution", "2", "--trials", "2", "--workers", "1", "--no-progress"]
@@ -115,3 +118,14 @@ def test_the_generalisation_tables_pair_with_ig_and_ig_spatial_by_default(tmp_pa
     assert by_planner["ig_spatial"]["minus_ig_spatial_mean"] == ""  # its own column
     assert by_planner["ig"]["minus_ig_mean"] == "" and by_planner["ig"]["minus_ig_spatial_mean"]
     assert r"ig\_spatial $-$ ig" in (tmp_path / "generalisation.tex").read_text()
+
+
+def test_a_policy_flown_off_its_training_setting_is_noted_before_flying():
+    from reports.compare import _checked_planners
+
+    notes: list[str] = []
+    config = EnvConfig().replace(team={"n_agents": 8, "comm_range": math.inf})
+    _checked_planners("ig,coma", config, notes.append)
+    assert len(notes) == 1 and notes[0].startswith(
+        "note: planner 'coma' flies off its training setting: team.n_agents: trained 4, "
+        "running 8; team.comm_range: trained 25.0, running inf")
