@@ -14,10 +14,10 @@ subpackages are its layers, and imports flow down this list only:
 - :mod:`ipp_toolkit.planners`: the planner interface, the per-UAV view and the registry;
 - :mod:`ipp_toolkit.runs`: the evaluation runner, result store, process pool and Ray backend.
 
-``ipp_toolkit._native`` holds the compiled (Numba) inner loops and ``ipp_toolkit.io`` the
-files that must never be half-written; both are used at every layer. Two imports still go up
-the list: the config checks terrain names against the world's registry (lazily), and the
-camera takes its footprint rectangle and the sensor's entropy from the belief layer.
+``ipp_toolkit._native`` holds the compiled (Numba) inner loops, ``ipp_toolkit.io`` the files
+that must never be half-written and ``ipp_toolkit.probability`` the log-odds and entropy of
+one cell; they are used at every layer. One import still goes up the list, lazily: the
+config checks terrain names against the world's terrain registry when a config is built.
 """
 
 from .config.files import load_config, save_config

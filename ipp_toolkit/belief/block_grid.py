@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BlockGrid", "Rect"]
+from ..world.sensor import Rect
 
-Rect = tuple[int, int, int, int]
-"""A half-open map-cell rectangle (row0, row1, col0, col1)."""
+__all__ = ["BlockGrid", "Rect"]
 
 
 class BlockGrid:

@@ -19,6 +19,7 @@ import numpy as np
 
 from .._native import kernels
 from .._native.kernels import REGION_STATS
+from ..probability import LOGODDS_CLIP, PROB_CLIP, binary_entropy, logit
 from .block_grid import BlockGrid, Rect
 from .value_table import DerivedMemo, ValueTable
 
@@ -41,24 +42,8 @@ __all__ = [
     "interesting_gain",
 ]
 
-PROB_CLIP = 1e-4
-"""Probabilities are kept inside [PROB_CLIP, 1 - PROB_CLIP] wherever a logit or log is taken."""
-
-LOGODDS_CLIP = float(np.log((1 - PROB_CLIP) / PROB_CLIP))
 WEIGHT_TIE_TOLERANCE = 1e-3
 """Cells within this distance of 0.5 are 'unknown' and get weight 0.5."""
-
-
-def logit(p: np.ndarray | float) -> np.ndarray:
-    """Log-odds of probabilities clipped to [PROB_CLIP, 1 - PROB_CLIP]; any shape."""
-    p = np.clip(np.asarray(p, dtype=np.float64), PROB_CLIP, 1 - PROB_CLIP)
-    return np.log(p / (1 - p))
-
-
-def binary_entropy(p: np.ndarray | float) -> np.ndarray:
-    """Shannon entropy in bits of Bernoulli(p), p clipped to [PROB_CLIP, 1 - PROB_CLIP]."""
-    p = np.clip(np.asarray(p, dtype=np.float64), PROB_CLIP, 1 - PROB_CLIP)
-    return -(p * np.log2(p) + (1 - p) * np.log2(1 - p))
 
 
 _INV_LN2 = np.float32(1.0 / np.log(2.0))

@@ -11,11 +11,14 @@ import math
 
 import numpy as np
 
-from ..belief.block_grid import Rect
-from ..belief.mapping import binary_entropy, logit
 from ..config.schema import SensorConfig, WorldConfig
+from ..probability import binary_entropy, logit
 
-__all__ = ["Camera", "footprint_side"]
+Rect = tuple[int, int, int, int]
+"""A half-open map-cell rectangle (row0, row1, col0, col1): a footprint, or a region of the
+maps (:mod:`ipp_toolkit.belief` takes its regions in this form)."""
+
+__all__ = ["Camera", "Rect", "footprint_side"]
 
 
 def footprint_side(altitude: float, fov_deg: float = 60.0) -> float:
