@@ -296,8 +296,10 @@ def _checked_planners(planners: str | Sequence[str | PlannerSpec] | None, env_co
         except ValueError as err:
             raise ValueError(f"planner {spec.effective_label!r} cannot fly this "
                              f"configuration: {err}") from err
-        # A learned policy flown off its training setting says so (a transfer, not an error).
-        transfer = getattr(planner, "transfer_notes", None) or []
+        # A learned policy flown off its training setting says so (a transfer, not an error);
+        # the mission's own feature switches are not one: a policy observes with its own.
+        transfer = [text for text in getattr(planner, "transfer_notes", None) or []
+                    if not text.startswith("features:")]
         if transfer:
             say(f"note: planner {spec.effective_label!r} flies off its training setting: "
                 + "; ".join(transfer))
