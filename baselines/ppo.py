@@ -78,9 +78,10 @@ TRAINING_KIND = "ipp-toolkit/ppo-training"
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 """Where the shipped PPO policies live."""
 SHIPPED_POLICIES: dict[str, str] = {"split": "ppo_4agents_d25.pt",
-                                   "spatial-mixture": "ppo_spatial_mixture_4agents_d25.pt"}
+                                   "spatial-mixture": "ppo_spatial_mixture_4agents_d25.pt",
+                                   "learned-mixture": "ppo_learned_mixture_4agents_d25.pt"}
 """Shipped PPO policies by name, as in ``ppo=shipped:NAME`` (files in :data:`CHECKPOINTS`)."""
-DEFAULT_SHIPPED = "spatial-mixture"
+DEFAULT_SHIPPED = "learned-mixture"
 """The shipped policy the ``ppo`` planner flies by default (the best on validation missions)."""
 DEFAULT_CHECKPOINT = CHECKPOINTS / SHIPPED_POLICIES[DEFAULT_SHIPPED]
 """Its file, used when the ``ppo`` planner gets no checkpoint."""

@@ -159,6 +159,11 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
     "spatial-mixture": {
         **_SPLIT_FLAGS, "timesteps": 1_100_000, "gain_prior": 20.0,
         "config": str(CHECKPOINTS / "ppo_spatial_mixture_4agents_d25.yaml")},
+    # spatial-mixture's run on the learned field prior's gain planes; ships its checkpoint
+    # at 600,000 (the best on validation missions).
+    "learned-mixture": {
+        **_SPLIT_FLAGS, "timesteps": 600_000, "gain_prior": 20.0,
+        "config": str(CHECKPOINTS / "ppo_learned_mixture_4agents_d25.yaml")},
 }
 
 
