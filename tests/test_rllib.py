@@ -129,8 +129,9 @@ def test_one_iteration_on_a_local_ray_flies_through_ipp_compare(
         tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     pytest.importorskip("ray.rllib.algorithms.ppo")
     run = tmp_path / "rllib"
+    # One remote env runner: the sampling path a cluster uses (0 samples in the driver).
     common = ["--train-batch", "60", "--width", "4", "--features-dim", "8", "--hidden", "8",
-              "--seed", "3", "--no-progress"]
+              "--seed", "3", "--num-env-runners", "1", "--no-progress"]
     assert train_main(["rllib", "--algo", "PPO", "--iterations", "1", "--out", str(run),
                        *common]) == 0
     assert (run / "policy.pt").is_file() and (run / "checkpoint" / "ipp_state.json").is_file()
