@@ -36,7 +36,12 @@ from ipp_toolkit.config.settings import (
 )
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planners import removed_name
-from ipp_toolkit.runs.cli_flags import add_compute_flags, add_progress_flag, add_set_flag
+from ipp_toolkit.runs.cli_flags import (
+    add_compute_flags,
+    add_progress_flag,
+    add_set_flag,
+    positive_int,
+)
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import check_backend_flags, probe
@@ -135,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_set_flag(parser, "any COMAConfig field, e.g. --set lr_actor=1e-4; a warm-start field "
                  "with a dot, e.g. --set warm_start.missions=100 (the older "
                  "warm_start_missions / warm_start_epochs are still read) (repeatable)")
-    add_compute_flags(parser, workers_type=_positive_int, workers_metavar="K",
+    add_compute_flags(parser, workers_type=positive_int("--workers"), workers_metavar="K",
                       workers_help="workers that fly each update's missions and the validation "
                                    "missions (default 1: this process); the same seed trains "
                                    "the same weights with any K (--backend ray: K Ray actors "
@@ -147,17 +152,6 @@ def build_parser() -> argparse.ArgumentParser:
                              "on CPUs, with a copy of the actor")
     add_progress_flag(parser, "hide the progress bar")
     return parser
-
-
-def _positive_int(text: str) -> int:
-    # Its own wording ("expected ..."), kept: ipp-compare's positive_int says "must be ...".
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return value
 
 
 def _check_compute(args: argparse.Namespace) -> None:
