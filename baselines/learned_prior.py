@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, FieldPrior, prior_file
+from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, prior_file, shared_prior
 from ipp_toolkit.planners import AgentView
 
 from .spatial_gain import SpatialGainPlanner
@@ -53,7 +53,8 @@ class LearnedPriorPlanner(SpatialGainPlanner):
         torch.set_num_threads(1)
         path = prior_file(DEFAULT_PRIOR if checkpoint is None else checkpoint)
         self.checkpoint = path
-        self.prior = FieldPrior.load(path)
+        # One network per file and process, shared with the learned gain planes.
+        self.prior = shared_prior(path)
         self._fine: np.ndarray | None = None  # (N, H / b, W / b) prior of this step's views
 
     def act(self, views: list[AgentView]) -> np.ndarray:

@@ -21,8 +21,7 @@ from ipp_toolkit.sim.features import option_gain_cells
 from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bfloat16_hardware", "bounded_softmax", "epsilon_at",
-           "greedy_actions", "in_input_layout", "learning_forward", "masked_logits",
-           "mixed_precision"]
+           "in_input_layout", "learning_forward", "masked_logits", "mixed_precision"]
 
 _KERNELS = (5, 4, 4)
 
@@ -242,8 +241,10 @@ def epsilon_at(missions_done: int, start: float, end: float, anneal_missions: in
     return start + (end - start) * missions_done / anneal_missions
 
 
-def greedy_actions(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
-    """Deployment policy (the ``coma`` planner, validation): eps = 0, the likeliest valid action.
+def masked_logits(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """The deployed policy's scores (eps = 0): the ``coma`` planner and COMA's validation take
+    the likeliest valid action of each UAV in agent order
+    (:func:`ipp_toolkit.sim.team.choose_in_order`).
 
     Args:
         actor: the actor network.
@@ -251,13 +252,8 @@ def greedy_actions(actor: nn.Module, observations: np.ndarray, masks: np.ndarray
         masks: (B, 6) valid actions.
 
     Returns:
-        (B,) int64 actions, always valid.
+        (B, 6) float32 logits, -inf on invalid actions.
     """
-    return masked_logits(actor, observations, masks).argmax(axis=-1)
-
-
-def masked_logits(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
-    """(B, 6) float32 actor logits, -inf on invalid actions (shapes as :func:`greedy_actions`)."""
     with torch.no_grad():
         logits = actor(torch.as_tensor(observations, dtype=torch.float32))
     logits = logits.masked_fill(~torch.as_tensor(masks, dtype=torch.bool), -math.inf)

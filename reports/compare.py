@@ -31,6 +31,7 @@ from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.config.settings import build_env_config, format_comm, safe_name
 from ipp_toolkit.io import write_json
 from ipp_toolkit.planners import (
+    FEATURES_NOTE,
     Planner,
     available_planners,
     check_planner_name,
@@ -299,7 +300,7 @@ def _checked_planners(planners: str | Sequence[str | PlannerSpec] | None, env_co
         # A learned policy flown off its training setting says so (a transfer, not an error);
         # the mission's own feature switches are not one: a policy observes with its own.
         transfer = [text for text in getattr(planner, "transfer_notes", None) or []
-                    if not text.startswith("features:")]
+                    if not text.startswith(FEATURES_NOTE)]
         if transfer:
             say(f"note: planner {spec.effective_label!r} flies off its training setting: "
                 + "; ".join(transfer))

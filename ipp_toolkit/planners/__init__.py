@@ -38,6 +38,7 @@ from ..sim.features import actor_observations
 from ..sim.mission import MissionState
 
 __all__ = [
+    "FEATURES_NOTE",
     "AgentView",
     "Planner",
     "PlannerFactory",
@@ -317,6 +318,11 @@ def make_planner(name: str, **kwargs: Any) -> Planner:
     return planner
 
 
+#: How a :func:`check_policy_transfer` note about the mission's feature switches begins: not
+#: a transfer (the policy observes with its own planes), so reports may leave it out.
+FEATURES_NOTE = "features: the policy observes with its own"
+
+
 def check_policy_transfer(trained: EnvConfig, requested: EnvConfig, path: str = "") -> list[str]:
     """Check that a policy trained on ``trained`` can fly missions of ``requested``.
 
@@ -355,7 +361,7 @@ def check_policy_transfer(trained: EnvConfig, requested: EnvConfig, path: str = 
         old = dataclasses.asdict(trained.features)
         new = dataclasses.asdict(requested.features)
         diffs = ", ".join(f"{k} {new[k]!r} -> {old[k]!r}" for k in old if old[k] != new[k])
-        notes.append(f"features: the policy observes with its own ({diffs})")
+        notes.append(f"{FEATURES_NOTE} ({diffs})")
     return notes
 
 
