@@ -21,7 +21,8 @@ from ipp_toolkit.sim.features import option_gain_cells
 from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bfloat16_hardware", "bounded_softmax", "epsilon_at",
-           "in_input_layout", "learning_forward", "masked_logits", "mixed_precision"]
+           "greedy_actions", "in_input_layout", "learning_forward", "masked_logits",
+           "mixed_precision"]
 
 _KERNELS = (5, 4, 4)
 
@@ -239,6 +240,23 @@ def epsilon_at(missions_done: int, start: float, end: float, anneal_missions: in
     if anneal_missions <= 0 or missions_done >= anneal_missions:
         return end
     return start + (end - start) * missions_done / anneal_missions
+
+
+def greedy_actions(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """Each agent's likeliest valid action on its own (eps = 0), for a batch of planes.
+
+    The ``coma`` planner and COMA's validation add the same-step rule on top
+    (:func:`masked_logits`, then :func:`ipp_toolkit.sim.team.choose_in_order`).
+
+    Args:
+        actor: the actor network.
+        observations: (B, C, G, G) float32 actor planes.
+        masks: (B, 6) valid actions.
+
+    Returns:
+        (B,) int64 actions, always valid.
+    """
+    return masked_logits(actor, observations, masks).argmax(axis=-1)
 
 
 def masked_logits(actor: nn.Module, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:

@@ -394,7 +394,7 @@ def test_gain_prior_actor_reads_each_options_waypoint():
 def test_gain_prior_policy_starts_at_the_best_expected_gain(tmp_path):
     import json
 
-    from coma.networks import masked_logits
+    from coma.networks import greedy_actions
     from coma.persistence import build_networks
     from ipp_toolkit.sim.features import actor_observations, footprint_gain
     from ipp_toolkit.sim.mission import reset_mission, step_mission
@@ -415,8 +415,7 @@ def test_gain_prior_policy_starts_at_the_best_expected_gain(tmp_path):
     state = reset_mission(env, 0, 0, "validation")
     while not state.done:
         masks = state.masks()
-        actions = masked_logits(untrained, actor_observations(state, env.features),
-                                masks).argmax(axis=-1)
+        actions = greedy_actions(untrained, actor_observations(state, env.features), masks)
         gain = footprint_gain(state)
         for k, (x, y, z) in enumerate(state.positions):
             options = [gain[k, z + dz, y + dy, x + dx] if masks[k, a] else -1.0
