@@ -126,3 +126,14 @@ def test_the_first_agents_best_learned_option_is_ig_learneds_choice():
         options[~state.masks()[0].astype(bool)] = -np.inf
         assert int(np.argmax(options)) == actions[0]
         step_mission(state, actions)
+
+
+def test_a_bad_gain_interest_on_the_command_line_exits_2_naming_it(tmp_path, capsys):
+    from coma.cli import main as coma_main
+
+    out = tmp_path / "run"
+    assert coma_main(["--out", str(out), "--feature", "gain=true",
+                      "--feature", "gain_interest=guess"]) == 2
+    err = capsys.readouterr().err
+    assert "features.gain_interest = 'guess'" in err and "Traceback" not in err
+    assert not out.exists()
