@@ -61,7 +61,9 @@ __all__ = [
     "policy_metadata",
     "save_policy",
     "load_policy",
+    "actor_logits",
     "masked_greedy_actions",
+    "masked_argmax",
     "NoOptimizer",
     "CHECKPOINT_KIND",
     "TRAINING_KIND",
@@ -568,6 +570,15 @@ def _rebuild(path: Path, data: dict[str, Any], device: str) -> tuple[Any, dict[s
     return policy, meta
 
 
+def actor_logits(policy: Any, observations: np.ndarray) -> torch.Tensor:
+    """(B, A) action logits of an SB3 actor-critic policy (masked or not) for (B, C, G, G)
+    float32 planes, in one forward pass without gradients; masks are not applied."""
+    with torch.no_grad():
+        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=policy.device)
+        features = policy.extract_features(obs, policy.pi_features_extractor)
+        return policy.action_net(policy.mlp_extractor.forward_actor(features))
+
+
 def masked_greedy_actions(policy: Any, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
     """Greedy valid actions of a batch in one forward pass.
 
@@ -579,13 +590,17 @@ def masked_greedy_actions(policy: Any, observations: np.ndarray, masks: np.ndarr
     Returns:
         (B,) int64 argmax of the logits over the valid actions.
     """
-    with torch.no_grad():
-        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=policy.device)
-        features = policy.extract_features(obs, policy.pi_features_extractor)
-        logits = policy.action_net(policy.mlp_extractor.forward_actor(features))
-        valid = torch.as_tensor(np.asarray(masks) != 0, device=policy.device)
-        logits = logits.masked_fill(~valid, -math.inf)
-        return logits.argmax(dim=1).cpu().numpy().astype(np.int64)
+    return masked_argmax(actor_logits(policy, observations), masks)
+
+
+def masked_argmax(scores: torch.Tensor, masks: np.ndarray) -> np.ndarray:
+    """(B,) int64 argmax of (B, A) ``scores`` over the valid actions of (B, A) ``masks``
+    (nonzero = valid); ValueError when the shapes differ."""
+    valid = torch.as_tensor(np.asarray(masks) != 0, device=scores.device)
+    if valid.shape != scores.shape:
+        raise ValueError(f"masks of shape {tuple(valid.shape)} do not fit scores of shape "
+                         f"{tuple(scores.shape)}")
+    return scores.masked_fill(~valid, -math.inf).argmax(dim=1).cpu().numpy().astype(np.int64)
 
 
 def __getattr__(name: str) -> Any:

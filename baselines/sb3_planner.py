@@ -17,15 +17,16 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
+from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer, choose_for_views
 
 from .ppo import resolve_policy
 from .sb3_policies import (
     RECURRENT_ALGORITHMS,
     LSTMStates,
+    action_scores,
     expected_obs_shape,
-    greedy_actions,
     load_sb3_policy,
+    masked_argmax,
 )
 
 __all__ = ["SB3Planner", "PPOPlanner"]
@@ -39,16 +40,21 @@ _UNKNOWN_SETTING = ("an SB3 zip records no training setting: it observes with th
 class SB3Planner(Planner):
     """Greedy shared SB3 policy for every agent (one batched forward per step).
 
-    Acts deterministically: the argmax of the valid logits (PPO, MaskablePPO, A2C,
-    RecurrentPPO), Q-values (DQN) or mean quantiles (QRDQN); a masked action is never chosen.
-    A RecurrentPPO policy keeps its LSTM state per agent across the steps of a mission and
-    starts each mission from zeros.
+    Acts deterministically on the policy's scores: the logits (PPO, MaskablePPO, A2C, TRPO,
+    RecurrentPPO), Q-values (DQN), mean quantiles (QRDQN) or action-net outputs (ARS); a
+    masked action is never chosen. By default the agents choose in agent order, each its
+    best option among those whose 2-D target no heard teammate of lower index already chose
+    (``ig``'s rule, :func:`~ipp_toolkit.planners.choose_for_views`), instead of each taking
+    its own argmax and losing same-target contests. A RecurrentPPO policy keeps its LSTM
+    state per agent across the steps of a mission and starts each mission from zeros.
 
     Args:
         checkpoint: a ``policy.pt`` (or ``checkpoint.pt``) of ``ipp-train sb3`` or
             ``ipp-train ppo``, an SB3 ``model.save`` zip, or a shipped PPO policy by name
             (``shipped:NAME``, :data:`baselines.ppo.SHIPPED_POLICIES`).
         device: torch device of the forward pass.
+        in_order: choose in agent order under the same-step rule (default); False gives
+            every agent its own argmax, as the policy acted while it trained.
 
     Raises:
         CheckpointError: no checkpoint; a missing, corrupt or foreign one; or one trained for
@@ -60,7 +66,8 @@ class SB3Planner(Planner):
     needs_observations = True
     needs_local_maps = False
 
-    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
+    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
+                 in_order: bool = True) -> None:
         # Batches of N observations: extra intra-op threads only spin on busy cores.
         torch.set_num_threads(1)
         if checkpoint is None:
@@ -68,6 +75,7 @@ class SB3Planner(Planner):
                                   "`ipp-train sb3 --algo ALGO --out RUN` and pass "
                                   "sb3=RUN/policy.pt (checkpoint='RUN/policy.pt')")
         self.checkpoint = resolve_policy(checkpoint)
+        self.in_order = bool(in_order)
         self.policy, self.meta = load_sb3_policy(self.checkpoint, device)
         self.algo: str = self.meta.algo
         self.obs_shape: tuple[int, int, int] = self.meta.obs_shape
@@ -109,9 +117,11 @@ class SB3Planner(Planner):
         states = self._lstm_states
         if states is not None and states[0].shape[1] != len(views):
             states = None  # another team: a new mission without reset()
-        actions, states = greedy_actions(self.policy, self.algo, observations, masks, states)
+        scores, states = action_scores(self.policy, self.algo, observations, states)
         self._lstm_states = states if self.algo in RECURRENT_ALGORITHMS else None
-        return actions
+        if self.in_order:
+            return choose_for_views(scores.cpu().numpy(), views)
+        return masked_argmax(scores, masks)
 
 
 class PPOPlanner(SB3Planner):
@@ -122,6 +132,7 @@ class PPOPlanner(SB3Planner):
             ``shipped:NAME`` (:data:`baselines.ppo.SHIPPED_POLICIES`); None loads the default
             shipped policy (:data:`baselines.ppo.DEFAULT_SHIPPED`).
         device: torch device of the forward pass.
+        in_order: as in :class:`SB3Planner`.
 
     Raises:
         CheckpointError: no shipped policy, or a missing, corrupt or foreign file.
@@ -129,7 +140,8 @@ class PPOPlanner(SB3Planner):
 
     name = "ppo"
 
-    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu") -> None:
+    def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
+                 in_order: bool = True) -> None:
         from . import ppo  # the default is read at call time (tests point it elsewhere)
 
         if checkpoint is None:
@@ -140,4 +152,4 @@ class PPOPlanner(SB3Planner):
                     "`ipp-train ppo --out runs/ppo` and pass ppo=runs/ppo/policy.pt "
                     "(checkpoint='runs/ppo/policy.pt')")
             checkpoint = ppo.DEFAULT_CHECKPOINT
-        super().__init__(checkpoint, device)
+        super().__init__(checkpoint, device, in_order)

@@ -26,7 +26,6 @@ configs; a JSON record sits beside it. PPO and MaskablePPO runs are written by
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,7 +49,7 @@ from ipp_toolkit.sim.team import N_ACTIONS
 
 from .ppo import CHECKPOINT_KIND as PPO_KIND
 from .ppo import TRAINING_KIND as PPO_TRAINING_KIND
-from .ppo import NoOptimizer, SmallCNN, check_policy_size, masked_greedy_actions
+from .ppo import NoOptimizer, SmallCNN, actor_logits, check_policy_size, masked_argmax
 from .ppo import load_policy as load_ppo_policy
 
 __all__ = [
@@ -72,6 +71,7 @@ __all__ = [
     "load_sb3_policy",
     "check_shapes",
     "masked_argmax",
+    "action_scores",
     "greedy_actions",
     "initial_lstm_states",
 ]
@@ -380,44 +380,58 @@ def initial_lstm_states(policy: BasePolicy, batch: int) -> LSTMStates:
     return zeros, zeros.clone()
 
 
-def masked_argmax(scores: torch.Tensor, masks: np.ndarray) -> np.ndarray:
-    valid = torch.as_tensor(np.asarray(masks) != 0, device=scores.device)
-    if valid.shape != scores.shape:
-        raise ValueError(f"masks of shape {tuple(valid.shape)} do not fit scores of shape "
-                         f"{tuple(scores.shape)}")
-    return scores.masked_fill(~valid, -math.inf).argmax(dim=1).cpu().numpy().astype(np.int64)
+def action_scores(policy: BasePolicy, algo: str, observations: np.ndarray,
+                  lstm_states: LSTMStates | None = None
+                  ) -> tuple[torch.Tensor, LSTMStates | None]:
+    """What a policy of ``algo`` ranks a batch of agents' actions by, in one forward pass.
+
+    The logits (PPO, MaskablePPO, A2C, TRPO, RecurrentPPO), the Q-values (DQN), the mean
+    quantiles (QRDQN) or the deterministic action net's outputs (ARS); masks are not
+    applied. Higher is better in every case.
+
+    Args:
+        policy: a policy of ``algo`` (from :func:`load_sb3_policy` or a trained model).
+        algo: its algorithm (any case).
+        observations: (B, C, G, G) float32 planes.
+        lstm_states: RecurrentPPO only: the (hidden, cell) states of the B agents, each
+            (n_layers, B, lstm_hidden_size); None starts from zeros (a mission start).
+
+    Returns:
+        ((B, A) float scores, the new LSTM states or None for non-recurrent policies).
+    """
+    algo = canonical_algo(algo)
+    if algo in ACTOR_CRITIC_ALGORITHMS:
+        return actor_logits(policy, observations), None
+    with torch.no_grad():
+        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=policy.device)
+        if algo == "DQN":
+            return policy.q_net(obs), None
+        if algo == "QRDQN":
+            return policy.quantile_net(obs).mean(dim=1), None
+        if algo == "ARS":
+            features = policy.extract_features(obs, policy.features_extractor)
+            return policy.action_net(features), None
+        if lstm_states is None:
+            lstm_states = initial_lstm_states(policy, obs.shape[0])
+        starts = torch.zeros(obs.shape[0], device=policy.device)
+        distribution, new_states = policy.get_distribution(obs, lstm_states, starts)
+        return distribution.distribution.logits, (new_states[0], new_states[1])
 
 
 def greedy_actions(policy: BasePolicy, algo: str, observations: np.ndarray, masks: np.ndarray,
                    lstm_states: LSTMStates | None = None) -> tuple[np.ndarray, LSTMStates | None]:
-    """Greedy valid actions of a batch of agents in one forward pass.
+    """Greedy valid actions of a batch of agents in one forward pass, each on its own.
 
     Args:
         policy: a policy of ``algo`` (from :func:`load_sb3_policy` or a trained model).
         algo: its algorithm (any case).
         observations: (B, C, G, G) float32 planes.
         masks: (B, A) valid actions (nonzero = valid); a masked action is never chosen.
-        lstm_states: RecurrentPPO only: the (hidden, cell) states of the B agents, each
-            (n_layers, B, lstm_hidden_size); None starts from zeros (a mission start).
+        lstm_states: as in :func:`action_scores`.
 
     Returns:
-        ((B,) int64 actions, the new LSTM states or None for non-recurrent policies).
+        ((B,) int64 argmax of :func:`action_scores` over the valid actions, the new LSTM
+        states or None for non-recurrent policies).
     """
-    algo = canonical_algo(algo)
-    if algo in ACTOR_CRITIC_ALGORITHMS:
-        return masked_greedy_actions(policy, observations, masks), None
-    with torch.no_grad():
-        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=policy.device)
-        if algo == "DQN":
-            return masked_argmax(policy.q_net(obs), masks), None
-        if algo == "QRDQN":
-            return masked_argmax(policy.quantile_net(obs).mean(dim=1), masks), None
-        if algo == "ARS":
-            features = policy.extract_features(obs, policy.features_extractor)
-            return masked_argmax(policy.action_net(features), masks), None
-        if lstm_states is None:
-            lstm_states = initial_lstm_states(policy, obs.shape[0])
-        starts = torch.zeros(obs.shape[0], device=policy.device)
-        distribution, new_states = policy.get_distribution(obs, lstm_states, starts)
-        logits = distribution.distribution.logits
-        return masked_argmax(logits, masks), (new_states[0], new_states[1])
+    scores, states = action_scores(policy, algo, observations, lstm_states)
+    return masked_argmax(scores, masks), states

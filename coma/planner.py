@@ -17,8 +17,7 @@ import numpy as np
 import torch
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import AgentView, Planner
-from ipp_toolkit.sim.team import choose_in_order
+from ipp_toolkit.planners import AgentView, Planner, choose_for_views
 
 from .config import mission_settings
 from .networks import masked_logits
@@ -86,12 +85,7 @@ class COMAPlanner(Planner):
         come from one batched forward pass)."""
         observations = np.stack([view.observation for view in views])
         masks = np.stack([view.mask for view in views]).astype(bool)
-        heard = np.zeros((len(views), len(views)), dtype=bool)
-        for k, view in enumerate(views):
-            heard[k, view.teammates] = True
-        positions = np.stack([view.position for view in views])
-        return choose_in_order(masked_logits(self.actor, observations, masks), positions,
-                               masks, heard)
+        return choose_for_views(masked_logits(self.actor, observations, masks), views)
 
 
 class COMAPriorPlanner(COMAPlanner):

@@ -528,25 +528,3 @@ def test_coma_sees_what_the_pettingzoo_env_shows_on_the_same_missions():
             observations, rewards, *_ = env.step(dict(zip(agents, actions.tolist(),
                                                           strict=True)))
             assert rewards[agents[0]] == pytest.approx(float(rollout.rewards[e, t]), abs=1e-6)
-
-
-def test_the_coma_planner_avoids_targets_heard_teammates_chose():
-    """Agents decide in index order, like ``ig``: none moves to a 2-D cell that a heard,
-    lower-index teammate chose while another valid option is left."""
-    from coma.planner import COMAPlanner
-    from ipp_toolkit.planners import planner_views
-    from ipp_toolkit.sim.mission import reset_mission, step_mission
-    from ipp_toolkit.sim.team import ACTION_DELTAS, unclaimed_options
-
-    planner = COMAPlanner()
-    config = planner.trained_config.replace(team={"n_agents": 8, "comm_range": math.inf})
-    planner.reset(config, 0)
-    state = reset_mission(config, seed=0, mission=0)
-    while not state.done:
-        views = planner_views(state, planner)
-        actions = planner.act(views)
-        targets = state.positions + ACTION_DELTAS[actions]
-        for k, view in enumerate(views):
-            mates = view.teammates[view.teammates < k]
-            assert unclaimed_options(view.position, view.mask, targets[mates])[actions[k]]
-        step_mission(state, actions)

@@ -282,3 +282,42 @@ def test_coverage_takes_a_valid_action_when_its_move_is_masked(blocker, position
     actions = planner.act(views)
     assert views[0].mask[actions[0]] and views[1].mask[actions[1]]
     assert ACTION_NAMES[actions[0]] == ACTION_NAMES[expected]
+
+
+def _trained_config(planner: Planner) -> EnvConfig:
+    return getattr(planner, "trained_config", None) or planner.meta.env_config
+
+
+@pytest.mark.parametrize("name", ["coma", "ppo"])
+def test_learned_planners_avoid_targets_heard_teammates_chose(name):
+    """The shipped learned planners decide in index order, like ``ig``: no agent moves to a
+    2-D cell that a heard, lower-index teammate chose while another valid option is left;
+    ``in_order=False`` gives each agent its own masked argmax instead."""
+    import math
+
+    from ipp_toolkit.planners import planner_views
+    from ipp_toolkit.sim.team import ACTION_DELTAS, unclaimed_options
+
+    planner = make_planner(name)
+    config = _trained_config(planner).replace(team={"n_agents": 8, "comm_range": math.inf})
+    planner.reset(config, 0)
+    independent = make_planner(name, in_order=False) if name == "ppo" else None
+    if independent is not None:
+        independent.reset(config, 0)
+    state = reset_mission(config, seed=0, mission=0)
+    differed = 0
+    while not state.done:
+        views = planner_views(state, planner)
+        actions = planner.act(views)
+        targets = state.positions + ACTION_DELTAS[actions]
+        for k, view in enumerate(views):
+            mates = view.teammates[view.teammates < k]
+            assert unclaimed_options(view.position, view.mask, targets[mates])[actions[k]]
+        if independent is not None:
+            own = independent.act(views)
+            masks = np.stack([view.mask for view in views]).astype(bool)
+            assert masks[np.arange(len(own)), own].all()
+            differed += int((own != actions).any())
+        step_mission(state, actions)
+    if independent is not None:
+        assert differed > 0  # the rule changed some choice of 8 UAVs over a mission

@@ -36,6 +36,7 @@ from ..config.schema import EnvConfig, FeatureConfig
 from ..io import CheckpointError
 from ..sim.features import actor_observations
 from ..sim.mission import MissionState
+from ..sim.team import choose_in_order
 
 __all__ = [
     "FEATURES_NOTE",
@@ -43,6 +44,7 @@ __all__ = [
     "Planner",
     "PlannerFactory",
     "agent_views",
+    "choose_for_views",
     "planner_views",
     "planners_in_process",
     "entry_point_planners",
@@ -190,6 +192,30 @@ def agent_views(state: MissionState, with_observations: bool = True,
             observation=_read_only(planes[k]),
         ))
     return views
+
+
+def choose_for_views(scores: np.ndarray, views: Sequence[AgentView]) -> np.ndarray:
+    """Each agent's best valid option, chosen in agent order like ``ig`` chooses.
+
+    A learned planner scores every agent's options in one batched pass, then decides in
+    agent order: an agent skips the 2-D targets that teammates it heard, and who decided
+    before it, already chose (:func:`ipp_toolkit.sim.team.choose_in_order`), instead of
+    losing a same-target contest and holding its position.
+
+    Args:
+        scores: (N, 6) values of the agents' options (logits, Q-values); higher is better.
+        views: the N agents' views at this decision point.
+
+    Returns:
+        (N,) int64 actions, each valid.
+    """
+    n = len(views)
+    heard = np.zeros((n, n), dtype=bool)
+    for k, view in enumerate(views):
+        heard[k, view.teammates] = True
+    positions = np.stack([view.position for view in views])
+    masks = np.stack([view.mask for view in views]).astype(bool)
+    return choose_in_order(np.asarray(scores), positions, masks, heard)
 
 
 def planner_views(state: MissionState, planner: Planner) -> list[AgentView]:
