@@ -26,6 +26,7 @@ from stable_baselines3 import PPO
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.runs.cli_flags import comm_range, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.sim.team import N_ACTIONS
@@ -173,13 +174,13 @@ def add_mission_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig | 
     has the fields ``seed``, ``n_agents``, ``comm_range`` and ``resolution``."""
     parser.add_argument("--config", help="env config YAML (defaults: the paper's world)")
     parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--agents", type=int, default=None,
+    parser.add_argument("--agents", type=positive_int("agents"), default=None,
                         help=f"team size N (default: the --config file's, else "
                              f"{defaults.n_agents})")
-    parser.add_argument("--comm", type=float, default=None,
+    parser.add_argument("--comm", type=comm_range, default=None, metavar="METRES|inf",
                         help=f"communication range D in metres, inf allowed (default: the "
                              f"--config file's, else {defaults.comm_range:g})")
-    parser.add_argument("--resolution", type=float, default=None,
+    parser.add_argument("--resolution", type=positive_float, default=None,
                         help=f"training map resolution in metres per cell (default: the "
                              f"--config file's, else {defaults.resolution:g})")
 

@@ -34,6 +34,7 @@ import math
 import shlex
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -55,6 +56,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch, write_json
 from ipp_toolkit.planners import Planner, planner_views
+from ipp_toolkit.runs.cli_flags import positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import progress_bar, report_interrupt
 from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
@@ -70,6 +72,10 @@ TRAINING_FORMAT = "ipp-toolkit/field-prior-training"
 PRIOR_COMMAND = "ipp-train prior"
 PROGRESS_COLUMNS = ("round", "epoch", "train_bce", "validation_bce", "smoothing_bce", "states",
                     "seconds")
+# The counts of PriorTrainingConfig that must be >= 1 (the config checks them; the command's
+# flags refuse a bad one before that).
+POSITIVE_FIELDS = ("rounds", "missions", "validation_missions", "agents_per_step", "epochs",
+                   "batch_size", "width")
 
 
 @dataclass(frozen=True)
@@ -101,8 +107,7 @@ class PriorTrainingConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("rounds", "missions", "validation_missions", "agents_per_step", "epochs",
-                     "batch_size", "width"):
+        for name in POSITIVE_FIELDS:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -423,6 +428,16 @@ FLAG_HELP = {
 }
 
 
+def _flag_type(name: str) -> Callable[[str], Any]:
+    """The value type of a config field's flag: a bad value (``--missions 0``) is refused by
+    argparse with exit code 2, naming the flag, like the other commands' counts."""
+    if name in POSITIVE_FIELDS:
+        return positive_int(name)
+    if name == "learning_rate":
+        return positive_float
+    return int
+
+
 def _parser() -> argparse.ArgumentParser:
     defaults = PriorTrainingConfig()
     parser = argparse.ArgumentParser(
@@ -435,7 +450,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
     for field in fields(PriorTrainingConfig):
         if field.name in FLAG_HELP:
-            parser.add_argument(f"--{field.name.replace('_', '-')}", type=type(field.default),
+            parser.add_argument(f"--{field.name.replace('_', '-')}", type=_flag_type(field.name),
                                 default=field.default, help=FLAG_HELP[field.name])
     parser.add_argument("--team-sizes", default=",".join(map(str, defaults.team_sizes)),
                         metavar="N,N,...", help="team sizes missions cycle over")
@@ -445,7 +460,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--config", help="YAML mission config (world, terrain, sensor, ...)")
     parser.add_argument("--terrain", default=None, metavar="KIND",
                         help="terrain of the missions (default: mixture)")
-    parser.add_argument("--resolution", type=float, default=None,
+    parser.add_argument("--resolution", type=positive_float, default=None,
                         help="map resolution in metres (default: 0.5)")
     parser.add_argument("--no-progress", action="store_true", help="no progress lines")
     return parser

@@ -34,6 +34,7 @@ from typing import Any
 from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
+from ipp_toolkit.extras import install_command, require_extra
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
@@ -52,7 +53,7 @@ from .rllib_policy import RLLIB_ALGORITHMS, canonical_rllib_algo
 __all__ = ["INSTALL_COMMAND", "RLlibUnavailableError", "RLlibTrainConfig", "require_rllib",
            "train_rllib", "main"]
 
-INSTALL_COMMAND = 'pip install -c constraints-rllib.txt -e ".[rllib]"'
+INSTALL_COMMAND = install_command("rllib", "constraints-rllib.txt")
 """How to install the optional RLlib extra (docs/rllib.md)."""
 
 
@@ -61,13 +62,10 @@ class RLlibUnavailableError(ValueError):
 
 
 def require_rllib() -> None:
-    """Raise :class:`RLlibUnavailableError` (naming the install command) unless RLlib imports."""
-    try:
-        import ray.rllib  # noqa: F401
-    except ImportError as err:
-        raise RLlibUnavailableError(
-            f"ipp-train rllib needs ray[rllib], which cannot be imported here ({err}); install "
-            f"the optional extra with: {INSTALL_COMMAND}") from None
+    """Raise :class:`RLlibUnavailableError` (naming the install command) unless RLlib imports
+    (:func:`~ipp_toolkit.extras.require_extra`)."""
+    require_extra("ray.rllib", "ipp-train rllib", INSTALL_COMMAND, package="ray[rllib]",
+                  error=RLlibUnavailableError)
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,8 @@ from ipp_toolkit.runs.cli_flags import (
     add_compute_flags,
     add_progress_flag,
     add_set_flag,
+    comm_range,
+    positive_float,
     positive_int,
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
@@ -105,19 +107,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, help="run seed")
     parser.add_argument("--out", required=True, help="run folder")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
-    parser.add_argument("--missions", type=int, help="training missions in total")
+    parser.add_argument("--missions", type=positive_int("missions"),
+                        help="training missions in total")
     parser.add_argument("--width", type=int, help="convolution channels")
     parser.add_argument("--precision", choices=PRECISIONS,
                         help="what the learning passes compute in (default float32): "
                              "bfloat16 is mixed precision, faster on CPUs with bfloat16 "
                              "instructions (AVX512-BF16, AMX) and on GPUs, slower elsewhere; "
                              "the same as --set precision=NAME")
-    parser.add_argument("--agents", type=int, help="team size (default: from --config, 4)")
-    parser.add_argument("--comm", type=float, help="communication range in metres")
+    parser.add_argument("--agents", type=positive_int("agents"),
+                        help="team size (default: from --config, 4)")
+    parser.add_argument("--comm", type=comm_range, metavar="METRES|inf",
+                        help="communication range in metres, or inf")
     parser.add_argument("--terrain", metavar="KIND",
                         help="terrain kind of the training missions, e.g. mixture (default: "
                              "the --config file's, else split)")
-    parser.add_argument("--resolution", type=float, default=None,
+    parser.add_argument("--resolution", type=positive_float, default=None,
                         help="map resolution for training in metres (default: the --config "
                              "file's, else 0.5)")
     parser.add_argument("--warm-start", metavar="PLANNER",

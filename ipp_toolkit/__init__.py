@@ -15,9 +15,11 @@ subpackages are its layers, and imports flow down this list only:
 - :mod:`ipp_toolkit.runs`: the evaluation runner, result store, process pool and Ray backend.
 
 ``ipp_toolkit._native`` holds the compiled (Numba) inner loops, ``ipp_toolkit.io`` the files
-that must never be half-written and ``ipp_toolkit.probability`` the log-odds and entropy of
-one cell; they are used at every layer. One import still goes up the list, lazily: the
-config checks terrain names against the world's terrain registry when a config is built.
+that must never be half-written, ``ipp_toolkit.probability`` the log-odds and entropy of
+one cell and ``ipp_toolkit.extras`` the import of an optional package (Ray, RLlib, TorchRL)
+with its install command; they are used at every layer. One import still goes up the list,
+lazily: the config checks terrain names against the world's terrain registry when a config
+is built.
 """
 
 from .config.files import load_config, save_config

@@ -30,6 +30,7 @@ from typing import Any
 
 from .config.schema import EnvConfig, check_int
 from .env import IPPEnv
+from .extras import install_command, require_extra
 
 __all__ = ["GROUP", "make_torchrl_env"]
 
@@ -76,11 +77,8 @@ def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed
         ImportError: torchrl is not installed (one line saying how to install it).
         ValueError: a bad ``num_envs`` or ``seed``.
     """
-    try:
-        from torchrl.envs import ActionMask, Compose, ParallelEnv, SerialEnv, TransformedEnv
-    except ImportError:
-        raise ImportError('make_torchrl_env needs torchrl: pip install -c constraints.txt '
-                          '-e ".[torchrl]"') from None
+    envs = require_extra("torchrl.envs", "make_torchrl_env", install_command("torchrl"),
+                         package="torchrl")
     config = config if config is not None else EnvConfig()
     num_envs = check_int("num_envs", num_envs, 1)
     seed = check_int("seed", seed, 0)
@@ -89,6 +87,6 @@ def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed
     if num_envs == 1:
         base = makers[0]()
     else:
-        base = (ParallelEnv if parallel else SerialEnv)(num_envs, makers, device=device)
-    mask = ActionMask(action_key=(GROUP, "action"), mask_key=(GROUP, "action_mask"))
-    return TransformedEnv(base, Compose(mask, *transforms))
+        base = (envs.ParallelEnv if parallel else envs.SerialEnv)(num_envs, makers, device=device)
+    mask = envs.ActionMask(action_key=(GROUP, "action"), mask_key=(GROUP, "action_mask"))
+    return envs.TransformedEnv(base, envs.Compose(mask, *transforms))

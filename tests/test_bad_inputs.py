@@ -137,6 +137,61 @@ def test_train_coma_bad_settings_exit_2_and_write_nothing(tmp_path, capsys, argv
     assert not out.exists()
 
 
+#: Each trainer's command, and the shared mission flags it takes (ipp-compare's value types).
+TRAINER_FLAGS = {
+    "coma": (["coma"], ("--agents", "--missions", "--comm", "--resolution")),
+    "ppo": (["ppo"], ("--agents", "--comm", "--resolution")),
+    "sb3": (["sb3", "--algo", "A2C"], ("--agents", "--comm", "--resolution")),
+    "rllib": (["rllib"], ("--agents", "--comm", "--resolution")),
+    "prior": (["prior"], ("--missions", "--resolution")),
+}
+#: A bad value of each flag, and what ipp-compare says of it.
+BAD_FLAG_VALUES = [
+    ("--agents", "0", "must be an integer >= 1, got '0'"),
+    ("--agents", "x", "must be an integer >= 1, got 'x'"),
+    ("--missions", "0", "must be an integer >= 1, got '0'"),
+    ("--missions", "2.5", "must be an integer >= 1, got '2.5'"),
+    ("--comm", "-3", "--comm must be >= 0 metres or 'inf', got '-3'"),
+    ("--comm", "nan", "--comm must be >= 0 metres or 'inf', got 'nan'"),
+    ("--comm", "far", "--comm must be metres or 'inf', got 'far'"),
+    ("--resolution", "0", "must be a positive number, got '0'"),
+    ("--resolution", "inf", "must be a positive number, got 'inf'"),
+]
+
+
+@pytest.mark.parametrize("trainer, flag, value, message", [
+    (trainer, flag, value, message) for trainer, (_, flags) in sorted(TRAINER_FLAGS.items())
+    for flag, value, message in BAD_FLAG_VALUES if flag in flags])
+def test_train_bad_mission_flags_exit_2_as_in_compare(tmp_path, capsys, trainer, flag, value,
+                                                      message):
+    command = TRAINER_FLAGS[trainer][0]
+    out = tmp_path / "run"
+    assert train_main([*command, "--out", str(out), flag, value]) == 2
+    err = capsys.readouterr().err
+    assert f"argument {flag}: {message}" in err, err
+    assert not out.exists()
+    # ipp-compare says the same of it.
+    if flag != "--missions":
+        assert compare_main([flag, value, "--out", str(tmp_path / "compare")]) == 2
+        assert f"argument {flag}: {message}" in capsys.readouterr().err
+        assert not (tmp_path / "compare").exists()
+
+
+@pytest.mark.parametrize("trainer", [name for name, (_, flags) in sorted(TRAINER_FLAGS.items())
+                                     if "--comm" in flags])
+def test_train_parsers_take_inf_comm_as_compare_does(trainer):
+    """An unlimited range is written ``inf`` in every command."""
+    import importlib
+
+    from reports.cli import TRAINERS
+
+    command = TRAINER_FLAGS[trainer][0]
+    module = importlib.import_module(TRAINERS[trainer])
+    parser = module.build_parser() if trainer == "coma" else module._parser()
+    args = parser.parse_args([*command[1:], "--out", "x", "--comm", "inf", "--agents", "3"])
+    assert args.comm == float("inf") and args.agents == 3
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--families", "blob"], "unknown terrain kind"),
     (["--planners", "random,coverage"], "reference planner 'ig'"),

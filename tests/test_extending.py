@@ -5,12 +5,14 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
 
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "extending.md"
 BLOCKS = re.findall(r"```python\n(.*?)```", PAGE.read_text(encoding="utf-8"), flags=re.S)
+TOML_BLOCKS = re.findall(r"```toml\n(.*?)```", PAGE.read_text(encoding="utf-8"), flags=re.S)
 
 
 def test_the_page_has_its_recipes():
@@ -23,3 +25,18 @@ def test_a_recipe_runs(index, tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip()
+
+
+def test_the_package_recipe_names_the_groups_the_toolkit_reads():
+    """The pyproject.toml of the entry-point recipes installs as written (a build system, a
+    project) and names the groups that ipp-compare and the terrain registry read."""
+    from ipp_toolkit.planners import ENTRY_POINT_GROUP as PLANNER_GROUP
+    from ipp_toolkit.world.terrain import ENTRY_POINT_GROUP as TERRAIN_GROUP
+
+    files = [tomllib.loads(block) for block in TOML_BLOCKS]
+    assert files and "build-system" in files[0] and "name" in files[0]["project"]
+    groups: dict[str, dict[str, str]] = {}
+    for data in files:
+        groups.update(data.get("project", {}).get("entry-points", {}))
+    assert groups == {PLANNER_GROUP: {"always-first": "my_planners.simple:AlwaysFirst"},
+                      TERRAIN_GROUP: {"stripes": "my_planners.terrains:stripes"}}

@@ -202,7 +202,7 @@ def test_ipp_train_prior_repeats_itself_and_continues_after_an_interruption(tmp_
 
 
 @pytest.mark.parametrize("flags, message", [
-    (["--width", "0"], "width must be"),
+    (["--width", "0"], "argument --width: must be an integer >= 1, got '0'"),
     (["--team-sizes", "2,x"], "--team-sizes must be integers"),
     (["--comm-ranges", "-5"], "comm_ranges must be non-negative"),
     (["--resolution", "0"], "resolution"),

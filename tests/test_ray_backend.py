@@ -142,6 +142,32 @@ def test_missing_ray_is_one_line_with_the_install_command(tmp_path, monkeypatch,
     assert not out.exists()
 
 
+def test_optional_imports_share_one_message_form(monkeypatch):
+    """require_ray, require_rllib and make_torchrl_env import through require_extra: one line
+    naming what needs the package, why it failed and the install command."""
+    from baselines.rllib_training import RLlibUnavailableError, require_rllib
+    from ipp_toolkit.extras import install_command, require_extra
+    from ipp_toolkit.torchrl_env import make_torchrl_env
+
+    assert require_extra("json", "a test", "no install") is json
+    for module in ("ray", "ray.rllib", "torchrl.envs"):
+        monkeypatch.setitem(sys.modules, module, None)  # importing it raises ImportError
+    cases = [(ray_backend.require_ray, RayUnavailableError, "the ray backend needs Ray, ",
+              'pip install -c constraints.txt -e ".[ray]"'),
+             (require_rllib, RLlibUnavailableError, "ipp-train rllib needs ray[rllib], ",
+              'pip install -c constraints-rllib.txt -e ".[rllib]"'),
+             (make_torchrl_env, ImportError, "make_torchrl_env needs torchrl, ",
+              install_command("torchrl"))]
+    for call, error, start, install in cases:
+        with pytest.raises(error) as raised:
+            call()
+        message = str(raised.value)
+        assert message.startswith(start) and "which cannot be imported here (" in message
+        assert message.endswith(f"install the optional extra with: {install}")
+        assert "\n" not in message
+    assert issubclass(RLlibUnavailableError, ValueError)  # ipp-train rllib exits 2 on it
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["--address", "127.0.0.1:6379"], "--address needs --backend ray"),
     (["--backend", "dask"], "invalid choice: 'dask'"),

@@ -1,11 +1,13 @@
 """The flags the commands share, one owner for their spelling and their values.
 
-``ipp-compare``, ``ipp-study``, ``ipp-simulate`` (:mod:`reports.cli`) and ``ipp-train coma``
-(:mod:`coma.cli`) parse some of the same flags. This module owns
+``ipp-compare``, ``ipp-study``, ``ipp-simulate`` (:mod:`reports.cli`) and the ``ipp-train``
+trainers (:mod:`coma.cli`, :mod:`baselines.ppo_training` for ``ppo``, ``sb3`` and ``rllib``,
+:mod:`baselines.prior_training`) parse some of the same flags. This module owns
 
 * the value types of their flags: :func:`positive_int`, :func:`positive_float`,
   :func:`finite_float` and :func:`comm_range` (argparse prints their message after
-  ``argument --flag:``);
+  ``argument --flag:`` and exits with code 2, so ``--agents 0`` reads the same in every
+  command);
 * the flags themselves where both command modules parse them: where the missions fly
   (:func:`add_compute_flags`: ``--workers``, ``--backend``, ``--address``), ``--set
   FIELD=VALUE`` (:func:`add_set_flag`) and ``--no-progress`` (:func:`add_progress_flag`).

@@ -45,6 +45,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
+from ..extras import install_command, require_extra
 from .process_pool import (
     TaskResult,
     TaskRunner,
@@ -60,7 +61,7 @@ __all__ = ["add_backend_flags", "BACKENDS", "check_backend", "check_backend_flag
            "RayUnavailableError", "connect", "probe", "require_ray", "run_calls", "run_ray",
            "session", "start_local"]
 
-INSTALL_COMMAND = 'pip install -c constraints.txt -e ".[ray]"'
+INSTALL_COMMAND = install_command("ray")
 """How to install the optional Ray extra (from the repository root)."""
 
 BACKENDS = ("local", "ray")
@@ -150,14 +151,10 @@ def check_backend_flags(backend: str, address: str | None) -> None:
 
 
 def require_ray() -> Any:
-    """Import and return the ``ray`` module, or raise :class:`RayUnavailableError`."""
-    try:
-        import ray
-    except ImportError as err:
-        raise RayUnavailableError(
-            f"the ray backend needs Ray, which cannot be imported here ({err}); install the "
-            f"optional extra with: {INSTALL_COMMAND}") from None
-    return ray
+    """Import and return the ``ray`` module, or raise :class:`RayUnavailableError` naming the
+    install command (:func:`~ipp_toolkit.extras.require_extra`)."""
+    return require_extra("ray", "the ray backend", INSTALL_COMMAND, package="Ray",
+                         error=RayUnavailableError)
 
 
 # --------------------------------------------------------------------------------------------
