@@ -71,7 +71,11 @@ def algorithm_config(config: RLlibTrainConfig, env_cfg: EnvConfig, base_seed: in
         .training(lr=config.lr, gamma=config.gamma,
                   train_batch_size_per_learner=config.train_batch)
         .callbacks(TeamMetricsCallback)
-        .reporting(metrics_num_episodes_for_smoothing=100)
+        # One iteration = one --train-batch of team steps for every algorithm: APPO and
+        # IMPALA otherwise default to iterations of at least 10 s each (RLlib's
+        # min_time_s_per_iteration), however little they sampled.
+        .reporting(metrics_num_episodes_for_smoothing=100, min_time_s_per_iteration=0,
+                   min_sample_timesteps_per_iteration=config.train_batch)
         .debugging(seed=config.seed, log_level="ERROR")
     )
     if config.algo == "PPO":

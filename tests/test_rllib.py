@@ -85,6 +85,21 @@ def test_default_imports_leave_ray_alone() -> None:
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
 
 
+@pytest.mark.parametrize("algo", ["PPO", "APPO", "IMPALA"])
+def test_an_iteration_is_one_train_batch_for_every_algorithm(algo: str) -> None:
+    # APPO and IMPALA default to iterations of at least 10 s (min_time_s_per_iteration):
+    # --iterations would count time, not --train-batch team steps as it does for PPO.
+    pytest.importorskip("ray.rllib.algorithms.appo")
+    from baselines.rllib_run import algorithm_config
+
+    config = RLlibTrainConfig(algo=algo, train_batch=96, num_env_runners=2)
+    rl_config = algorithm_config(config, EnvConfig(), base_seed=0)
+    assert not rl_config.min_time_s_per_iteration
+    assert rl_config.min_sample_timesteps_per_iteration == 96
+    assert rl_config.count_steps_by == "env_steps"  # team steps, as --train-batch counts
+    assert rl_config.num_env_runners == 2
+
+
 def _policy_dir(tmp_path: Path, config: EnvConfig) -> Path:
     torch.manual_seed(0)
     grid = int(config.world.grid_points)
@@ -147,3 +162,27 @@ def test_one_iteration_on_a_local_ray_flies_through_ipp_compare(
     assert compare_main(["--planners", f"rllib={run}", "--trials", "2", "--out", str(out),
                          "--no-progress"]) == 0
     assert (out / "results.csv").is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None
+                    or importlib.util.find_spec("ray.rllib") is None,
+                    reason="needs ray[rllib] (pip install -c constraints-rllib.txt -e .[rllib])")
+def test_appo_iterations_count_train_batches_on_a_remote_runner(tmp_path: Path) -> None:
+    pytest.importorskip("ray.rllib.algorithms.appo")
+    run = tmp_path / "appo"
+    assert train_main(["rllib", "--algo", "APPO", "--iterations", "2", "--train-batch", "60",
+                       "--agents", "2", "--width", "4", "--features-dim", "8", "--hidden", "8",
+                       "--seed", "1", "--num-env-runners", "1", "--out", str(run),
+                       "--no-progress"]) == 0
+    meta = RLlibPlanner(run).meta
+    assert meta.algo == "APPO" and meta.iteration == 2
+    # Each iteration sampled at least one --train-batch of team steps (2 UAVs each): the
+    # TensorBoard steps are the agent-steps after each iteration.
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(run / "tb" / "appo_1"))
+    events.Reload()
+    steps = [0] + [e.step for e in events.Scalars("time/agent_steps_per_s")]
+    assert len(steps) == 3 and steps[-1] == meta.agent_steps
+    assert all(b - a >= 60 * 2 for a, b in zip(steps[:-1], steps[1:], strict=True))
