@@ -15,7 +15,13 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer
+from ipp_toolkit.planners import (
+    AgentView,
+    Planner,
+    check_policy_transfer,
+    choose_for_views,
+    policy_inputs,
+)
 from ipp_toolkit.sim.features import actor_plane_names
 
 from .rllib_policy import load_rllib_policy, policy_file_of
@@ -74,14 +80,12 @@ class RLlibPlanner(Planner):
                                                     str(self.checkpoint))
 
     def act(self, views: list[AgentView]) -> np.ndarray:
-        """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks."""
-        planes = np.stack([view.observation for view in views])
-        if planes.shape[1:] != self.obs_shape:
-            raise CheckpointError(
-                f"RLlib policy {str(self.checkpoint)!r} expects observations of shape "
-                f"{self.obs_shape}, got {planes.shape[1:]}")
-        masks = np.stack([view.mask for view in views])
+        """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks, chosen
+        in agent order under the same-step rule
+        (:func:`~ipp_toolkit.planners.choose_for_views`), like the other learned planners."""
+        planes, masks = policy_inputs(views, self.obs_shape,
+                                      f"RLlib policy {str(self.checkpoint)!r}")
         with torch.no_grad():
             logits = self.policy(torch.as_tensor(planes, device=self.device),
                                  torch.as_tensor(masks, device=self.device))
-        return logits.argmax(dim=1).cpu().numpy().astype(np.int64)
+        return choose_for_views(logits.cpu().numpy(), views)

@@ -17,7 +17,13 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import AgentView, Planner, check_policy_transfer, choose_for_views
+from ipp_toolkit.planners import (
+    AgentView,
+    Planner,
+    check_policy_transfer,
+    choose_for_views,
+    policy_inputs,
+)
 
 from .ppo import resolve_policy
 from .sb3_policies import (
@@ -108,12 +114,8 @@ class SB3Planner(Planner):
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks."""
-        observations = np.stack([view.observation for view in views])
-        if observations.shape[1:] != self.obs_shape:
-            raise CheckpointError(
-                f"{self.algo} policy {str(self.checkpoint)!r} expects observations of shape "
-                f"{self.obs_shape}, got {observations.shape[1:]}")
-        masks = np.stack([view.mask for view in views])
+        observations, masks = policy_inputs(
+            views, self.obs_shape, f"{self.algo} policy {str(self.checkpoint)!r}")
         states = self._lstm_states
         if states is not None and states[0].shape[1] != len(views):
             states = None  # another team: a new mission without reset()

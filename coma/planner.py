@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import AgentView, Planner, choose_for_views
+from ipp_toolkit.planners import AgentView, Planner, choose_for_views, policy_inputs
 
 from .config import mission_settings
 from .networks import masked_logits
@@ -83,8 +83,7 @@ class COMAPlanner(Planner):
         """(N,) int64: each agent's likeliest valid action, chosen in agent order, avoiding
         the 2-D targets heard lower-index teammates chose (``ig``'s rule; the actors' logits
         come from one batched forward pass)."""
-        observations = np.stack([view.observation for view in views])
-        masks = np.stack([view.mask for view in views]).astype(bool)
+        observations, masks = policy_inputs(views)
         return choose_for_views(masked_logits(self.actor, observations, masks), views)
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "PlannerFactory",
     "agent_views",
     "choose_for_views",
+    "policy_inputs",
     "planner_views",
     "planners_in_process",
     "entry_point_planners",
@@ -192,6 +193,29 @@ def agent_views(state: MissionState, with_observations: bool = True,
             observation=_read_only(planes[k]),
         ))
     return views
+
+
+def policy_inputs(views: Sequence[AgentView], expected_shape: tuple[int, ...] | None = None,
+                  policy: str = "the policy") -> tuple[np.ndarray, np.ndarray]:
+    """A learned planner's batch: the agents' observation planes and masks.
+
+    Args:
+        views: the N agents' views at this decision point.
+        expected_shape: the (C, G, G) the policy was trained on; None skips the check.
+        policy: how the error names the policy (e.g. its algorithm and file).
+
+    Returns:
+        ((N, C, G, G) float32 planes, (N, 6) bool masks).
+
+    Raises:
+        CheckpointError: the planes are not of ``expected_shape``, naming both shapes.
+    """
+    observations = np.stack([view.observation for view in views])
+    if expected_shape is not None and observations.shape[1:] != tuple(expected_shape):
+        raise CheckpointError(f"{policy} expects observations of shape "
+                              f"{tuple(expected_shape)}, got {observations.shape[1:]}")
+    masks = np.stack([view.mask for view in views]).astype(bool)
+    return observations, masks
 
 
 def choose_for_views(scores: np.ndarray, views: Sequence[AgentView]) -> np.ndarray:
