@@ -253,6 +253,7 @@ def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.Ar
     defaults = PPOTrainConfig()
     parser = argparse.ArgumentParser(
         prog=prog,
+        allow_abbrev=False,  # a prefix of another flag must not be taken for it
         description="Train a shared (parameter-sharing) PPO policy on the simulator.",
         formatter_class=HelpFormatter)
     add_version(parser)

@@ -442,6 +442,7 @@ def _parser() -> argparse.ArgumentParser:
     defaults = PriorTrainingConfig()
     parser = argparse.ArgumentParser(
         prog="ipp-train prior",
+        allow_abbrev=False,  # a prefix of another flag must not be taken for it
         description="Train a field prior (P(interesting | local map)) on simulator ground "
                     "truth, in DAgger-style rounds; fly it as ig_learned=OUT/best.pt.",
         formatter_class=HelpFormatter)

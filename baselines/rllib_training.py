@@ -228,6 +228,7 @@ def _parser() -> argparse.ArgumentParser:
     defaults = RLlibTrainConfig()
     parser = argparse.ArgumentParser(
         prog="ipp-train rllib",
+        allow_abbrev=False,  # a prefix of another flag must not be taken for it
         description="Train a shared (parameter-sharing) policy with RLlib (PPO, APPO or "
                     "IMPALA) on a local Ray or a Ray cluster; the rllib planner flies it "
                     "(ipp-compare --planners rllib=OUT). Needs the optional extra: "

@@ -399,6 +399,7 @@ def _parser() -> argparse.ArgumentParser:
     defaults = SB3TrainConfig(algo="A2C")
     parser = argparse.ArgumentParser(
         prog="ipp-train sb3",
+        allow_abbrev=False,  # a prefix of another flag must not be taken for it
         description="Train a shared (parameter-sharing) policy of any supported SB3 algorithm "
                     "on the simulator. --algo PPO and --algo MaskablePPO run ipp-train ppo "
                     "and take its options (ipp-train sb3 --algo PPO --help).",
@@ -440,7 +441,7 @@ def main(argv: list[str] | None = None) -> int:
     """``ipp-train sb3 --algo ALGO [options]``; returns 0 on success, 2 on bad input."""
     argv = list(sys.argv[1:] if argv is None else argv)
     command = shlex.join(["ipp-train", "sb3", *argv])
-    pre = argparse.ArgumentParser(add_help=False)
+    pre = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
     pre.add_argument("--algo")
     known, rest = pre.parse_known_args(argv)
     if known.algo is None:

@@ -92,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     ``ipp-study`` come from :mod:`ipp_toolkit.runs.cli_flags`."""
     parser = argparse.ArgumentParser(
         prog="ipp-train coma",
+        allow_abbrev=False,  # a prefix of another flag must not be taken for it
         description="Train COMA (or a credit-assignment variant) on the UAV mapping missions.",
         formatter_class=HelpFormatter)
     add_version(parser)

@@ -52,6 +52,7 @@ from .compare import DEFAULT_PLANNERS
 def _simulate_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-simulate",
+        allow_abbrev=False,  # a prefix of another flag must not be taken for it
         description="Fly one mission with random valid actions and report its metrics.",
         formatter_class=HelpFormatter,
     )
@@ -135,6 +136,7 @@ DEFAULT_COMPARE_OUT = "results/compare-a{agents}-d{comm}"
 def _compare_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-compare",
+        allow_abbrev=False,  # a prefix of another flag must not be taken for it
         description="Evaluate planners on the same test missions of one configuration; print "
                     "the table (mean ± std of entropy and F1 at 33/67/100 % of the budget, "
                     "best in bold) and the planning time per step; write summary.md/.csv/.tex, "

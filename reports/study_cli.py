@@ -72,7 +72,8 @@ def _check_flags(args: argparse.Namespace) -> None:
 
 def _study_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="ipp-study", description="Regenerate the paper's studies into a folder.",
+        prog="ipp-study", allow_abbrev=False,
+        description="Regenerate the paper's studies into a folder.",
         formatter_class=HelpFormatter)
     add_version(parser)
     parser.add_argument("study", choices=["robustness", "credit", "ablation", "generalisation",

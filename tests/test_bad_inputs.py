@@ -192,6 +192,32 @@ def test_train_parsers_take_inf_comm_as_compare_does(trainer):
     assert args.comm == float("inf") and args.agents == 3
 
 
+@pytest.mark.parametrize("command, prefix", [
+    (["prior"], "--agents"),  # a prefix of --agents-per-step
+    (["prior"], "--comm"),  # a prefix of --comm-ranges
+    (["coma"], "--comm-r"),  # a prefix of --comm-ranges
+    (["ppo"], "--time-l"),  # a prefix of --time-limit
+    (["sb3", "--algo", "A2C"], "--time-l"),
+    (["rllib"], "--iter"),  # a prefix of --iterations
+    (["compare"], "--plan"),  # a prefix of --planners
+    (["study", "generalisation"], "--team"),  # a prefix of --team-families
+])
+def test_a_prefix_of_a_flag_is_refused_not_taken_for_it(tmp_path, capsys, command, prefix):
+    """``ipp-train prior --agents 4`` must not quietly set ``--agents-per-step``."""
+    from reports.study_cli import main as study_main
+
+    out = tmp_path / "run"
+    if command[0] == "compare":
+        code = compare_main([prefix, "ig", "--out", str(out)])
+    elif command[0] == "study":
+        code = study_main([*command[1:], prefix, "split", "--out", str(out)])
+    else:
+        code = train_main([*command, prefix, "4", "--out", str(out)])
+    assert code == 2
+    assert f"unrecognized arguments: {prefix}" in capsys.readouterr().err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--families", "blob"], "unknown terrain kind"),
     (["--planners", "random,coverage"], "reference planner 'ig'"),
