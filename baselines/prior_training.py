@@ -56,7 +56,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch, write_json
 from ipp_toolkit.planners import Planner, planner_views
-from ipp_toolkit.runs.cli_flags import positive_float, positive_int
+from ipp_toolkit.runs.cli_flags import comm_range_list, int_list, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import progress_bar, report_interrupt
 from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
@@ -453,9 +453,11 @@ def _parser() -> argparse.ArgumentParser:
         if field.name in FLAG_HELP:
             parser.add_argument(f"--{field.name.replace('_', '-')}", type=_flag_type(field.name),
                                 default=field.default, help=FLAG_HELP[field.name])
-    parser.add_argument("--team-sizes", default=",".join(map(str, defaults.team_sizes)),
-                        metavar="N,N,...", help="team sizes missions cycle over")
-    parser.add_argument("--comm-ranges", default="0,25,inf", metavar="D,D,...",
+    parser.add_argument("--team-sizes", type=int_list("--team-sizes"),
+                        default=",".join(map(str, defaults.team_sizes)), metavar="N,N,...",
+                        help="team sizes missions cycle over")
+    parser.add_argument("--comm-ranges", type=comm_range_list("--comm-ranges"),
+                        default="0,25,inf", metavar="D,D,...",
                         help="communication ranges (metres, inf) missions cycle over "
                              "(default: 0,25,inf)")
     parser.add_argument("--config", help="YAML mission config (world, terrain, sensor, ...)")
@@ -475,8 +477,7 @@ def main(argv: list[str] | None = None) -> int:
         values = {f.name: getattr(args, f.name) for f in fields(PriorTrainingConfig)
                   if f.name not in ("team_sizes", "comm_ranges")}
         config = PriorTrainingConfig(
-            **values, team_sizes=tuple(_int_list(args.team_sizes, "--team-sizes")),
-            comm_ranges=tuple(_range_list(args.comm_ranges)))
+            **values, team_sizes=tuple(args.team_sizes), comm_ranges=tuple(args.comm_ranges))
         env_config = build_env_config(
             args.config, terrain=args.terrain, resolution=args.resolution,
             defaults={"world": {"resolution": 0.5}, "terrain": {"kind": "mixture"}})
@@ -491,21 +492,6 @@ def main(argv: list[str] | None = None) -> int:
         return report_interrupt("ipp-train prior", f"continue with --resume --out {args.out}")
     print(f"saved {path}")
     return 0
-
-
-def _int_list(text: str, flag: str) -> list[int]:
-    try:
-        return [int(v) for v in text.split(",")]
-    except ValueError:
-        raise ValueError(f"{flag} must be integers separated by commas, got {text!r}") from None
-
-
-def _range_list(text: str) -> list[float]:
-    try:
-        return [float(v) for v in text.split(",")]
-    except ValueError:
-        raise ValueError(f"--comm-ranges must be metres or inf separated by commas, "
-                         f"got {text!r}") from None
 
 
 if __name__ == "__main__":

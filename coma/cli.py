@@ -3,8 +3,8 @@
 This module owns the command line of COMA training: its flags (:func:`build_parser`), the
 training defaults over the paper's mission (:data:`TRAINING_DEFAULTS`), how flags, a
 ``--config`` file and ``--set FIELD=VALUE`` become a :class:`~coma.config.COMAConfig` and an
-:class:`~ipp_toolkit.config.schema.EnvConfig` (:func:`configs_from_args`; :func:`coerce_value` and
-:func:`int_list` also serve ``ipp-study``), and :func:`main` with its exit codes. ``--set``
+:class:`~ipp_toolkit.config.schema.EnvConfig` (:func:`configs_from_args`; :func:`coerce_value`
+also serves ``ipp-study``), and :func:`main` with its exit codes. ``--set``
 names a nested field with a dot (``--set warm_start.missions=100``); the older flat names
 (``--set warm_start_missions=100``) are still read (:func:`coma.config.nested_fields`).
 
@@ -41,6 +41,8 @@ from ipp_toolkit.runs.cli_flags import (
     add_progress_flag,
     add_set_flag,
     comm_range,
+    comm_range_list,
+    int_list,
     positive_float,
     positive_int,
 )
@@ -66,7 +68,7 @@ from .recipes import RECIPES, Stage, recipe
 from .validation import validation_settings
 
 __all__ = ["TRAINING_DEFAULTS", "PAPER_TRAINING_DEFAULTS", "build_parser", "coerce_value",
-           "int_list", "configs_from_args", "main"]
+           "configs_from_args", "main"]
 
 
 TRAINING_DEFAULTS = {"world": {"resolution": 0.5}, "features": {"own_position": True}}
@@ -130,10 +132,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="first imitate this registered planner (e.g. ig; 'none' to "
                              "switch the preset's off; the same as --set "
                              "warm_start.planner=NAME); not in the paper")
-    parser.add_argument("--team-sizes", metavar="N,N,...",
+    parser.add_argument("--team-sizes", type=int_list("--team-sizes"), metavar="N,N,...",
                         help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
                              "randomisation; not in the paper)")
-    parser.add_argument("--comm-ranges", metavar="D,D,...",
+    parser.add_argument("--comm-ranges", type=comm_range_list("--comm-ranges"),
+                        metavar="D,D,...",
                         help="train on these communication ranges in metres, e.g. 0,25,inf")
     parser.add_argument("--init", metavar="POLICY",
                         help="start from this COMA policy file instead of a warm start "
@@ -181,22 +184,6 @@ def coerce_value(text: str) -> Any:
     return text
 
 
-def int_list(flag: str, text: str) -> list[int]:
-    """Integers separated by commas (``--team-sizes 2,4,8``); ValueError naming ``flag``."""
-    try:
-        return [int(item) for item in text.split(",")]
-    except ValueError:
-        raise ValueError(f"{flag} expects integers separated by commas, got {text!r}") from None
-
-
-def _float_list(flag: str, text: str) -> list[float]:
-    try:
-        return [float(item) for item in text.split(",")]
-    except ValueError:
-        raise ValueError(f"{flag} expects numbers (or inf) separated by commas, got "
-                         f"{text!r}") from None
-
-
 def _changes_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """The COMAConfig fields the flags set (ValueError on bad input)."""
     changes: dict[str, Any] = {}
@@ -211,9 +198,9 @@ def _changes_from_args(args: argparse.Namespace) -> dict[str, Any]:
     if args.warm_start is not None:
         changes["warm_start.planner"] = "" if args.warm_start == "none" else args.warm_start
     if args.team_sizes is not None:
-        changes["team_sizes"] = int_list("--team-sizes", args.team_sizes)
+        changes["team_sizes"] = args.team_sizes
     if args.comm_ranges is not None:
-        changes["comm_ranges"] = _float_list("--comm-ranges", args.comm_ranges)
+        changes["comm_ranges"] = args.comm_ranges
     if args.init is not None:
         init = f"shipped:{DEFAULT_SHIPPED}" if args.init == "shipped" else args.init
         changes["init_policy"] = str(resolve_policy(init))

@@ -11,12 +11,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from ipp_toolkit.config.settings import parse_comm
+from ipp_toolkit.config.settings import comm_label
 from ipp_toolkit.runs.cli_flags import (
     add_compute_flags,
     add_progress_flag,
     add_set_flag,
-    comm_range,
+    comm_range_list,
+    int_list,
     positive_float,
     positive_int,
 )
@@ -45,8 +46,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     backend = {"backend": args.backend, "address": args.address}
     seed = 0 if args.seed is None else args.seed
-    agents = "2,4,8" if args.agents is None else args.agents
-    comm = "0,25,inf" if args.comm is None else args.comm
+    agents = [2, 4, 8] if args.agents is None else args.agents
+    comm = [0.0, 25.0, float("inf")] if args.comm is None else args.comm
     try:
         # The study's folder holds the folders of its runs: one study at a time.
         with claim(out, f"ipp-study {args.study}"):
@@ -66,8 +67,9 @@ def _check_flags(args: argparse.Namespace) -> None:
     if args.sweep and args.study != "sweep":
         raise ValueError(f"--sweep is for ipp-study sweep, not {args.study}")
     if args.seeds is not None and len(args.seeds) > 1:
-        raise ValueError(f"--seeds is given {len(args.seeds)} times "
-                         f"({' and '.join(args.seeds)}); give all seeds in one --seeds S,S,...")
+        given = " and ".join(",".join(map(str, seeds)) for seeds in args.seeds)
+        raise ValueError(f"--seeds is given {len(args.seeds)} times ({given}); give all seeds "
+                         "in one --seeds S,S,...")
 
 
 def _study_parser() -> argparse.ArgumentParser:
@@ -91,13 +93,13 @@ def _study_parser() -> argparse.ArgumentParser:
                         help="planners, comma-separated (coma=PATH for your own policy, "
                              "LABEL:coma=PATH to name it); default: coma,ig,coverage, and "
                              f"for generalisation {','.join(DEFAULT_PLANNERS)}")
-    parser.add_argument("--agents", default=None,
+    parser.add_argument("--agents", type=int_list("--agents"), default=None,
                         help="team sizes, comma-separated (default 2,4,8); sweep: the one "
                              "team size of training and validation (default 4)")
-    parser.add_argument("--comm", default=None,
+    parser.add_argument("--comm", type=comm_range_list("--comm"), default=None,
                         help="ranges in metres, comma-separated (default 0,25,inf); sweep: "
                              "the one range (default 25)")
-    parser.add_argument("--failures", default="0",
+    parser.add_argument("--failures", type=int_list("--failures", minimum=0), default="0",
                         help="robustness: numbers of UAVs failing at a random step, "
                              "comma-separated (e.g. 0,1; beyond the paper)")
     parser.add_argument("--trials", type=positive_int("--trials"), default=50)
@@ -130,7 +132,8 @@ def _study_parser() -> argparse.ArgumentParser:
                         help="sweep: a COMAConfig field and its values (repeatable: the grid "
                              "is the product; a list field's items joined by +, e.g. "
                              "team_sizes=2+4,4)")
-    parser.add_argument("--seeds", action="append", default=None, metavar="S,S,...",
+    parser.add_argument("--seeds", type=int_list("--seeds", minimum=0), action="append",
+                        default=None, metavar="S,S,...",
                         help="credit, ablation, sweep: training seeds; with several, each run "
                              "is trained once per seed and the table gives mean and spread "
                              "over seeds (default: one seed, 0)")
@@ -151,7 +154,7 @@ def _study_parser() -> argparse.ArgumentParser:
 
 
 def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], seed: int,
-           agents: str, comm: str) -> int:
+           agents: list[int], comm: list[float]) -> int:
     """Run the study ``args.study`` into ``out`` (claimed); ValueError on bad input."""
     if args.study == "sweep":  # the sweep takes one value of each, checked there
         return _sweep(args, out, backend)
@@ -167,13 +170,12 @@ def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], s
 
 
 def _generalisation(args: argparse.Namespace, out: str, backend: dict[str, str | None],
-                    seed: int, agents: str, comm: str) -> None:
+                    seed: int, agents: list[int], comm: list[float]) -> None:
     """``ipp-study generalisation``: planners x terrain families x team settings."""
     from .generalisation import generalisation_study, study_cells
 
     planners = args.planners or ",".join(DEFAULT_PLANNERS)
-    settings = [(int(a), comm_range(c)) for a in agents.split(",")
-                for c in comm.split(",")]
+    settings = [(a, c) for a in agents for c in comm]
     cells = study_cells([f for f in args.families.split(",") if f],
                         [f for f in args.team_families.split(",") if f], settings)
     study = generalisation_study(planners, cells, trials=args.trials, seed=seed,
@@ -186,18 +188,17 @@ def _generalisation(args: argparse.Namespace, out: str, backend: dict[str, str |
 
 
 def _robustness(args: argparse.Namespace, out: str, backend: dict[str, str | None],
-                seed: int, agents: str, comm: str) -> None:
+                seed: int, agents: list[int], comm: list[float]) -> None:
     """``ipp-study robustness``: paper Table I (team sizes x communication ranges)."""
     from .studies import robustness_study
 
     study = robustness_study(args.planners or "coma,ig,coverage",
-                             [int(a) for a in agents.split(",")],
-                             [comm_range(c) for c in comm.split(",")],
+                             agents, comm,
                              trials=args.trials,
                              seed=seed, out=out, workers=args.workers,
                              resolution=args.resolution,
                              progress=not args.no_progress,
-                             failures=[int(f) for f in args.failures.split(",")],
+                             failures=args.failures,
                              **backend)
     print(study.table)
     print(f"written: {out}/robustness.md, .csv, .png, .pdf")
@@ -206,13 +207,11 @@ def _robustness(args: argparse.Namespace, out: str, backend: dict[str, str | Non
 def _training_study(args: argparse.Namespace, out: str, backend: dict[str, str | None],
                     seed: int) -> None:
     """``ipp-study credit`` or ``ablation``: COMA runs trained alike, then compared."""
-    from coma.cli import int_list
-
     from .studies import ablation_study, credit_assignment_study
     from .sweep import parse_assignments
 
     overrides = parse_assignments(args.set)
-    seeds = None if args.seeds is None else int_list("--seeds", args.seeds[0])
+    seeds = None if args.seeds is None else args.seeds[0]
     common = dict(missions=args.missions or 5000, overrides=overrides, seeds=seeds,
                   train_resolution=args.train_resolution, trials=args.trials,
                   seed=seed, out=out, workers=args.workers,
@@ -228,22 +227,23 @@ def _training_study(args: argparse.Namespace, out: str, backend: dict[str, str |
           "F1 per step)")
 
 
-def _distinct_items(flag: str, text: str) -> None:
-    """Refuse a list flag that names no value, an empty item or a value twice (a study would
-    silently fly its defaults or a duplicate row)."""
-    items = [item.strip() for item in text.split(",")]
-    if not text.strip() or any(not item for item in items):
-        raise ValueError(f"{flag} {text!r} has an empty value; give e.g. {flag} 2,4,8")
-    repeated = sorted({item for item in items if items.count(item) > 1})
+def _distinct_items(flag: str, values: list[int] | list[float]) -> None:
+    """Refuse a list flag that gives a value twice (a study would fly a duplicate row); an
+    empty item is refused by the flag's type (:func:`~ipp_toolkit.runs.cli_flags.int_list`)."""
+    repeated = sorted({value for value in values if values.count(value) > 1})
     if repeated:
-        raise ValueError(f"{flag} {text!r} gives {', '.join(repeated)} more than once")
+        raise ValueError(f"{flag} {_listed(values)} gives "
+                         f"{', '.join(_listed([v]) for v in repeated)} more than once")
+
+
+def _listed(values: list[int] | list[float]) -> str:
+    """A list flag's values as they would be written: ``2,4,8`` or ``0,25,inf``."""
+    return ",".join(str(v) if isinstance(v, int) else comm_label(v) for v in values)
 
 
 def _sweep(args: argparse.Namespace, out: str, backend: dict[str, str | None]) -> int:
     """``ipp-study sweep``: the grid from --sweep/--set/--seeds, trained and scored
     (ValueError on bad input, before anything is written)."""
-    from coma.cli import int_list
-
     from .sweep import SCORING_SEED, parse_assignments, parse_sweep, sweep_study
 
     if not args.sweep:
@@ -257,20 +257,15 @@ def _sweep(args: argparse.Namespace, out: str, backend: dict[str, str | None]) -
         missions = overrides.pop("missions", 5000)  # --set missions=N is --missions N
     elif missions is None:
         missions = 5000  # swept (sweep_grid refuses it in --set as well)
-    for flag, text in (("--agents", args.agents), ("--comm", args.comm)):
-        if text is not None and "," in text:
+    for flag, values in (("--agents", args.agents), ("--comm", args.comm)):
+        if values is not None and len(values) > 1:
             raise ValueError(f"sweep: {flag} takes one value (the training and validation "
-                             f"missions'), got {text!r}")
-    agents = None
-    if args.agents is not None:
-        try:
-            agents = int(args.agents)
-        except ValueError:
-            raise ValueError(f"--agents must be an integer >= 1, got {args.agents!r}") from None
+                             f"missions'), got {_listed(values)!r}")
     study = sweep_study(
-        grid, seeds=[0] if args.seeds is None else int_list("--seeds", args.seeds[0]),
+        grid, seeds=[0] if args.seeds is None else args.seeds[0],
         overrides=overrides, missions=missions, train_resolution=args.train_resolution,
-        agents=agents, comm=None if args.comm is None else parse_comm(args.comm),
+        agents=None if args.agents is None else args.agents[0],
+        comm=None if args.comm is None else args.comm[0],
         trials=args.trials, seed=SCORING_SEED if args.seed is None else args.seed, out=out,
         workers=args.workers, eval_resolution=args.resolution,
         progress=not args.no_progress, **backend)

@@ -218,6 +218,75 @@ def test_a_prefix_of_a_flag_is_refused_not_taken_for_it(tmp_path, capsys, comman
     assert not out.exists()
 
 
+#: Each comma-list flag (the command, the flag), a bad list, and what is said of its bad item:
+#: the words of the single-value type (ipp_toolkit.runs.cli_flags), then the whole list.
+BAD_LISTS = [
+    (["train", "coma"], "--team-sizes", "2,x,8", "must be an integer >= 1, got 'x' (in '2,x,8')"),
+    (["train", "coma"], "--team-sizes", "2,0", "must be an integer >= 1, got '0' (in '2,0')"),
+    (["train", "coma"], "--team-sizes", "2,,8", "'2,,8' has an empty value"),
+    (["train", "coma"], "--comm-ranges", "0,far",
+     "--comm-ranges must be metres or 'inf', got 'far' (in '0,far')"),
+    (["train", "coma"], "--comm-ranges", "0,-5",
+     "--comm-ranges must be >= 0 metres or 'inf', got '-5' (in '0,-5')"),
+    (["train", "prior"], "--team-sizes", "2,x", "must be an integer >= 1, got 'x' (in '2,x')"),
+    (["train", "prior"], "--comm-ranges", "25,nan",
+     "--comm-ranges must be >= 0 metres or 'inf', got 'nan' (in '25,nan')"),
+    (["study", "robustness"], "--agents", "2,four", "must be an integer >= 1, got 'four'"),
+    (["study", "robustness"], "--comm", "0,far", "--comm must be metres or 'inf', got 'far'"),
+    (["study", "robustness"], "--failures", "0,-1", "must be an integer >= 0, got '-1'"),
+    (["study", "credit"], "--seeds", "0,x", "must be an integer >= 0, got 'x' (in '0,x')"),
+    (["study", "sweep"], "--seeds", "1.5", "must be an integer >= 0, got '1.5'"),
+]
+
+
+@pytest.mark.parametrize("command, flag, value, message", BAD_LISTS)
+def test_a_bad_item_of_a_list_flag_is_named_with_exit_2(tmp_path, capsys, command, flag, value,
+                                                        message):
+    from reports.cli import study_main
+
+    out = tmp_path / "run"
+    argv = [*command[1:], flag, value, "--out", str(out)]
+    code = train_main(argv) if command[0] == "train" else study_main(argv)
+    assert code == 2
+    err = capsys.readouterr().err
+    assert f"argument {flag}: {message}" in err, err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command, flag, text, values", [
+    ("coma", "--team-sizes", "2,4,8", [2, 4, 8]),
+    ("coma", "--team-sizes", "2, 4", [2, 4]),
+    ("coma", "--comm-ranges", "0,25,inf", [0.0, 25.0, float("inf")]),
+    ("prior", "--team-sizes", "3", [3]),
+    ("prior", "--comm-ranges", "12.5,inf", [12.5, float("inf")]),
+    ("study", "--agents", "2,4,8", [2, 4, 8]),
+    ("study", "--comm", "0,25,inf", [0.0, 25.0, float("inf")]),
+    ("study", "--failures", "0,1", [0, 1]),
+    ("study", "--seeds", "0,1,2", [[0, 1, 2]]),
+])
+def test_good_lists_still_parse(command, flag, text, values):
+    from baselines.prior_training import _parser as prior_parser
+    from coma.cli import build_parser
+    from reports.study_cli import _study_parser
+
+    argv = ["--out", "x", flag, text]
+    if command == "study":
+        args = _study_parser().parse_args(["robustness", *argv])
+    else:
+        args = (build_parser() if command == "coma" else prior_parser()).parse_args(argv)
+    assert getattr(args, flag[2:].replace("-", "_")) == values
+
+
+def test_list_flag_defaults_are_read_as_lists():
+    from baselines.prior_training import PriorTrainingConfig
+    from baselines.prior_training import _parser as prior_parser
+
+    args = prior_parser().parse_args(["--out", "x"])
+    assert tuple(args.team_sizes) == PriorTrainingConfig().team_sizes
+    assert args.comm_ranges == [0.0, 25.0, float("inf")]
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--families", "blob"], "unknown terrain kind"),
     (["--planners", "random,coverage"], "reference planner 'ig'"),

@@ -1,3 +1,4 @@
+import dataclasses
 import math
 import warnings
 
@@ -7,9 +8,16 @@ from helpers import small_config
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from ipp_toolkit.config.schema import ACTOR_PLANES, FeatureConfig
 from ipp_toolkit.env import IPPEnv
-from ipp_toolkit.sim.features import actor_plane_names, critic_plane_names, state_plane_names
+from ipp_toolkit.sim.features import (
+    GAIN_PLANES,
+    actor_plane_names,
+    critic_plane_names,
+    state_plane_names,
+)
 from ipp_toolkit.sim.mission import InvalidActionError
+from ipp_toolkit.vec import make_sb3_vec_env
 
 TEAMS = [2, 4, 8]
 RANGES = [0.0, 25.0, math.inf]
@@ -208,6 +216,52 @@ def test_feature_switches_change_channels():
     position = obs["uav_0"]["observation"][names.index("position")]
     assert position[2, 2] == pytest.approx(1.0) and position.min() == 0  # absolute grid
     assert env.critic_observations(np.zeros(4, int)).shape == (4, 5 + 3, 11, 11)
+
+
+#: Every boolean switch of FeatureConfig that adds planes (``centred`` changes the frame of
+#: the position plane, not which planes there are). A new switch is checked here by itself.
+PLANE_SWITCHES = [f.name for f in dataclasses.fields(FeatureConfig)
+                  if f.type in (bool, "bool") and f.name != "centred"]
+
+
+@pytest.mark.parametrize("switch", PLANE_SWITCHES)
+def test_each_plane_switch_adds_the_planes_its_names_say_and_leaves_the_others(switch):
+    """Turning one switch on (every actor plane on besides) adds exactly the planes
+    ``actor_plane_names`` lists for it, at the place it lists them, leaves every other
+    channel's content where its name says, and every view's space follows."""
+    on_features = {name: True for name in ACTOR_PLANES} | {switch: True}
+    on = small_config().replace(features=on_features)
+    off = on.replace(features={switch: False})
+    added = list(GAIN_PLANES) if switch == "gain" else [switch]
+    on_names, off_names = actor_plane_names(on.features), actor_plane_names(off.features)
+    if switch in ACTOR_PLANES:
+        assert [n for n in on_names if n not in added] == off_names
+        assert sorted(set(on_names) - set(off_names)) == sorted(added)
+    else:  # a critic-only plane: the actor sees the same
+        assert on_names == off_names
+        assert len(critic_plane_names(on.features)) > len(critic_plane_names(off.features))
+    observations = {}
+    for config, names in ((on, on_names), (off, off_names)):
+        env = IPPEnv(config)
+        obs, _ = env.reset(seed=0)
+        g = config.world.grid_points
+        assert obs["uav_0"]["observation"].shape == (len(names), g, g)
+        assert env.observation_space("uav_0").contains(obs["uav_0"])
+        assert env.state().shape == env.state_space.shape
+        assert env.state_space.shape[0] == len(state_plane_names(config.features))
+        critic = env.critic_observations(np.zeros(len(env.agents), int))
+        assert critic.shape[1] == len(critic_plane_names(config.features))
+        observations[names is on_names] = {n: obs["uav_1"]["observation"][k]
+                                           for k, n in enumerate(names)}
+    for name in off_names:  # the builder appends in ACTOR_PLANES order, as the names say
+        np.testing.assert_array_equal(observations[True][name], observations[False][name],
+                                      err_msg=name)
+    venv = make_sb3_vec_env(on)
+    try:
+        assert venv.observation_space.shape == (len(on_names), on.world.grid_points,
+                                                on.world.grid_points)
+    finally:
+        venv.close()
 
 
 def test_gain_planes_pass_the_api_test():

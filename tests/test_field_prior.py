@@ -203,8 +203,8 @@ def test_ipp_train_prior_repeats_itself_and_continues_after_an_interruption(tmp_
 
 @pytest.mark.parametrize("flags, message", [
     (["--width", "0"], "argument --width: must be an integer >= 1, got '0'"),
-    (["--team-sizes", "2,x"], "--team-sizes must be integers"),
-    (["--comm-ranges", "-5"], "comm_ranges must be non-negative"),
+    (["--team-sizes", "2,x"], "argument --team-sizes: must be an integer >= 1, got 'x'"),
+    (["--comm-ranges", "-5"], "argument --comm-ranges: --comm-ranges must be >= 0 metres"),
     (["--resolution", "0"], "resolution"),
 ])
 def test_ipp_train_prior_refuses_bad_flags_before_writing(tmp_path, capsys, flags, message):

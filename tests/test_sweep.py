@@ -62,7 +62,6 @@ def never_train(task):
     (["--sweep", "lr_actor=1e-4", "--seeds", "0,1", "--seeds", "2"],
      "--seeds is given 2 times (0,1 and 2)"),
     (["--sweep", "lr_actor=1e-4", "--seeds", "0,0"], "distinct non-negative integers, got [0, 0]"),
-    (["--sweep", "lr_actor=1e-4", "--seeds", "0,x"], "--seeds expects integers"),
     (["--sweep", "seed=0,1"], "given with --seeds"),
     (["--sweep", "lr_actor=1e-4", "--set", "seed=3"], "given with --seeds"),
     (["--sweep", "lr_actor=1e-4", "--seeds", "0,1", "--seed", "1"],
@@ -74,7 +73,6 @@ def never_train(task):
     (["--sweep", "warm_start.planner=nosuch"], "grid point warm_start.planner=nosuch: unknown "
                                                "planner 'nosuch'"),
     (["--sweep", "lr_actor=1e-4", "--agents", "2,4"], "--agents takes one value"),
-    (["--sweep", "lr_actor=1e-4", "--comm", "far"], "--comm must be metres or 'inf', got 'far'"),
     ([], "needs at least one --sweep"),
     (["--sweep", "lr_actor=1e-4", "--address", "127.0.0.1:6379"], "--address needs --backend"),
 ])

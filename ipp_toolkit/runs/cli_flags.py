@@ -5,9 +5,11 @@ trainers (:mod:`coma.cli`, :mod:`baselines.ppo_training` for ``ppo``, ``sb3`` an
 :mod:`baselines.prior_training`) parse some of the same flags. This module owns
 
 * the value types of their flags: :func:`positive_int`, :func:`positive_float`,
-  :func:`finite_float` and :func:`comm_range` (argparse prints their message after
-  ``argument --flag:`` and exits with code 2, so ``--agents 0`` reads the same in every
-  command);
+  :func:`finite_float` and :func:`comm_range`, and the comma lists built on them,
+  :func:`int_list` and :func:`comm_range_list` (``--team-sizes 2,4,8``, ``--comm-ranges
+  0,25,inf``, ``--seeds 0,1,2``). argparse prints their message after ``argument --flag:`` and
+  exits with code 2, so ``--agents 0`` reads the same in every command, and a list names its
+  bad item in the same words as the single value would;
 * the flags themselves where both command modules parse them: where the missions fly
   (:func:`add_compute_flags`: ``--workers``, ``--backend``, ``--address``), ``--set
   FIELD=VALUE`` (:func:`add_set_flag`) and ``--no-progress`` (:func:`add_progress_flag`).
@@ -26,21 +28,27 @@ from typing import Any
 from ..config.settings import parse_comm
 from .ray_backend import add_backend_flags
 
-__all__ = ["positive_int", "positive_float", "finite_float", "comm_range", "add_compute_flags",
-           "add_set_flag", "add_progress_flag"]
+__all__ = ["positive_int", "positive_float", "finite_float", "comm_range", "int_list",
+           "comm_range_list", "add_compute_flags", "add_set_flag", "add_progress_flag"]
+
+
+def _integer(text: str, minimum: int) -> int:
+    """``text`` as an integer >= ``minimum``; ArgumentTypeError saying so otherwise."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be an integer >= {minimum}, got {text!r}") from None
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"must be an integer >= {minimum}, got {text!r}")
+    return value
 
 
 def positive_int(flag: str) -> Callable[[str], int]:
     """The value type of an integer flag >= 1 (``flag`` names it in tracebacks)."""
 
     def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
-        return value
+        return _integer(text, 1)
 
     parse.__name__ = flag
     return parse
@@ -75,6 +83,57 @@ def comm_range(text: str) -> float:
         return parse_comm(text)
     except ValueError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def int_list(flag: str, minimum: int = 1) -> Callable[[str], list[int]]:
+    """The value type of a comma list of integers >= ``minimum`` (``--team-sizes 2,4,8``;
+    ``minimum=0`` for seeds and failure counts).
+
+    Each item is read as :func:`positive_int` reads one value, so a bad item is refused in the
+    same words, with the whole list after it: ``argument --team-sizes: must be an integer >= 1,
+    got 'x' (in '2,x')``. Spaces around an item are allowed; an empty item is refused.
+    """
+
+    def parse(text: str) -> list[int]:
+        return _items(text, lambda item: _integer(item, minimum))
+
+    parse.__name__ = flag
+    return parse
+
+
+def comm_range_list(flag: str) -> Callable[[str], list[float]]:
+    """The value type of a comma list of communication ranges (``--comm-ranges 0,25,inf``),
+    each read as :func:`comm_range` reads one, naming ``flag`` in its message."""
+
+    def parse(text: str) -> list[float]:
+        def one(item: str) -> float:
+            try:
+                return parse_comm(item, flag)
+            except ValueError as err:
+                raise argparse.ArgumentTypeError(str(err)) from None
+
+        return _items(text, one)
+
+    parse.__name__ = flag
+    return parse
+
+
+def _items(text: str, parse_item: Callable[[str], Any]) -> list[Any]:
+    """The items of a comma list, each read by ``parse_item``; a refusal names the item (in
+    ``parse_item``'s words) and the list, so ``2,x,8`` points at ``x``."""
+    items = [item.strip() for item in text.split(",")]
+    if any(not item for item in items):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} has an empty value; give values separated by commas, e.g. 2,4,8")
+    values = []
+    for item in items:
+        try:
+            values.append(parse_item(item))
+        except argparse.ArgumentTypeError as err:
+            if len(items) == 1:
+                raise
+            raise argparse.ArgumentTypeError(f"{err} (in {text!r})") from None
+    return values
 
 
 def add_compute_flags(parser: argparse.ArgumentParser, *, workers_help: str,
