@@ -487,8 +487,9 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
     ``seeds``, ``backend`` and ``address`` work as in :func:`credit_assignment_study`.
 
     Returns:
-        a :class:`CreditStudy` whose ``policies`` are keyed ``full`` and ``-<name>`` (with
-        ``@sK`` appended per seed when there are several).
+        a :class:`CreditStudy` whose ``policies`` are keyed ``full`` and ``-<name>`` for a
+        setting removed or ``+<name>`` for a plane the training mission lacks (with ``@sK``
+        appended per seed when there are several).
     """
     from dataclasses import fields
 
@@ -506,15 +507,18 @@ def ablation_study(ablations: Sequence[str], missions: int = 3_000,
     values = {**(overrides or {}), "missions": int(missions)}
     runs = [("full", values, config_to_dict(base), out / "runs" / "full")]
     for name in ablations:
+        sign = "-"
         if name == "masking":
             env = base.replace(team={"invalid_action": "hold"})
         else:
-            env = base.replace(features={name: not getattr(base.features, name)})
-        runs.append((f"-{name}", values, config_to_dict(env), out / "runs" / name))
+            added = not getattr(base.features, name)
+            env = base.replace(features={name: added})
+            sign = "+" if added else "-"
+        runs.append((f"{sign}{name}", values, config_to_dict(env), out / "runs" / name))
     tasks = _seeded_tasks(runs, training_seeds, progress and workers == 1)
     caption = (f"Feature ablation: COMA trained for {missions} missions per run (cpu preset, "
                f"overrides {overrides or {}}), {_seeds_text(training_seeds)}; '-x' = x "
-               f"toggled; test: {trials} missions.")
+               f"removed, '+x' = x added; test: {trials} missions.")
     with backend_session(backend, address, workers) as cluster:
         policies = train_runs(tasks, workers, cluster, progress)
         return _compare_runs(policies, out, "ablation.md", caption, trials, seed, workers,

@@ -63,11 +63,15 @@ def test_ablation_study_end_to_end(tmp_path):
 
     tiny = {"width": 8, "hidden": 16, "missions_per_update": 2, "minibatch_size": 60,
             "eval_missions": 1, "warm_start": ""}
-    study = ablation_study(["masking", "own_position"], missions=2, overrides=tiny,
+    study = ablation_study(["masking", "own_position", "gain"], missions=2, overrides=tiny,
                            train_resolution=1.0, trials=1, eval_resolution=1.0,
                            out=tmp_path, progress=False)
-    assert set(study.policies) == {"full", "-masking", "-own_position"}
+    # gain planes are off in the training mission: the run adds them and says so
     from coma.persistence import load_policy
+
+    assert set(study.policies) == {"full", "-masking", "-own_position", "+gain"}
+    with_gain, _ = load_policy(study.policies["+gain"])
+    assert with_gain.env_config.features.gain
 
     masked_off, _ = load_policy(study.policies["-masking"])
     assert masked_off.env_config.team.invalid_action == "hold"
