@@ -79,8 +79,14 @@ def finite_float(text: str) -> float:
 def comm_range(text: str) -> float:
     """The value type of a communication range: metres >= 0, or ``inf``
     (:func:`~ipp_toolkit.config.settings.parse_comm`)."""
+    return _comm_range(text, "--comm")
+
+
+def _comm_range(text: str, flag: str) -> float:
+    """:func:`~ipp_toolkit.config.settings.parse_comm` of ``text``, its ValueError (naming
+    ``flag``) as argparse's ArgumentTypeError."""
     try:
-        return parse_comm(text)
+        return parse_comm(text, flag)
     except ValueError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
 
@@ -106,13 +112,7 @@ def comm_range_list(flag: str) -> Callable[[str], list[float]]:
     each read as :func:`comm_range` reads one, naming ``flag`` in its message."""
 
     def parse(text: str) -> list[float]:
-        def one(item: str) -> float:
-            try:
-                return parse_comm(item, flag)
-            except ValueError as err:
-                raise argparse.ArgumentTypeError(str(err)) from None
-
-        return _items(text, one)
+        return _items(text, lambda item: _comm_range(item, flag))
 
     parse.__name__ = flag
     return parse
