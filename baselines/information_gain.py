@@ -15,7 +15,7 @@ from ipp_toolkit.planners import AgentView, Planner
 from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
 
-__all__ = ["InformationGainPlanner", "PaperInformationGainPlanner", "expected_gain"]
+__all__ = ["InformationGainPlanner", "PaperInformationGainPlanner", "expected_gain", "gain_table"]
 
 Rect = tuple[int, int, int, int]
 
@@ -27,6 +27,17 @@ def _bounding_box(rects: np.ndarray) -> Rect:
     """Union bounding box of (K, 4) rectangles (row0, row1, col0, col1)."""
     return (int(rects[:, 0].min()), int(rects[:, 1].max()), int(rects[:, 2].min()),
             int(rects[:, 3].max()))
+
+
+def gain_table(config: EnvConfig, camera: Camera, objective: str,
+               outcome_weighting: str = "predictive") -> ValueTable:
+    """A table of the per-cell ``objective`` (:func:`~ipp_toolkit.belief.gain.cell_objective`)
+    by log-odds, one column ``altitude_z`` per altitude z of ``camera``."""
+    weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
+    derive = partial(gains_by_altitude, accuracy=camera.accuracy,
+                     delta_logodds=camera.delta_logodds,
+                     cell_gain=cell_objective(objective, weights, outcome_weighting))
+    return ValueTable(derive, [f"altitude_{z}" for z in range(len(camera.accuracy))])
 
 
 class InformationGainPlanner(Planner):
@@ -101,13 +112,7 @@ class InformationGainPlanner(Planner):
         """Build the camera geometry and gain table for ``config`` (kept while it is unchanged)."""
         if config != self._config:
             camera = Camera(config.world, config.sensor)
-            weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
-            derive = partial(gains_by_altitude, accuracy=camera.accuracy,
-                             delta_logodds=camera.delta_logodds,
-                             cell_gain=cell_objective(self.objective, weights,
-                                                      self.outcome_weighting))
-            self._gains = ValueTable(derive, [f"altitude_{z}" for z in
-                                              range(len(camera.accuracy))])
+            self._gains = gain_table(config, camera, self.objective, self.outcome_weighting)
             self._camera, self._config = camera, config
 
     @property

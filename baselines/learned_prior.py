@@ -9,6 +9,11 @@ UAV's own local map, how likely each 2 m block is to be interesting, having lear
 shapes fields take (straight boundaries continue, hotspots have sizes) from simulator ground
 truth (``ipp-train prior``). No policy is learned: the decision is still the greedy argmax.
 
+A cell the map holds above 0.5 that the prior doubts is worth checking too: the entropy over
+interesting cells never counts such a false positive, but the final F1 does. ``ig_learned``
+adds ``false_positive_weight * (1 - pi(c)) * false_positive_gain(c)``
+(:class:`~baselines.spatial_gain.SpatialGainPlanner`; :data:`DEFAULT_FALSE_POSITIVE_WEIGHT`).
+
 ``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON
 record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read
 the same file); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
@@ -21,12 +26,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, prior_file, shared_prior
+from ipp_toolkit.belief.field_prior import (
+    DEFAULT_FALSE_POSITIVE_WEIGHT,
+    SHIPPED_PRIOR,
+    prior_file,
+    shared_prior,
+)
 from ipp_toolkit.planners import AgentView
 
 from .spatial_gain import SpatialGainPlanner
 
-__all__ = ["DEFAULT_PRIOR", "LearnedPriorPlanner"]
+__all__ = ["DEFAULT_FALSE_POSITIVE_WEIGHT", "DEFAULT_PRIOR", "LearnedPriorPlanner"]
 
 DEFAULT_PRIOR = SHIPPED_PRIOR
 """The shipped field prior."""
@@ -39,16 +49,20 @@ class LearnedPriorPlanner(SpatialGainPlanner):
         checkpoint: a field-prior file (``ipp-train prior`` writes ``RUN/best.pt``); None: the
             shipped one.
         overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
+        false_positive_weight: as for :class:`~baselines.spatial_gain.SpatialGainPlanner`
+            (default :data:`DEFAULT_FALSE_POSITIVE_WEIGHT`; 0 flies the prior's objective
+            alone).
     """
 
     name = "ig_learned"
     needs_observations = False
 
-    def __init__(self, checkpoint: str | Path | None = None,
-                 overlap_discount: float = 0.5) -> None:
+    def __init__(self, checkpoint: str | Path | None = None, overlap_discount: float = 0.5,
+                 false_positive_weight: float = DEFAULT_FALSE_POSITIVE_WEIGHT) -> None:
         import torch
 
-        super().__init__(overlap_discount=overlap_discount)
+        super().__init__(overlap_discount=overlap_discount,
+                         false_positive_weight=false_positive_weight)
         # A batch of N small maps: extra intra-op threads only spin on busy cores.
         torch.set_num_threads(1)
         path = prior_file(DEFAULT_PRIOR if checkpoint is None else checkpoint)

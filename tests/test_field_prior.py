@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.learned_prior import LearnedPriorPlanner
+from baselines.learned_prior import DEFAULT_FALSE_POSITIVE_WEIGHT, LearnedPriorPlanner
 from baselines.spatial_gain import SpatialGainPlanner
 from ipp_toolkit import EnvConfig
 from ipp_toolkit.belief.field_prior import (
@@ -120,14 +120,17 @@ def _fly(planner, config, mission=0):
 
 def test_the_learned_planner_with_the_gaussian_prior_flies_as_ig_spatial(tmp_path):
     """With the prior's prediction replaced by ig_spatial's smoothing, the planner makes
-    ig_spatial's every choice: the plumbing (blocks, windows, agents) is the same."""
+    ig_spatial's every choice (with the same false-positive weight): the plumbing (blocks,
+    windows, agents) is the same."""
     config = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 4},
                                  terrain={"kind": "blobs"})
     _tiny_prior(tmp_path / "prior.pt")
-    learned = LearnedPriorPlanner(tmp_path / "prior.pt")
     smoother = interest_smoother(config.world.map_cells, config.world.resolution, 5.0)
-    learned.prior.fine_values = lambda prob, resolution, fine: smoother.block_values(prob)
-    np.testing.assert_array_equal(_fly(learned, config), _fly(SpatialGainPlanner(), config))
+    for weight in (0.0, DEFAULT_FALSE_POSITIVE_WEIGHT):
+        learned = LearnedPriorPlanner(tmp_path / "prior.pt", false_positive_weight=weight)
+        learned.prior.fine_values = lambda prob, resolution, fine: smoother.block_values(prob)
+        spatial = SpatialGainPlanner(false_positive_weight=weight)
+        np.testing.assert_array_equal(_fly(learned, config), _fly(spatial, config))
 
 
 def test_the_learned_planner_flies_valid_missions_and_names_bad_files(tmp_path):

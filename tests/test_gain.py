@@ -16,7 +16,7 @@ from ipp_toolkit.belief.gain import (
     recomputed_footprint_sums,
 )
 from ipp_toolkit.belief.interest import BlockMeanCache, InterestSmoother, block_means
-from ipp_toolkit.belief.mapping import interesting_gain
+from ipp_toolkit.belief.mapping import false_positive_gain, interesting_gain
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.sim.features import footprint_gain, gain_planes
 from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission
@@ -181,6 +181,31 @@ def test_interesting_gain_on_a_hand_sized_case():
     h_001 = -(1 / 17 * math.log2(1 / 17) + 16 / 17 * math.log2(16 / 17))  # l = -log 16
     assert gain[0, 0] == pytest.approx(0.8 * (h - 1.0) + 0.2 * (h - h_001), abs=1e-5)
     assert gain[0, 0] < 0
+
+
+def test_false_positive_gain_on_a_hand_sized_case():
+    # Accuracy 0.8, d = +-log 4. A cell believed interesting (p = 0.8) that is not: a correct
+    # reading of 0 brings it back to 0.5 (H = 1), a wrong one to l = log 16.
+    a = 0.8
+    d = np.array([-math.log(4.0), math.log(4.0)], dtype=np.float32)
+    h = -(0.8 * math.log2(0.8) + 0.2 * math.log2(0.2))
+    h_16 = -(1 / 17 * math.log2(1 / 17) + 16 / 17 * math.log2(16 / 17))
+    high = np.full((1, 1), math.log(4.0), dtype=np.float32)
+    gain = false_positive_gain(high, high * 0 + 0.8, high * 0 + h, a, d)
+    assert gain[0, 0] == pytest.approx(0.8 * (h - 1.0) + 0.2 * (h - h_16), abs=1e-5)
+    # p = 0.99 (l = log 99): a correct reading brings it to l = log(99 / 4), lower entropy.
+    sure = np.full((1, 1), math.log(99.0), dtype=np.float32)
+    h_99 = -(0.99 * math.log2(0.99) + 0.01 * math.log2(0.01))
+    p_down = 99 / 103
+    h_down = -(p_down * math.log2(p_down) + (1 - p_down) * math.log2(1 - p_down))
+    p_up = 396 / 397
+    h_up = -(p_up * math.log2(p_up) + (1 - p_up) * math.log2(1 - p_up))
+    gain = false_positive_gain(sure, sure * 0 + 0.99, sure * 0 + h_99, a, d)
+    assert gain[0, 0] == pytest.approx(0.8 * (h_99 - h_down) + 0.2 * (h_99 - h_up), abs=1e-5)
+    # At or below 0.5 there is no false positive to check.
+    cells = np.array([[0.0, -1.0, -5.0]], dtype=np.float32)
+    entropy = np.array([[1.0, 0.8, 0.05]], dtype=np.float32)
+    np.testing.assert_array_equal(false_positive_gain(cells, cells, entropy, a, d), 0.0)
 
 
 def test_interest_smoother_keeps_constants_and_spreads_a_hotspot():

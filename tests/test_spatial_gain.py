@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from ipp_toolkit.belief.mapping import entropy_from_logodds
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, make_planner
-from ipp_toolkit.runs.evaluation import evaluate
+from ipp_toolkit.runs.evaluation import evaluate, run_mission
 from ipp_toolkit.sim.team import ACTION_NAMES
 from ipp_toolkit.world.sensor import Camera
 
@@ -63,3 +65,24 @@ def test_ig_spatial_flies_valid_deterministic_missions_and_refuses_bad_sigma():
     assert len(finals) == 2 and all(e < 1.0 for e in finals)
     with pytest.raises(ValueError, match="sigma"):
         make_planner("ig_spatial", sigma=-1.0)
+
+
+def test_the_false_positive_term_changes_choices_and_is_validated():
+    from baselines.spatial_gain import SpatialGainPlanner
+
+    """w > 0 draws UAVs to check cells held above 0.5 that the smoothing doubts; w = 0 is the
+    plain objective, and a bad w is refused naming it."""
+    config = EnvConfig().replace(world={"resolution": 0.5})
+    plain = SpatialGainPlanner()
+    zero = SpatialGainPlanner(false_positive_weight=0.0)
+    checking = SpatialGainPlanner(false_positive_weight=2.0)
+    runs = {}
+    for label, planner in (("plain", plain), ("zero", zero), ("checking", checking)):
+        rows = [run_mission(config, planner, seed=1, mission=m, namespace="validation")["rows"]
+                for m in range(3)]
+        runs[label] = [(r["entropy"], r["f1"]) for mission in rows for r in mission]
+    assert runs["zero"] == runs["plain"]
+    assert runs["checking"] != runs["plain"]
+    for bad in (-1.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match="false_positive_weight"):
+            SpatialGainPlanner(false_positive_weight=bad)

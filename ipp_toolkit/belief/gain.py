@@ -21,14 +21,17 @@ exactly inside every refreshed region.
 The result equals a full recomputation up to float64 summation order (checked over whole
 missions in ``tests/test_gain.py``).
 
-Two per-cell objectives are kept this way (``objective``): ``"ig"``, the ``ig`` planner's
-:func:`~ipp_toolkit.belief.mapping.expected_gain`, and ``"interesting"``,
+Three per-cell objectives are kept this way (``objective``): ``"ig"``, the ``ig`` planner's
+:func:`~ipp_toolkit.belief.mapping.expected_gain`; ``"interesting"``,
 :func:`~ipp_toolkit.belief.mapping.interesting_gain` (the entropy a reading removes from a cell
-that is interesting). The second is meant to be weighted by how likely each cell is to be
-interesting (:mod:`ipp_toolkit.belief.interest`); that weight moves everywhere at every step, but it
-is constant over squares of cells (blocks of ~0.5 m). The footprints' bounds and the squares'
-edges cut every map into segments (:class:`BoxLayout`), and each segment's sum of the
-per-cell gain is kept per map and summed again only where the map changed;
+that is interesting); and ``"false_positive"``,
+:func:`~ipp_toolkit.belief.mapping.false_positive_gain` (the entropy it removes from a cell
+believed interesting that is not). The last two are meant to be weighted by how likely each
+cell is to be interesting, or not (:mod:`ipp_toolkit.belief.interest`); that weight moves
+everywhere at every step, but it is constant over squares of cells (blocks of ~0.5 m). The
+footprints' bounds and the squares' edges cut every map into segments (:class:`BoxLayout`),
+and each segment's sum of the per-cell gain is kept per map and summed again only where the
+map changed;
 :meth:`FootprintGainCache.weighted_sums` then multiplies each segment's sum by its square's
 weight and adds the products per footprint: some 15,000 segments per map and altitude at
 r_M = 0.1 m instead of 250,000 cells. Every sum is float64 and added in a fixed order, so a
@@ -48,7 +51,13 @@ from .._native import kernels
 from ..world.sensor import Camera
 from .block_grid import Rect
 from .box_sums import BoxLayout
-from .mapping import BeliefMaps, belief_columns, expected_gain, interesting_gain
+from .mapping import (
+    BeliefMaps,
+    belief_columns,
+    expected_gain,
+    false_positive_gain,
+    interesting_gain,
+)
 from .value_table import DerivedMemo, exact_memo
 
 __all__ = ["CellGain", "FootprintGainCache", "OBJECTIVES", "cell_objective",
@@ -58,7 +67,7 @@ __all__ = ["CellGain", "FootprintGainCache", "OBJECTIVES", "cell_objective",
 #: (logodds, prob, entropy, accuracy, delta_logodds) -> per-cell gain, all (..., h, w) float32.
 CellGain = Callable[..., np.ndarray]
 #: The per-cell objectives a :class:`FootprintGainCache` can keep.
-OBJECTIVES = ("ig", "interesting")
+OBJECTIVES = ("ig", "interesting", "false_positive")
 
 
 def cell_objective(objective: str, weights: tuple[float, float],
@@ -76,6 +85,8 @@ def cell_objective(objective: str, weights: tuple[float, float],
                        weight_uninteresting=weights[1], outcome_weighting=outcome_weighting)
     if objective == "interesting":
         return interesting_gain
+    if objective == "false_positive":
+        return false_positive_gain
     raise ValueError(f"unknown gain objective {objective!r}; expected one of {OBJECTIVES}")
 
 

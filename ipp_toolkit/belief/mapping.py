@@ -39,6 +39,7 @@ __all__ = [
     "f1_score",
     "expected_gain",
     "OUTCOME_WEIGHTINGS",
+    "false_positive_gain",
     "interesting_gain",
 ]
 
@@ -534,3 +535,38 @@ def interesting_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
     gain0 *= np.float32(1.0) - a
     gain1 += gain0
     return gain1
+
+
+def false_positive_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
+                        accuracy: float, delta_logodds: np.ndarray) -> np.ndarray:
+    """Expected entropy reduction per cell of one reading, given that the cell is not
+    interesting, where the map believes it is (p > 0.5); 0 elsewhere.
+
+    The mirror of :func:`interesting_gain` for the cells that cost F1: a cell of the
+    uninteresting class held above 0.5 (a noisy reading from 10-15 m) is a false positive,
+    which the entropy over interesting cells never sees. A reading there is 0 with
+    probability a: ``a (H(p) - H(p0)) + (1 - a) (H(p) - H(p1))`` in bits where l > 0.
+    Weighted by the probability that the cell is *not* interesting it is the value of
+    checking it (``false_positive_weight`` of the ``ig_spatial`` family). ``prob`` is unused.
+
+    Args:
+        logodds, prob, entropy: (h, w) float32 log-odds, probability and entropy (bits).
+        accuracy: probability a that a reading at this altitude is correct.
+        delta_logodds: (2,) float32 log-odds increments (d0, d1) of a reading 0 / 1.
+
+    Returns:
+        (h, w) float32 expected gain per cell, at most 1; 0 where p <= 0.5.
+    """
+    a = np.float32(accuracy)
+    d0, d1 = (np.float32(d) for d in delta_logodds)
+    l0 = logodds + d0
+    np.maximum(l0, -_LOGODDS_CLIP32, out=l0)
+    l1 = logodds + d1
+    np.minimum(l1, _LOGODDS_CLIP32, out=l1)
+    gain0 = entropy - entropy_from_logodds(l0)
+    gain0 *= a
+    gain1 = entropy - entropy_from_logodds(l1)
+    gain1 *= np.float32(1.0) - a
+    gain0 += gain1
+    gain0 *= logodds > 0
+    return gain0

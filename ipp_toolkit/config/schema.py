@@ -486,6 +486,11 @@ class FeatureConfig:
             ``ig_learned`` flies (:mod:`ipp_toolkit.belief.field_prior`); or the path of a
             field-prior file (``ipp-train prior`` writes ``RUN/best.pt``). With a learned
             prior the planes hold ``ig_learned``'s objective and ``gain_smoothing`` is unused.
+        gain_false_positive: w >= 0; with the ``ig_spatial`` objective in the planes (a
+            smoothing or a learned prior), w > 0 adds ``w * (1 - pi) * false_positive_gain``
+            per cell: the value of checking cells the local map holds above 0.5 that are
+            probably not interesting (``false_positive_weight`` of ``ig_spatial`` and
+            ``ig_learned``). 0 (default) leaves the planes as they were.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
     """
@@ -507,6 +512,7 @@ class FeatureConfig:
     centred: bool = True
     gain_smoothing: float = 0.0
     gain_interest: str = GAIN_INTEREST_SMOOTHED
+    gain_false_positive: float = 0.0
     agent_id_scale: int = 8
 
     def __post_init__(self) -> None:
@@ -516,6 +522,12 @@ class FeatureConfig:
                 or not 0 <= self.gain_smoothing < math.inf):
             _fail("features", "gain_smoothing", self.gain_smoothing,
                   "must be a finite number of metres >= 0 (0: ig's objective)")
+        if (isinstance(self.gain_false_positive, bool)
+                or not isinstance(self.gain_false_positive,
+                                  int | float | np.integer | np.floating)
+                or not 0 <= self.gain_false_positive < math.inf):
+            _fail("features", "gain_false_positive", self.gain_false_positive,
+                  "must be a finite number >= 0 (0: no false-positive term)")
         if (self.gain_interest not in (GAIN_INTEREST_SMOOTHED, GAIN_INTEREST_LEARNED)
                 and not os.path.isfile(self.gain_interest)):
             _fail("features", "gain_interest", self.gain_interest,

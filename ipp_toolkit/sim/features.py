@@ -180,12 +180,14 @@ def actor_observations(state: MissionState, features: FeatureConfig) -> np.ndarr
         planes.append(_footprint_cover(state, state.heard))
     if features.gain:
         planes.extend(np.moveaxis(
-            gain_planes(state, features.gain_smoothing, features.gain_interest), 1, 0))
+            gain_planes(state, features.gain_smoothing, features.gain_interest,
+                        features.gain_false_positive), 1, 0))
     return np.stack(planes, axis=1).astype(np.float32)
 
 
 def footprint_gain(state: MissionState, smoothing: float | None = None,
-                   interest: str | None = None) -> np.ndarray:
+                   interest: str | None = None,
+                   false_positive: float | None = None) -> np.ndarray:
     """Expected gain of a reading from every waypoint, on every agent's local map.
 
     The gain of one reading from waypoint (ix, iy, iz) is the sum over its footprint of
@@ -207,6 +209,11 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     each agent's local map instead of the smoothing: ``ig_learned``'s objective
     (:mod:`ipp_toolkit.belief.field_prior`; one batched forward pass per call).
 
+    With either, ``false_positive`` w > 0 (None: the mission's
+    ``features.gain_false_positive``) adds w times
+    :func:`~ipp_toolkit.belief.mapping.false_positive_gain` weighted by the probability that
+    the cell is *not* interesting, as ``ig_learned(false_positive_weight=w)`` values cells.
+
     Returns:
         (N, Z, G, G) float32.
     """
@@ -214,6 +221,7 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     features = state.config.features
     smoothing = features.gain_smoothing if smoothing is None else smoothing
     interest = features.gain_interest if interest is None else interest
+    false_positive = features.gain_false_positive if false_positive is None else false_positive
     learned = interest != GAIN_INTEREST_SMOOTHED
     objective = "interesting" if smoothing > 0 or learned else "ig"
     cache = state.gain_cache
@@ -234,6 +242,9 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
             weight = interest_smoother(world.map_cells, world.resolution,
                                        smoothing).smooth(means.means())
         sums = cache.weighted_sums(weight, block)
+        if false_positive > 0:
+            sums += false_positive * _false_positive_cache(state).weighted_sums(1.0 - weight,
+                                                                                 block)
         scale = 1.0
     else:
         sums = cache.sums()
@@ -241,9 +252,22 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
 
 
+def _false_positive_cache(state: MissionState) -> FootprintGainCache:
+    """The state's footprint sums of :func:`~ipp_toolkit.belief.mapping.false_positive_gain`."""
+    cache = state.false_positive_cache
+    if cache is None or cache.maps is not state.maps:
+        reward = state.config.reward
+        cache = state.false_positive_cache = FootprintGainCache(
+            state.maps, state.n_agents, state.geometry.camera,
+            (reward.weight_interesting, reward.weight_uninteresting), "false_positive")
+    return cache
+
+
 def gain_planes(state: MissionState, smoothing: float | None = None,
-                interest: str | None = None) -> np.ndarray:
-    """The ``gain`` planes: :func:`footprint_gain` (of ``smoothing`` and ``interest``) at the
+                interest: str | None = None, false_positive: float | None = None
+                ) -> np.ndarray:
+    """The ``gain`` planes: :func:`footprint_gain` (of ``smoothing``, ``interest`` and
+    ``false_positive``) at the
     agent's altitude, above and below, in an 11 x 11 window centred on the agent.
 
     Window cell (v, u) of agent k shows waypoint (y_k + v - c, x_k + u - c), c = G // 2, so the
@@ -256,7 +280,7 @@ def gain_planes(state: MissionState, smoothing: float | None = None,
     Returns:
         (N, 3, G, G) float32 in :data:`GAIN_PLANES` order.
     """
-    gain = footprint_gain(state, smoothing, interest)
+    gain = footprint_gain(state, smoothing, interest, false_positive)
     n, z, g = gain.shape[:3]
     c = g // 2
     level = state.positions[:, 2]

@@ -156,6 +156,8 @@ class MissionState:
         gain_cache: the footprint gain cache of the local maps
             (:class:`ipp_toolkit.belief.gain.FootprintGainCache`), built on first use by
             :func:`ipp_toolkit.sim.features.footprint_gain`; None until then.
+        false_positive_cache: the same for the false-positive objective
+            (``features.gain_false_positive``); None until used.
         block_mean_cache: the local maps' block means of probability
             (:class:`ipp_toolkit.belief.interest.BlockMeanCache`), likewise.
     """
@@ -181,6 +183,7 @@ class MissionState:
     _drop_rng: np.random.Generator | None = None
     _noise_prefix: list[int] | None = field(default=None, repr=False, compare=False)
     gain_cache: Any = field(default=None, repr=False, compare=False)
+    false_positive_cache: Any = field(default=None, repr=False, compare=False)
     block_mean_cache: Any = field(default=None, repr=False, compare=False)
 
     @property
