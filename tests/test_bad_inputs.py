@@ -3,6 +3,8 @@ from the command line, and nothing written."""
 
 from __future__ import annotations
 
+import importlib
+
 import pytest
 import torch
 
@@ -31,11 +33,21 @@ def broken_policies(tmp_path_factory) -> dict[str, str]:
     ("infinite", "holds non-finite values (NaN or inf) in critic."),
 ])
 @pytest.mark.parametrize("planner", ["coma", "ppo"])
-def test_compare_refuses_broken_checkpoints(broken_policies, tmp_path, capsys, kind, message,
-                                            planner):
+def test_compare_refuses_broken_checkpoints(broken_policies, tmp_path, capsys, monkeypatch,
+                                            kind, message, planner):
     path = broken_policies[kind]
     out = tmp_path / "out"
-    assert compare_main(["--planners", f"ig,{planner}={path}", "--out", str(out)]) == 2
+    workers = ["--workers", "1"]
+    if (planner, kind) == ("coma", "infinite"):
+        # With ipp-compare's default workers, as in a fresh process (this one may hold the
+        # planners already): a worker builds and checks the planners, and its error is the
+        # refusal here. The other cases check their files in this process, sparing each a
+        # worker's start (torch); the checks are the same.
+        module = importlib.import_module("reports.compare")  # not the function reports exports
+        monkeypatch.setattr(module, "planners_in_process", lambda: [])
+        workers = []
+    assert compare_main(["--planners", f"ig,{planner}={path}", "--out", str(out),
+                         *workers]) == 2
     err = capsys.readouterr().err
     assert "ipp-compare: error:" in err and path in err
     if planner == "coma" or kind == "empty":
@@ -54,7 +66,8 @@ def test_train_init_refuses_broken_checkpoints(broken_policies, tmp_path, capsys
 
 
 def test_unknown_shipped_policy_is_named(tmp_path, capsys):
-    assert compare_main(["--planners", "coma=shipped:best", "--out", str(tmp_path / "o")]) == 2
+    assert compare_main(["--planners", "coma=shipped:best", "--workers", "1",
+                         "--out", str(tmp_path / "o")]) == 2
     assert "unknown shipped policy 'best'" in capsys.readouterr().err
 
 
@@ -83,7 +96,7 @@ def test_removed_coma_mixed_is_refused_with_what_to_use_instead(tmp_path, capsys
     assert "coma_mixed" not in available_planners()
 
 
-def test_a_result_folder_is_a_growing_set(tmp_path, capsys):
+def test_a_result_folder_is_a_growing_set(tmp_path, capsys, placeholder_figures):
     import csv
 
     out = tmp_path / "out"
@@ -321,6 +334,7 @@ def test_simulate_bad_input_exits_2(tmp_path, capsys, argv, message):
     assert not out.exists()
 
 
+@pytest.mark.slow  # in this process, fast: test_evaluation's interrupted run resumes
 def test_a_killed_compare_resumes_without_loss_or_duplicates(tmp_path):
     import csv
     import os
@@ -411,6 +425,33 @@ def _start_compare(out, argv):
     return process
 
 
+def test_ctrl_c_in_ipp_compare_exits_130_with_one_line_and_keeps_the_missions(tmp_path, capsys,
+                                                                             monkeypatch):
+    """In this process (the test below sends the signal to a real run and its workers): a
+    KeyboardInterrupt while missions fly ends ipp-compare with exit 130 and one line saying
+    how to continue; the missions already flown stay stored."""
+    from baselines.random_planner import RandomPlanner
+    from ipp_toolkit.world.seeding import planner_seed
+
+    reset = RandomPlanner.reset
+
+    def interrupted_at_the_second_mission(self, config, seed):
+        if seed == planner_seed(0, 1):  # mission 1 of run seed 0
+            raise KeyboardInterrupt
+        reset(self, config, seed)
+
+    monkeypatch.setattr(RandomPlanner, "reset", interrupted_at_the_second_mission)
+    out = tmp_path / "out"
+    assert compare_main(["--agents", "2", "--resolution", "1.0", "--budget", "2", "--trials",
+                         "3", "--planners", "random", "--workers", "1", "--no-progress",
+                         "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("interrupted") == 1
+    assert "run the same command again" in err and str(out) in err
+    assert [p.name for p in out.glob("shards/*/mission_*.json")] == ["mission_00000.json"]
+
+
+@pytest.mark.slow  # in this process, fast: the test above
 @pytest.mark.skipif(not __import__("pathlib").Path("/proc/self/stat").exists(),
                     reason="reads /proc")
 def test_ctrl_c_prints_one_line_and_a_killed_main_leaves_no_workers(tmp_path):
@@ -546,6 +587,7 @@ def test_a_raster_with_only_nodata_is_refused(tmp_path):
         reset_mission(config, seed=0, mission=0)
 
 
+@pytest.mark.slow  # in this process, fast: test_coma's resumed run trains the same weights
 def test_a_killed_coma_training_resumes_without_loss_or_duplicates(tmp_path):
     import csv
     import os

@@ -189,7 +189,7 @@ def test_compare_is_exported():
 
 @needs_evaluation
 @needs_baselines
-def test_raster_terrain_file_end_to_end(capsys, tmp_path):
+def test_raster_terrain_file_end_to_end(capsys, tmp_path, placeholder_figures):
     raster = tmp_path / "field.npy"
     values = np.zeros((20, 20))
     values[:, :8] = 1.0
@@ -204,7 +204,8 @@ def test_raster_terrain_file_end_to_end(capsys, tmp_path):
 
 
 @needs_evaluation
-def test_compare_records_checkpoints_and_the_paired_column(tmp_path, capsys):
+def test_compare_records_checkpoints_and_the_paired_column(tmp_path, capsys,
+                                                           placeholder_figures):
     from coma.persistence import DEFAULT_SHIPPED, resolve_policy
 
     out = tmp_path / "out"
@@ -229,7 +230,8 @@ def test_compare_records_checkpoints_and_the_paired_column(tmp_path, capsys):
     assert snapshot(out) == before
 
 
-def test_the_papers_real_world_protocol_runs_with_the_shipped_policies(tmp_path, capsys):
+def test_the_papers_real_world_protocol_runs_with_the_shipped_policies(tmp_path, capsys,
+                                                                       placeholder_figures):
     # The paper's field: 40 m x 40 m, waypoints every 4 m (11 x 11, the policies' grid),
     # altitudes 5/10/15 m, a temperature raster thresholded at 25 deg C. Coarser cells and a
     # short budget keep it quick; the command is the documented one otherwise.

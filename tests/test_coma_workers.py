@@ -408,6 +408,7 @@ def test_ipp_train_coma_on_a_local_ray_end_to_end(tmp_path):
         assert torch.equal(trained.actor.state_dict()[key], value), key
 
 
+@pytest.mark.slow  # a fresh process trains; test_evaluation tests the allocator setting fast
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc",
                     reason="retain_freed_memory sets glibc's allocator")
 def test_the_trainer_process_keeps_freed_memory_for_reuse(tmp_path):

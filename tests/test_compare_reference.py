@@ -13,6 +13,8 @@ from reports.cli import compare_main
 
 SMALL = ["--resolution", "2", "--trials", "2", "--workers", "1", "--no-progress"]
 
+pytestmark = pytest.mark.usefixtures("placeholder_figures")  # the tables are tested here
+
 
 def test_the_paired_column_compares_with_the_reference_given(tmp_path, capsys):
     out = tmp_path / "run"

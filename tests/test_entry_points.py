@@ -13,6 +13,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 PLUGIN = '''
@@ -70,6 +72,9 @@ def _install(site: Path) -> None:
     (info / "entry_points.txt").write_text(ENTRY_POINTS)
 
 
+# Slow: an installed package in fresh processes. Fast: entry-point planners in a pool's
+# workers (tests/test_evaluation.py), a registered terrain (tests/test_registry_names.py).
+@pytest.mark.slow
 def test_an_installed_planner_and_terrain_fly_in_worker_processes(tmp_path):
     site, marks, out = tmp_path / "site", tmp_path / "marks", tmp_path / "out"
     _install(site)

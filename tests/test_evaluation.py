@@ -237,7 +237,8 @@ def test_compare_stops_the_workers_it_started_when_a_planner_is_refused(tmp_path
     assert children_gone()
 
 
-def test_compare_starts_no_workers_when_every_mission_is_stored(tmp_path, started_pools):
+def test_compare_starts_no_workers_when_every_mission_is_stored(tmp_path, started_pools,
+                                                               placeholder_figures):
     from reports.compare import compare
 
     started = started_pools
@@ -289,6 +290,9 @@ print("checked")
 """
 
 
+# Slow: three interpreters and two pools import torch. Faster tests hold its parts: the
+# results of workers (above), a refusal from a worker (tests/test_bad_inputs.py).
+@pytest.mark.slow
 def test_compare_with_workers_checks_the_planners_in_a_worker(tmp_path):
     """The workers import torch and SB3 anyway; with them the main process of ``compare``
     neither builds a planner nor loads a planner's module, and refuses a bad one all the

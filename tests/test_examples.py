@@ -56,7 +56,7 @@ def test_credit_assignment_study_runs_every_variant(monkeypatch, capsys):
         assert 0 <= entropy <= 1 and 0 <= f1 <= 1
 
 
-def test_real_terrain_example(tmp_path, monkeypatch, capsys):
+def test_real_terrain_example(tmp_path, monkeypatch, capsys, placeholder_figures):
     out = run_example("04_real_terrain.py", ["--quick", "--planners", "ig,coverage",
                                              "--out", str(tmp_path)], monkeypatch, capsys)
     assert "of the area lies above 550 m" in out

@@ -46,7 +46,8 @@ def test_input_failing_on_the_first_mission_writes_nothing(tmp_path, capsys, cas
     assert not out.exists()
 
 
-def test_temporary_files_of_a_killed_run_are_removed_by_the_next(tmp_path, capsys):
+def test_temporary_files_of_a_killed_run_are_removed_by_the_next(tmp_path, capsys,
+                                                                 placeholder_figures):
     out = tmp_path / "out"
     argv = [*QUICK, "--planners", "random", "--resolution", "1", "--out", str(out)]
     assert compare_main(argv) == 0

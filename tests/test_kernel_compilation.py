@@ -18,15 +18,15 @@ needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not imp
 
 # Flies one mission of every default planner of ipp-compare in a fresh interpreter (no other
 # test's calls in its kernels), then prints the argument types each public kernel of the
-# three compiled modules was called with, and those mission_kernels() declares.
+# three compiled modules was called with, and those mission_kernels() declares. In memory:
+# the files and figures of an output folder call no kernel (and drawing them took two thirds
+# of the time).
 _FLOWN_TYPES = """
-import json, sys, tempfile
-from pathlib import Path
+import json
 from ipp_toolkit._native import kernels
 from reports.compare import compare
 
-with tempfile.TemporaryDirectory() as folder:
-    compare(trials=1, workers=1, out=Path(folder) / "out", progress=False)
+compare(trials=1, workers=1, progress=False)
 flown, declared = {}, {}
 for module in (kernels._compiled(), kernels._compiled_step(), kernels._compiled_noise()):
     for name, value in vars(module).items():
@@ -38,6 +38,7 @@ print(json.dumps({"flown": flown, "declared": {k: sorted(v) for k, v in declared
 """
 
 
+@pytest.mark.slow  # every default planner flies in a fresh interpreter
 @needs_numba
 def test_mission_kernels_declares_exactly_the_kernels_and_types_missions_fly():
     environment = {k: v for k, v in os.environ.items() if k != "IPP_TOOLKIT_NO_NUMBA"}
@@ -64,6 +65,7 @@ def test_a_pools_workers_compile_the_kernels_between_them():
     assert pool.kernels_claimed.value == expected
 
 
+@pytest.mark.slow  # compiles every kernel into an empty cache; the sharing is tested above
 @needs_numba
 def test_a_worker_that_compiled_waits_for_the_others_then_goes_on_alone():
     # A fresh interpreter with an empty cache folder compiles (its share is every kernel, as

@@ -64,8 +64,11 @@ def test_checkpoint_sizes_are_bounded_before_building(tmp_path, capsys, planner,
     data[section][field] = value
     path = tmp_path / "huge.pt"
     torch.save(data, path)
+    # --workers 1: the check runs here, not in a worker that would import torch first
+    # (tests/test_bad_inputs.py refuses a checkpoint from a worker).
     err = refused(lambda out: compare_main([*QUICK, "--planners", f"{planner}={path}",
-                                            "--out", str(out)]), tmp_path, capsys, needle)
+                                            "--workers", "1", "--out", str(out)]),
+                  tmp_path, capsys, needle)
     assert str(path) in err
 
 

@@ -109,19 +109,29 @@ def test_registry_errors():
         make_planner("test-not-a-planner")
 
 
-@pytest.mark.parametrize("planner_module, training_modules", [
-    ("coma.planner", ("coma.learner", "coma.warm_start", "coma.rollout", "coma.run_files",
-                      "coma.cli")),
-    ("baselines.ppo", ("baselines.ppo_training", "ipp_toolkit.vec")),
-    ("baselines.sb3_planner", ("baselines.sb3_training", "baselines.sb3_runner",
-                               "baselines.ppo_training", "ipp_toolkit.vec")),
-])
-def test_inference_never_imports_training(planner_module, training_modules):
+#: Each planner module, and the training modules that acting with its planner must not load.
+INFERENCE_ONLY = {
+    "coma.planner": ("coma.learner", "coma.warm_start", "coma.rollout", "coma.run_files",
+                     "coma.cli"),
+    "baselines.ppo": ("baselines.ppo_training", "ipp_toolkit.vec"),
+    "baselines.sb3_planner": ("baselines.sb3_training", "baselines.sb3_runner",
+                              "baselines.ppo_training", "ipp_toolkit.vec"),
+}
+
+
+def test_inference_never_imports_training():
+    import json
     import subprocess
     import sys
 
-    code = (f"import sys, {planner_module}; "
-            f"print(sorted(m for m in {training_modules!r} if m in sys.modules))")
+    # One fresh interpreter imports the modules in turn and lists, after each, its training
+    # modules then loaded. Loaded modules stay loaded: none listed means that no module
+    # imports any of its training modules on its own either (one interpreter, not three).
+    code = ("import importlib, json, sys\n"
+            f"found = {{}}\nfor module, training in {INFERENCE_ONLY!r}.items():\n"
+            "    importlib.import_module(module)\n"
+            "    found[module] = sorted(m for m in training if m in sys.modules)\n"
+            "print(json.dumps(found))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout.strip()
-    assert out == "[]"
+                         check=True).stdout.strip().splitlines()[-1]
+    assert json.loads(out) == {module: [] for module in INFERENCE_ONLY}

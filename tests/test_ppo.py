@@ -367,6 +367,7 @@ def test_a_loaded_policy_acts_without_an_optimiser_or_torch_dynamo():
 
 
 
+@pytest.mark.slow  # a fresh process trains; test_evaluation tests the allocator setting fast
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc",
                     reason="retain_freed_memory sets glibc's allocator")
 def test_the_trainer_process_keeps_freed_memory_for_reuse(tmp_path):

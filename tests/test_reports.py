@@ -335,16 +335,16 @@ def test_compare_in_memory_then_plot(tmp_path):
         compare(planners="random,astar", trials=1)
 
 
-def test_compare_animate_writes_one_gif_per_planner(tmp_path):
+def test_compare_animate_writes_one_gif_per_planner(tmp_path, placeholder_figures):
     from PIL import Image
 
     from reports.compare import compare
 
     compare(agents=2, comm=0.0, planners="random,coverage", trials=1, resolution=1.0,
-            out=tmp_path, progress=False, animate=True)
+            budget=3, out=tmp_path, progress=False, animate=True)
     for label in ("random", "coverage"):
         gif = Image.open(tmp_path / "animations" / f"{label}.gif")
-        assert gif.n_frames == 16  # s = 0..15
+        assert gif.n_frames == 4  # s = 0..3
 
 
 def test_save_figure_lays_out_once_and_writes_what_savefig_writes(tmp_path):
@@ -376,7 +376,8 @@ def test_save_figure_lays_out_once_and_writes_what_savefig_writes(tmp_path):
     assert saved.get_layout_engine() is None  # laid out once; kept as it was saved
 
 
-def test_a_trajectory_figure_is_drawn_again_only_when_its_inputs_change(tmp_path):
+def test_a_trajectory_figure_is_drawn_again_only_when_its_inputs_change(tmp_path,
+                                                                        placeholder_figures):
     from reports.compare import draw_trajectory
 
     config = EnvConfig().replace(world={"resolution": 1.0})
@@ -413,7 +414,7 @@ def test_a_trajectory_figure_is_drawn_again_only_when_its_inputs_change(tmp_path
     assert drawn_at() == now
 
 
-def test_a_finished_run_reported_again_keeps_its_figures(tmp_path):
+def test_a_finished_run_reported_again_keeps_its_figures(tmp_path, placeholder_figures):
     from reports.compare import compare
 
     arguments = dict(agents=2, comm=0.0, planners="random,coverage", trials=1, resolution=1.0,

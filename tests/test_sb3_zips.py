@@ -73,7 +73,8 @@ def test_an_sb3_zip_of_every_algorithm_flies_as_the_model_predicts(tmp_path, alg
     assert len(result["rows"]) == config.team.budget + 1
 
 
-def test_ipp_compare_flies_a_zip_and_refuses_what_it_cannot_rebuild(tmp_path, capsys):
+def test_ipp_compare_flies_a_zip_and_refuses_what_it_cannot_rebuild(tmp_path, capsys,
+                                                                    placeholder_figures):
     _, path, _, _ = _train("PPO", tmp_path)
     out = tmp_path / "compare"
     assert compare_main(["--planners", f"ig,sb3={path}", "--agents", "2", "--resolution", "1",
@@ -96,7 +97,7 @@ def test_ipp_compare_flies_a_zip_and_refuses_what_it_cannot_rebuild(tmp_path, ca
                              policy_kwargs={"features_extractor_class": MeanPool})
     with pytest.raises(CheckpointError, match="features extractor .*MeanPool"):
         SB3Planner(custom)
-    assert compare_main(["--planners", f"ig,sb3={custom}", "--out",
+    assert compare_main(["--planners", f"ig,sb3={custom}", "--workers", "1", "--out",
                          str(tmp_path / "no")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()  # the setting line, then the error
     assert lines[-1].startswith("ipp-compare: error: planner 'sb3' cannot be built")

@@ -102,7 +102,8 @@ def test_text_forms():
     assert safe_name("mine:coma=runs/x.pt") == "mine_coma_runs_x.pt"
 
 
-def test_ipp_compare_honours_the_config_file(tmp_path, capsys, monkeypatch):
+def test_ipp_compare_honours_the_config_file(tmp_path, capsys, monkeypatch,
+                                             placeholder_figures):
     monkeypatch.chdir(tmp_path)
     path = _yaml(tmp_path, "team: {n_agents: 2, comm_range: 0, budget: 2}\n"
                            "world: {resolution: 1.0}\nterrain: {kind: blobs}\n")
@@ -165,7 +166,8 @@ def test_threshold_quantile_keyword(tmp_path):
         build_env_config(terrain=str(raster), threshold=3.0, threshold_quantile=0.5)
 
 
-def test_ipp_compare_validation_namespace(tmp_path, capsys, monkeypatch):
+def test_ipp_compare_validation_namespace(tmp_path, capsys, monkeypatch,
+                                          placeholder_figures):
     monkeypatch.chdir(tmp_path)
     argv = ["--agents", "2", "--resolution", "1.0", "--budget", "2", "--trials", "1",
             "--planners", "random", "--workers", "1", "--no-progress"]
@@ -189,7 +191,8 @@ def test_describe_config_names_a_raster_threshold_or_its_quantile(tmp_path):
     assert "raster field.npy >= quantile 0.5" in by_quantile
 
 
-def test_ipp_compare_runs_a_raster_thresholded_at_a_quantile(tmp_path, capsys):
+def test_ipp_compare_runs_a_raster_thresholded_at_a_quantile(tmp_path, capsys,
+                                                            placeholder_figures):
     raster = tmp_path / "field.npy"
     np.save(raster, np.arange(400.0).reshape(20, 20))
     assert compare_main(["--terrain", str(raster), "--threshold-quantile", "0.6", "--agents",

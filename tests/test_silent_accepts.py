@@ -25,8 +25,8 @@ def test_compare_refuses_what_it_would_ignore(tmp_path, capsys):
     ]
     for flags, message in cases:
         out = tmp_path / "out"
-        argv = ["--planners", "random", "--no-progress", "--resolution", "1", *flags,
-                "--out", str(out)]
+        argv = ["--planners", "random", "--no-progress", "--resolution", "1", "--workers", "1",
+                *flags, "--out", str(out)]
         assert compare_main(argv) == 2, flags
         err = capsys.readouterr().err.strip().splitlines()[-1]
         assert message in err, (flags, err)
