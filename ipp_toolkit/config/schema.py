@@ -517,17 +517,13 @@ class FeatureConfig:
 
     def __post_init__(self) -> None:
         check_field_types(self, "features")
-        if (isinstance(self.gain_smoothing, bool)
-                or not isinstance(self.gain_smoothing, int | float | np.integer | np.floating)
-                or not 0 <= self.gain_smoothing < math.inf):
-            _fail("features", "gain_smoothing", self.gain_smoothing,
-                  "must be a finite number of metres >= 0 (0: ig's objective)")
-        if (isinstance(self.gain_false_positive, bool)
-                or not isinstance(self.gain_false_positive,
-                                  int | float | np.integer | np.floating)
-                or not 0 <= self.gain_false_positive < math.inf):
-            _fail("features", "gain_false_positive", self.gain_false_positive,
-                  "must be a finite number >= 0 (0: no false-positive term)")
+        for name, meaning in (("gain_smoothing", "of metres >= 0 (0: ig's objective)"),
+                              ("gain_false_positive", ">= 0 (0: no false-positive term)")):
+            value = getattr(self, name)
+            if (isinstance(value, bool)
+                    or not isinstance(value, int | float | np.integer | np.floating)
+                    or not 0 <= value < math.inf):
+                _fail("features", name, value, f"must be a finite number {meaning}")
         if (self.gain_interest not in (GAIN_INTEREST_SMOOTHED, GAIN_INTEREST_LEARNED)
                 and not os.path.isfile(self.gain_interest)):
             _fail("features", "gain_interest", self.gain_interest,
