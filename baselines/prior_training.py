@@ -348,7 +348,7 @@ def _train(config: PriorTrainingConfig, env_config: EnvConfig, out: Path,
 
 def _round_planner(out: Path, round_: int) -> Planner:
     """``ig_spatial`` in round 0, ``ig_learned`` with the best prior so far after it (the
-    prior's objective alone, as the shipped prior was trained: no false-positive term)."""
+    prior's objective alone: no false-positive term)."""
     if round_ == 0 or not (out / "best.pt").is_file():
         return SpatialGainPlanner()
     return LearnedPriorPlanner(out / "best.pt", false_positive_weight=0.0)

@@ -19,8 +19,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from ipp_toolkit.belief.field_prior import DEFAULT_FALSE_POSITIVE_WEIGHT
-
 __all__ = ["Stage", "RECIPES", "recipe"]
 
 
@@ -74,13 +72,11 @@ RECIPES: dict[str, tuple[Stage, ...]] = {
                "terrain": {"kind": "mixture"}}),
     ),
     # spatial-mixture's recipe with the learned field prior in the gain planes: its untrained
-    # residual flies ig_learned's objective, false-positive term included (without ig's
-    # same-step coordination).
+    # residual flies ig_learned's objective (without ig's same-step coordination).
     "learned-mixture": (
         Stage("learned", {**_GAIN_PRIOR, **_MIXTURE_SELECTION, "missions": 2500,
                           "lr_actor": 1e-4, "seed": 0},
-              {"features": {"gain": True, "gain_interest": "learned",
-                            "gain_false_positive": DEFAULT_FALSE_POSITIVE_WEIGHT},
+              {"features": {"gain": True, "gain_interest": "learned"},
                "terrain": {"kind": "mixture"}}),
     ),
 }

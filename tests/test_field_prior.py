@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.learned_prior import DEFAULT_FALSE_POSITIVE_WEIGHT, LearnedPriorPlanner
+from baselines.learned_prior import LearnedPriorPlanner
 from baselines.spatial_gain import SpatialGainPlanner
 from ipp_toolkit import EnvConfig
 from ipp_toolkit.belief.field_prior import (
@@ -126,7 +126,7 @@ def test_the_learned_planner_with_the_gaussian_prior_flies_as_ig_spatial(tmp_pat
                                  terrain={"kind": "blobs"})
     _tiny_prior(tmp_path / "prior.pt")
     smoother = interest_smoother(config.world.map_cells, config.world.resolution, 5.0)
-    for weight in (0.0, DEFAULT_FALSE_POSITIVE_WEIGHT):
+    for weight in (0.0, 0.2):
         learned = LearnedPriorPlanner(tmp_path / "prior.pt", false_positive_weight=weight)
         learned.prior.fine_values = lambda prob, resolution, fine: smoother.block_values(prob)
         spatial = SpatialGainPlanner(false_positive_weight=weight)

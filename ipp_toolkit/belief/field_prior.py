@@ -46,8 +46,7 @@ from ..config.schema import GAIN_INTEREST_LEARNED
 from ..io import CheckpointError, load_torch, save_torch
 from .interest import block_means, square_cells
 
-__all__ = ["BLOCK_METRES", "DEFAULT_FALSE_POSITIVE_WEIGHT", "FORMAT", "INPUT_PLANES",
-           "SHIPPED_PRIOR", "FieldPrior",
+__all__ = ["BLOCK_METRES", "FORMAT", "INPUT_PLANES", "SHIPPED_PRIOR", "FieldPrior",
            "PriorNetConfig", "block_average", "block_cells", "block_labels", "build_network",
            "parameter_count", "prior_file", "prior_inputs", "resample_matrix", "shared_prior",
            "square_inputs"]
@@ -65,18 +64,6 @@ MAX_WIDTH = 128
 SHIPPED_PRIOR = Path(__file__).resolve().parents[1] / "data" / "field_prior.pt"
 #: The name that stands for :data:`SHIPPED_PRIOR` in configs and on command lines.
 SHIPPED_NAME = GAIN_INTEREST_LEARNED
-
-DEFAULT_FALSE_POSITIVE_WEIGHT = 0.2
-"""The weight ``ig_learned`` (and the learned recipes' ``features.gain_false_positive``)
-gives to checking cells believed interesting that the prior doubts
-(:func:`~ipp_toolkit.belief.mapping.false_positive_gain`).
-
-Without it the learned prior cuts the final entropy but leaves false positives (single noisy
-readings from 10 m over uninteresting ground): on validation missions (4 UAVs, D = 25 m) the
-final F1 fell 0.021 below ``ig_spatial``'s on fractal and 0.04 with 8 UAVs. Of the weights
-tried (0.2, 0.3, 0.5 on 30 missions per family; 0.1 on 16, which still lost 0.016 on fractal)
-0.2 is the smallest with the F1 within 0.01 of ``ig_spatial``'s on every family at 4 UAVs;
-it gives back part of the entropy gain (docs/field-prior.md)."""
 
 
 def _sub_block(resolution: float, size: int) -> int:
