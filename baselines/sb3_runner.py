@@ -232,6 +232,18 @@ def run_sb3_training(
                             progress, resume, time_limit_s, announce)
 
 
+def _restore(model: Any, state: dict[str, Any]) -> None:
+    """Put a checkpoint's weights, optimizer and counters back into a fresh SB3 model."""
+    model.policy.load_state_dict(state["policy"])
+    if "optimizer" in state:  # ARS has none: it perturbs the weights directly
+        model.policy.optimizer.load_state_dict(state["optimizer"])
+    if isinstance(getattr(model, "weights", None), torch.Tensor):
+        # ARS searches around its own flat copy of the weights: refresh it.
+        model.weights = torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach()
+    model.num_timesteps = int(state["num_timesteps"])
+    model._episode_num = int(state.get("episodes", 0))
+
+
 def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timesteps: int,
                  checkpoint_every: int, make_env: Callable[[int], VecEnv],
                  make_model: Callable[[VecEnv, int, str, int], Any],
@@ -259,18 +271,11 @@ def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timestep
     # A resumed run starts new missions: copy c continues on run seed + done + c.
     env_seed = seed + done
     venv = make_env(env_seed)
+    model = None
     try:
         model = make_model(VecMonitor(venv), env_seed, str(out_dir / "tb"), done)
         if state is not None:
-            model.policy.load_state_dict(state["policy"])
-            if "optimizer" in state:  # ARS has none: it perturbs the weights directly
-                model.policy.optimizer.load_state_dict(state["optimizer"])
-            if isinstance(getattr(model, "weights", None), torch.Tensor):
-                # ARS searches around its own flat copy of the weights: refresh it.
-                model.weights = torch.nn.utils.parameters_to_vector(
-                    model.policy.parameters()).detach()
-            model.num_timesteps = done
-            model._episode_num = int(state.get("episodes", 0))
+            _restore(model, state)
         started = time.perf_counter()
         elapsed_before = float(state.get("train_seconds", 0.0)) if state is not None else 0.0
 
@@ -309,4 +314,7 @@ def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timestep
                                        **extra_record))
         return policy_path
     finally:
+        # SB3 leaves its TensorBoard writer (a thread with an open file) running after learn.
+        if getattr(model, "_logger", None) is not None:
+            model.logger.close()
         venv.close()

@@ -381,3 +381,16 @@ train_ppo(config, EnvConfig(), {str(tmp_path / "run")!r}, progress=False)
 """
     plain, trained = page_faults_of_reallocation(), page_faults_of_reallocation(setup)
     assert plain > 1000 and trained < plain / 10, (plain, trained)
+
+
+def test_training_leaves_no_tensorboard_writer_running(tmp_path):
+    """SB3 keeps its TensorBoard writer (a thread and an open file) alive after learn: a
+    process that trains several runs must not collect them."""
+    import threading
+
+    before = set(threading.enumerate())
+    config = PPOTrainConfig(total_timesteps=256, **TINY)
+    train_ppo(config, EnvConfig(), tmp_path, progress=False)
+    left = [thread.name for thread in threading.enumerate() if thread not in before]
+    assert not left, left
+    assert any((tmp_path / "tb").rglob("events.out.tfevents.*"))  # the log was written
