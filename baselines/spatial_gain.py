@@ -124,8 +124,9 @@ class SpatialGainPlanner(InformationGainPlanner):
         if self.false_positive_weight > 0:
             table = self._false_positive_gains
             assert table is not None
-            checking = table.column(f"altitude_{altitude}")[table.indices(
-                view.local_logodds[cells])]
+            # Intern first: indices() may grow the table and replace its columns.
+            index = table.indices(view.local_logodds[cells])
+            checking = table.column(f"altitude_{altitude}")[index]
             checking *= np.float32(self.false_positive_weight) * (np.float32(1.0) - interest)
             gain += checking
         return gain
