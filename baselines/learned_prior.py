@@ -14,6 +14,11 @@ A cell the map holds above 0.5 that the prior doubts can be given value too
 over interesting cells never counts such a false positive, the final F1 does. Off by
 default: 0.2 kept the F1 at 4 UAVs but cost entropy, and on split with no or full
 communication it fell behind ``ig_spatial`` (docs/field-prior.md).
+
+``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON
+record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read
+the same file); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
+unused. Cost: ``ig_spatial``'s work plus one batched forward pass of the prior per step.
 """
 
 from __future__ import annotations

@@ -79,19 +79,17 @@ class SpatialGainPlanner(InformationGainPlanner):
         self.sigma = float(sigma)
         self.false_positive_weight = float(false_positive_weight)
         self._false_positive_gains: ValueTable | None = None
-        self._false_positive_config: EnvConfig | None = None
         self._smoother: InterestSmoother | None = None
         self._interest: tuple[AgentView, np.ndarray] | None = None
 
     def reset(self, config: EnvConfig, seed: int) -> None:
+        rebuilt = config != self._config  # ig's gain table is kept while the config is
         super().reset(config, seed)
         world = config.world
         self._smoother = interest_smoother(world.map_cells, world.resolution, self.sigma)
         self._interest = None
-        if self.false_positive_weight > 0 and (self._false_positive_gains is None
-                                               or self._false_positive_config != config):
+        if self.false_positive_weight > 0 and rebuilt:
             self._false_positive_gains = gain_table(config, self.camera, "false_positive")
-            self._false_positive_config = config
 
     @property
     def block_cells(self) -> int:

@@ -224,11 +224,7 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     false_positive = features.gain_false_positive if false_positive is None else false_positive
     learned = interest != GAIN_INTEREST_SMOOTHED
     objective = "interesting" if smoothing > 0 or learned else "ig"
-    cache = state.gain_cache
-    if cache is None or cache.maps is not state.maps or cache.objective != objective:
-        cache = state.gain_cache = FootprintGainCache(
-            state.maps, state.n_agents, state.geometry.camera,
-            (reward.weight_interesting, reward.weight_uninteresting), objective)
+    cache = _footprint_cache(state, "gain_cache", objective)
     if objective == "interesting":
         world = state.config.world
         block = square_cells(world.map_cells, world.resolution)
@@ -243,8 +239,8 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
                                        smoothing).smooth(means.means())
         sums = cache.weighted_sums(weight, block)
         if false_positive > 0:
-            sums += false_positive * _false_positive_cache(state).weighted_sums(1.0 - weight,
-                                                                                 block)
+            checking = _footprint_cache(state, "false_positive_cache", "false_positive")
+            sums += false_positive * checking.weighted_sums(1.0 - weight, block)
         scale = 1.0
     else:
         sums = cache.sums()
@@ -252,14 +248,17 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
 
 
-def _false_positive_cache(state: MissionState) -> FootprintGainCache:
-    """The state's footprint sums of :func:`~ipp_toolkit.belief.mapping.false_positive_gain`."""
-    cache = state.false_positive_cache
-    if cache is None or cache.maps is not state.maps:
+def _footprint_cache(state: MissionState, slot: str, objective: str) -> FootprintGainCache:
+    """The :class:`~ipp_toolkit.belief.gain.FootprintGainCache` of ``objective`` kept in the
+    state's attribute ``slot`` (``gain_cache`` or ``false_positive_cache``), built anew when
+    the maps or the objective changed."""
+    cache = getattr(state, slot)
+    if cache is None or cache.maps is not state.maps or cache.objective != objective:
         reward = state.config.reward
-        cache = state.false_positive_cache = FootprintGainCache(
-            state.maps, state.n_agents, state.geometry.camera,
-            (reward.weight_interesting, reward.weight_uninteresting), "false_positive")
+        cache = FootprintGainCache(state.maps, state.n_agents, state.geometry.camera,
+                                   (reward.weight_interesting, reward.weight_uninteresting),
+                                   objective)
+        setattr(state, slot, cache)
     return cache
 
 
