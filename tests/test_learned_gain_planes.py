@@ -176,3 +176,18 @@ def test_a_bad_gain_interest_on_the_command_line_exits_2_naming_it(tmp_path, cap
     err = capsys.readouterr().err
     assert "features.gain_interest = 'guess'" in err and "Traceback" not in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("value, shown", [("-0.2", "-0.2"), ("inf", "inf"), ("lots", None)])
+def test_a_bad_gain_false_positive_on_the_command_line_exits_2_naming_it(tmp_path, capsys,
+                                                                          value, shown):
+    from coma.cli import main as coma_main
+
+    out = tmp_path / "run"
+    assert coma_main(["--out", str(out), "--feature", "gain=true",
+                      "--feature", f"gain_false_positive={value}"]) == 2
+    err = capsys.readouterr().err
+    assert "gain_false_positive" in err and "Traceback" not in err
+    if shown is not None:
+        assert f"features.gain_false_positive = {shown}" in err
+    assert not out.exists()
