@@ -45,19 +45,22 @@ class LearnedPriorPlanner(SpatialGainPlanner):
         checkpoint: a field-prior file (``ipp-train prior`` writes ``RUN/best.pt``); None: the
             shipped one.
         overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
-        false_positive_weight: as for :class:`~baselines.spatial_gain.SpatialGainPlanner`;
-            0 (default) flies the prior's objective alone.
+        false_positive_weight, false_positive_steps: as for
+            :class:`~baselines.spatial_gain.SpatialGainPlanner`; weight 0 (default) flies the
+            prior's objective alone.
     """
 
     name = "ig_learned"
     needs_observations = False
 
     def __init__(self, checkpoint: str | Path | None = None, overlap_discount: float = 0.5,
-                 false_positive_weight: float = 0.0) -> None:
+                 false_positive_weight: float = 0.0,
+                 false_positive_steps: int | None = None) -> None:
         import torch
 
         super().__init__(overlap_discount=overlap_discount,
-                         false_positive_weight=false_positive_weight)
+                         false_positive_weight=false_positive_weight,
+                         false_positive_steps=false_positive_steps)
         # A batch of N small maps: extra intra-op threads only spin on busy cores.
         torch.set_num_threads(1)
         path = prior_file(DEFAULT_PRIOR if checkpoint is None else checkpoint)

@@ -57,27 +57,37 @@ class SpatialGainPlanner(InformationGainPlanner):
     value of checking a cell the map holds above 0.5 that is probably not interesting
     (:func:`~ipp_toolkit.belief.mapping.false_positive_gain`). The entropy over interesting
     cells never counts such a cell, but the final F1 does: a single noisy reading from 10-15 m
-    leaves one behind. 0 (default here) keeps the objective above.
+    leaves one behind. 0 (default here) keeps the objective above. ``false_positive_steps``
+    k applies the term only in the mission's last k steps (a clean-up before the final map;
+    None: every step): it buys back part of the F1 for less entropy (docs/field-prior.md).
 
     Args:
         sigma: standard deviation of the smoothing in metres (> 0).
         overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
         false_positive_weight: w >= 0 of the false-positive term.
+        false_positive_steps: k >= 1, the last steps in which the term applies; None: all.
     """
 
     name = "ig_spatial"
     objective = "interesting"  # interesting_gain: weighted by interest_blocks in cell_gains
 
     def __init__(self, sigma: float = 5.0, overlap_discount: float = 0.5,
-                 false_positive_weight: float = 0.0) -> None:
+                 false_positive_weight: float = 0.0,
+                 false_positive_steps: int | None = None) -> None:
         if not sigma > 0 or not math.isfinite(sigma):
             raise ValueError(f"sigma must be a positive number of metres, got {sigma!r}")
         if not 0 <= false_positive_weight < math.inf:
             raise ValueError("false_positive_weight must be a finite number >= 0, got "
                              f"{false_positive_weight!r}")
+        if false_positive_steps is not None and (
+                isinstance(false_positive_steps, bool) or not isinstance(false_positive_steps, int)
+                or false_positive_steps < 1):
+            raise ValueError("false_positive_steps must be an integer >= 1 or None, got "
+                             f"{false_positive_steps!r}")
         super().__init__(overlap_discount)
         self.sigma = float(sigma)
         self.false_positive_weight = float(false_positive_weight)
+        self.false_positive_steps = false_positive_steps
         self._false_positive_gains: ValueTable | None = None
         self._smoother: InterestSmoother | None = None
         self._interest: tuple[AgentView, np.ndarray] | None = None
@@ -110,7 +120,8 @@ class SpatialGainPlanner(InformationGainPlanner):
                    cells: tuple[slice, slice]) -> np.ndarray:
         """``interesting_gain`` of a reading at ``altitude`` over the ``cells`` box times the
         probability that each cell is interesting (:meth:`interest_blocks`), plus the
-        false-positive term when ``false_positive_weight`` > 0; see
+        false-positive term when ``false_positive_weight`` > 0 (in the last
+        ``false_positive_steps`` steps); see
         :meth:`InformationGainPlanner.cell_gains`."""
         # One estimate per agent and decision: the up, down and level boxes share it.
         if self._interest is None or self._interest[0] is not view:
@@ -119,7 +130,9 @@ class SpatialGainPlanner(InformationGainPlanner):
         gain = super().cell_gains(view, altitude, cells)
         interest = self._smoother.window(self._interest[1], *cells)
         gain *= interest
-        if self.false_positive_weight > 0:
+        if self.false_positive_weight > 0 and (
+                self.false_positive_steps is None
+                or view.budget - view.step <= self.false_positive_steps):
             table = self._false_positive_gains
             assert table is not None
             # Intern first: indices() may grow the table and replace its columns.

@@ -32,6 +32,7 @@ import numpy as np
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import comm_label, format_comm
+from ipp_toolkit.planners.specs import PlannerSpec
 from ipp_toolkit.runs.ray_backend import check_backend
 from ipp_toolkit.world.families import real_raster_names
 
@@ -178,7 +179,8 @@ def _figure(cells: list[Cell], planners: list[str], reference: str,
     return save_figure(figure, stem)
 
 
-def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNERS),
+def generalisation_study(planners: str | Sequence[str | PlannerSpec]
+                         = ",".join(DEFAULT_PLANNERS),
                          cells: Sequence[Cell] | None = None, trials: int = 50, seed: int = 0,
                          out: str | os.PathLike[str] = "results/generalisation",
                          workers: int = 1, resolution: float | None = None,
@@ -190,7 +192,9 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
     """Fly every planner in every cell and write the study's tables and figure into ``out``.
 
     Args:
-        planners: comma-separated names or specs; must include a reference.
+        planners: comma-separated names, or a sequence of names and
+            :class:`~ipp_toolkit.planners.specs.PlannerSpec` (planners with options); must
+            include a reference.
         cells: the grid (default :func:`study_cells`).
         trials: test missions per cell (each ``real`` mission a different map).
         seed: run seed of the missions.
@@ -214,12 +218,11 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
         ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
         ConnectionError: no Ray cluster answers at ``address``.
     """
-    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.planners.specs import as_specs
 
     check_backend(backend, address)
-    names = planners.split(",") if isinstance(planners, str) else list(planners)
     references = _study_references(
-        reference, planners, [PlannerSpec.parse(n).effective_label for n in names if n.strip()])
+        reference, planners, [spec.effective_label for spec in as_specs(planners)])
     out = Path(out)
     cells = list(study_cells() if cells is None else cells)
     if backend == "ray":
@@ -256,7 +259,8 @@ def generalisation_study(planners: str | Sequence[str] = ",".join(DEFAULT_PLANNE
     return GeneralisationStudy(cells, labels, first, summaries, caption + markdown, references)
 
 
-def _study_references(reference: str | Sequence[str] | None, planners: str | Sequence[str],
+def _study_references(reference: str | Sequence[str] | None,
+                      planners: str | Sequence[str | PlannerSpec],
                       labels: list[str]) -> tuple[str, ...]:
     """The reference planners of the study (see :func:`reports.tables.flown_references`);
     without names, at least one default must be flown: the study is about beating one."""

@@ -122,6 +122,20 @@ def test_the_generalisation_tables_pair_with_ig_and_ig_spatial_by_default(tmp_pa
     assert r"ig\_spatial $-$ ig" in (tmp_path / "generalisation.tex").read_text()
 
 
+def test_the_generalisation_study_flies_planners_with_options(tmp_path):
+    """Specs with options and labels are flown under their labels, and the options act."""
+    from ipp_toolkit.planners.specs import PlannerSpec
+    from reports.generalisation import Cell, generalisation_study
+
+    wide = PlannerSpec("ig_spatial", {"sigma": 20.0}, label="wide")
+    study = generalisation_study(["ig_spatial", wide], [Cell("split", 2, 0.0)], trials=2,
+                                 out=tmp_path, resolution=2.0, budget=4, progress=False)
+    assert study.references == ("ig_spatial",)
+    summary = study.summaries[Cell("split", 2, 0.0)]
+    assert list(summary.planners) == ["ig_spatial", "wide"]
+    assert "wide − ig_spatial" in study.table
+
+
 def test_a_policy_flown_off_its_training_setting_is_noted_before_flying():
     from reports.compare import _checked_planners
 

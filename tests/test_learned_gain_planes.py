@@ -108,18 +108,20 @@ def test_shared_prior_is_loaded_once_and_again_when_the_file_changes(tmp_path):
     assert shared_prior(own) is not first
 
 
-@pytest.mark.parametrize("false_positive", [0.0, 0.5])
-def test_the_first_agents_best_learned_option_is_ig_learneds_choice(false_positive):
+@pytest.mark.parametrize("false_positive, steps", [(0.0, 0), (0.5, 0), (0.5, 6)])
+def test_the_first_agents_best_learned_option_is_ig_learneds_choice(false_positive, steps):
     """Agent 0 hears no lower-index teammate, so ``ig_learned`` flies the argmax of its
     planes: the planes hold that planner's objective, with or without the false-positive
-    term."""
+    term, at every step or in the last ``steps``."""
     from baselines.learned_prior import LearnedPriorPlanner
     from ipp_toolkit.planners import planner_views
     from ipp_toolkit.sim.features import option_gain_cells
 
     config = EnvConfig().replace(world={"resolution": 0.5},
-                                 features={**LEARNED, "gain_false_positive": false_positive})
-    planner = LearnedPriorPlanner(false_positive_weight=false_positive)
+                                 features={**LEARNED, "gain_false_positive": false_positive,
+                                           "gain_false_positive_steps": steps})
+    planner = LearnedPriorPlanner(false_positive_weight=false_positive,
+                                  false_positive_steps=steps or None)
     planner.reset(config, 0)
     state = reset_mission(config, seed=0, mission=1)
     channel, row, col = option_gain_cells([0, 1, 2], state.geometry.grid_points)
@@ -159,6 +161,33 @@ def test_false_positive_planes_equal_a_full_recomputation():
     assert np.abs(checking).max() > 0  # the term is not empty on this mission
     plain = footprint_gain(state, false_positive=0.0)
     assert not np.allclose(got, plain)
+
+
+def test_false_positive_steps_add_the_term_only_in_the_last_steps():
+    """With k steps the planes are the prior's alone until k steps are left, then those of the
+    term at every step (its cache, built late, agrees with one kept from the start)."""
+    k, features = 6, {**LEARNED, "gain_false_positive": 0.5}
+    late, always = (reset_mission(EnvConfig().replace(
+        world={"resolution": 0.5}, features={**features, "gain_false_positive_steps": steps}),
+        seed=3, mission=0, namespace="validation") for steps in (k, 0))
+    rng = np.random.default_rng(5)
+    while not late.done:
+        got = footprint_gain(late)
+        if late.budget - late.step > k:
+            np.testing.assert_array_equal(got, footprint_gain(late, false_positive=0.0))
+            assert late.false_positive_cache is None
+        else:
+            np.testing.assert_allclose(got, footprint_gain(always), rtol=0, atol=1e-6)
+            assert not np.allclose(got, footprint_gain(late, false_positive=0.0))
+        actions = [rng.choice(np.flatnonzero(m)) for m in late.masks()]
+        step_mission(late, actions)
+        step_mission(always, actions)
+
+
+@pytest.mark.parametrize("bad", [-1, 2.5, True])
+def test_gain_false_positive_steps_is_validated(bad):
+    with pytest.raises(ValueError, match="gain_false_positive_steps"):
+        EnvConfig().replace(features={"gain_false_positive_steps": bad})
 
 
 @pytest.mark.parametrize("bad", [-0.1, math.inf, math.nan, True])

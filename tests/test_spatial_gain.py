@@ -86,3 +86,31 @@ def test_the_false_positive_term_changes_choices_and_is_validated():
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(ValueError, match="false_positive_weight"):
             SpatialGainPlanner(false_positive_weight=bad)
+
+
+def test_false_positive_steps_applies_the_term_only_in_the_last_steps():
+    """With k steps the values are the plain objective's until k steps are left, then those
+    of the term at every step; a bad k is refused naming it."""
+    from dataclasses import replace
+
+    from baselines.spatial_gain import SpatialGainPlanner
+
+    camera = Camera(CONFIG.world, CONFIG.sensor)
+    box = camera.rects[1, 5, 5]
+    cells = (slice(int(box[0]), int(box[1])), slice(int(box[2]), int(box[3])))
+    logodds = np.zeros((CONFIG.world.map_cells,) * 2)
+    logodds[cells] = 1.0  # one noisy positive reading: held above 0.5, doubted by the smoothing
+    view = lone_view(CONFIG, (5, 5, 1), logodds, np.ones(6, dtype=np.int8))
+    planners = {label: SpatialGainPlanner(false_positive_weight=w, false_positive_steps=k)
+                for label, w, k in (("plain", 0.0, None), ("always", 0.5, None),
+                                    ("late", 0.5, 4))}
+    for planner in planners.values():
+        planner.reset(CONFIG, 0)
+    for step, like in ((0, "plain"), (10, "plain"), (11, "always"), (14, "always")):
+        at_step = replace(view, step=step)
+        gains = {label: p.cell_gains(at_step, 1, cells) for label, p in planners.items()}
+        assert not np.array_equal(gains["always"], gains["plain"])
+        np.testing.assert_array_equal(gains["late"], gains[like])
+    for bad in (0, -2, 2.5, True, "3"):
+        with pytest.raises(ValueError, match="false_positive_steps"):
+            SpatialGainPlanner(false_positive_weight=0.2, false_positive_steps=bad)

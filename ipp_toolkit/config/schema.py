@@ -19,20 +19,9 @@ import numpy as np
 
 from .field_types import check_field_types, short_repr
 
-__all__ = [
-    "WorldConfig",
-    "SensorConfig",
-    "TerrainConfig",
-    "TeamConfig",
-    "RewardConfig",
-    "FeatureConfig",
-    "EnvConfig",
-    "terrain_kinds",
-    "start_for_team_size",
-    "fixed_starts_fit",
-    "fixed_start_waypoints",
-    "check_int",
-]
+__all__ = ["WorldConfig", "SensorConfig", "TerrainConfig", "TeamConfig", "RewardConfig",
+           "FeatureConfig", "EnvConfig", "terrain_kinds", "start_for_team_size",
+           "fixed_starts_fit", "fixed_start_waypoints", "check_int"]
 
 REAL_SOURCES = ("mission", "train", "validation", "test", "all")
 DEFAULT_MIXTURE = (("split", 1.0), ("blobs", 1.0), ("fractal", 1.0), ("real", 1.0))
@@ -491,6 +480,8 @@ class FeatureConfig:
             per cell: the value of checking cells the local map holds above 0.5 that are
             probably not interesting (``false_positive_weight`` of ``ig_spatial`` and
             ``ig_learned``). 0 (default) leaves the planes as they were.
+        gain_false_positive_steps: k >= 1 adds that term only in the last k steps
+            (``false_positive_steps``); 0 (default): at every step.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
     """
@@ -513,6 +504,7 @@ class FeatureConfig:
     gain_smoothing: float = 0.0
     gain_interest: str = GAIN_INTEREST_SMOOTHED
     gain_false_positive: float = 0.0
+    gain_false_positive_steps: int = 0
     agent_id_scale: int = 8
 
     def __post_init__(self) -> None:
@@ -529,8 +521,10 @@ class FeatureConfig:
             _fail("features", "gain_interest", self.gain_interest,
                   f"must be {GAIN_INTEREST_SMOOTHED!r}, {GAIN_INTEREST_LEARNED!r} or the path "
                   "of a field-prior file (`ipp-train prior` writes RUN/best.pt); no such file")
-        if not isinstance(self.agent_id_scale, int | np.integer) or self.agent_id_scale < 1:
-            _fail("features", "agent_id_scale", self.agent_id_scale, "must be an integer >= 1")
+        for name, least in (("agent_id_scale", 1), ("gain_false_positive_steps", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
+                _fail("features", name, value, f"must be an integer >= {least}")
         if not any(getattr(self, name) for name in ACTOR_PLANES):
             _fail("features", "actor planes", "all off", "the actor needs at least one plane")
 

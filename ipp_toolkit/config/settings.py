@@ -295,7 +295,8 @@ def parse_feature_flags(items: Sequence[str]) -> dict[str, bool | int | float | 
     """``--feature NAME=VALUE`` flags as a ``features`` section, typed by :class:`FeatureConfig`.
 
     Switches take true/false (also 1/0, on/off, yes/no); ``gain_smoothing`` a number of
-    metres; ``agent_id_scale`` an integer; ``gain_interest`` a word or a path, as written.
+    metres; ``agent_id_scale`` and ``gain_false_positive_steps`` integers; ``gain_interest``
+    a word or a path, as written.
 
     Raises:
         ValueError: an unknown feature or a value of the wrong kind (the message names it).
@@ -321,7 +322,7 @@ def parse_feature_flags(items: Sequence[str]) -> dict[str, bool | int | float | 
             else:
                 parsed[name] = float(raw)
         except ValueError:
-            raise ValueError(f"--feature {item!r}: {name} takes "
-                             f"{'true|false' if kind in (bool, 'bool') else 'a number'}"
-                             ) from None
+            wanted = {bool: "true|false", "bool": "true|false", int: "an integer",
+                      "int": "an integer"}.get(kind, "a number")
+            raise ValueError(f"--feature {item!r}: {name} takes {wanted}") from None
     return parsed

@@ -181,13 +181,15 @@ def actor_observations(state: MissionState, features: FeatureConfig) -> np.ndarr
     if features.gain:
         planes.extend(np.moveaxis(
             gain_planes(state, features.gain_smoothing, features.gain_interest,
-                        features.gain_false_positive), 1, 0))
+                        features.gain_false_positive, features.gain_false_positive_steps),
+            1, 0))
     return np.stack(planes, axis=1).astype(np.float32)
 
 
 def footprint_gain(state: MissionState, smoothing: float | None = None,
                    interest: str | None = None,
-                   false_positive: float | None = None) -> np.ndarray:
+                   false_positive: float | None = None,
+                   false_positive_steps: int | None = None) -> np.ndarray:
     """Expected gain of a reading from every waypoint, on every agent's local map.
 
     The gain of one reading from waypoint (ix, iy, iz) is the sum over its footprint of
@@ -212,7 +214,9 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     With either, ``false_positive`` w > 0 (None: the mission's
     ``features.gain_false_positive``) adds w times
     :func:`~ipp_toolkit.belief.mapping.false_positive_gain` weighted by the probability that
-    the cell is *not* interesting, as ``ig_learned(false_positive_weight=w)`` values cells.
+    the cell is *not* interesting, as ``ig_learned(false_positive_weight=w)`` values cells;
+    ``false_positive_steps`` k >= 1 (None: the mission's ``features.gain_false_positive_steps``)
+    only when at most k steps are left, as ``false_positive_steps=k`` (0: at every step).
 
     Returns:
         (N, Z, G, G) float32.
@@ -222,6 +226,10 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     smoothing = features.gain_smoothing if smoothing is None else smoothing
     interest = features.gain_interest if interest is None else interest
     false_positive = features.gain_false_positive if false_positive is None else false_positive
+    if false_positive_steps is None:
+        false_positive_steps = features.gain_false_positive_steps
+    if 0 < false_positive_steps < state.budget - state.step:
+        false_positive = 0.0  # the clean-up of the last steps has not begun
     learned = interest != GAIN_INTEREST_SMOOTHED
     objective = "interesting" if smoothing > 0 or learned else "ig"
     cache = _footprint_cache(state, "gain_cache", objective)
@@ -263,10 +271,10 @@ def _footprint_cache(state: MissionState, slot: str, objective: str) -> Footprin
 
 
 def gain_planes(state: MissionState, smoothing: float | None = None,
-                interest: str | None = None, false_positive: float | None = None
-                ) -> np.ndarray:
-    """The ``gain`` planes: :func:`footprint_gain` (of ``smoothing``, ``interest`` and
-    ``false_positive``) at the
+                interest: str | None = None, false_positive: float | None = None,
+                false_positive_steps: int | None = None) -> np.ndarray:
+    """The ``gain`` planes: :func:`footprint_gain` (of ``smoothing``, ``interest``,
+    ``false_positive`` and ``false_positive_steps``) at the
     agent's altitude, above and below, in an 11 x 11 window centred on the agent.
 
     Window cell (v, u) of agent k shows waypoint (y_k + v - c, x_k + u - c), c = G // 2, so the
@@ -279,7 +287,7 @@ def gain_planes(state: MissionState, smoothing: float | None = None,
     Returns:
         (N, 3, G, G) float32 in :data:`GAIN_PLANES` order.
     """
-    gain = footprint_gain(state, smoothing, interest, false_positive)
+    gain = footprint_gain(state, smoothing, interest, false_positive, false_positive_steps)
     n, z, g = gain.shape[:3]
     c = g // 2
     level = state.positions[:, 2]
