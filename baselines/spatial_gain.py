@@ -7,8 +7,9 @@ import math
 import numpy as np
 
 from ipp_toolkit.belief.interest import InterestSmoother, interest_smoother
+from ipp_toolkit.belief.mapping import false_positive_term_applies
 from ipp_toolkit.belief.value_table import ValueTable
-from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.planners import AgentView
 
 from .information_gain import InformationGainPlanner, gain_table
@@ -79,11 +80,8 @@ class SpatialGainPlanner(InformationGainPlanner):
         if not 0 <= false_positive_weight < math.inf:
             raise ValueError("false_positive_weight must be a finite number >= 0, got "
                              f"{false_positive_weight!r}")
-        if false_positive_steps is not None and (
-                isinstance(false_positive_steps, bool) or not isinstance(false_positive_steps, int)
-                or false_positive_steps < 1):
-            raise ValueError("false_positive_steps must be an integer >= 1 or None, got "
-                             f"{false_positive_steps!r}")
+        if false_positive_steps is not None:
+            false_positive_steps = check_int("false_positive_steps", false_positive_steps, 1)
         super().__init__(overlap_discount)
         self.sigma = float(sigma)
         self.false_positive_weight = float(false_positive_weight)
@@ -130,9 +128,8 @@ class SpatialGainPlanner(InformationGainPlanner):
         gain = super().cell_gains(view, altitude, cells)
         interest = self._smoother.window(self._interest[1], *cells)
         gain *= interest
-        if self.false_positive_weight > 0 and (
-                self.false_positive_steps is None
-                or view.budget - view.step <= self.false_positive_steps):
+        if self.false_positive_weight > 0 and false_positive_term_applies(
+                view.budget - view.step, self.false_positive_steps):
             table = self._false_positive_gains
             assert table is not None
             # Intern first: indices() may grow the table and replace its columns.

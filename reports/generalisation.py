@@ -32,7 +32,7 @@ import numpy as np
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import comm_label, format_comm
-from ipp_toolkit.planners.specs import PlannerSpec
+from ipp_toolkit.planners.specs import PlannerSpec, as_specs
 from ipp_toolkit.runs.ray_backend import check_backend
 from ipp_toolkit.world.families import real_raster_names
 
@@ -218,8 +218,6 @@ def generalisation_study(planners: str | Sequence[str | PlannerSpec]
         ipp_toolkit.runs.ray_backend.RayUnavailableError: ``backend="ray"`` without Ray.
         ConnectionError: no Ray cluster answers at ``address``.
     """
-    from ipp_toolkit.planners.specs import as_specs
-
     check_backend(backend, address)
     references = _study_references(
         reference, planners, [spec.effective_label for spec in as_specs(planners)])

@@ -16,7 +16,11 @@ from ipp_toolkit.belief.gain import (
     recomputed_footprint_sums,
 )
 from ipp_toolkit.belief.interest import BlockMeanCache, InterestSmoother, block_means
-from ipp_toolkit.belief.mapping import false_positive_gain, interesting_gain
+from ipp_toolkit.belief.mapping import (
+    false_positive_gain,
+    false_positive_term_applies,
+    interesting_gain,
+)
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.sim.features import footprint_gain, gain_planes
 from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission
@@ -420,3 +424,9 @@ def test_block_mean_cache_takes_the_whole_maps_where_the_order_is_unchecked(monk
     cache = BlockMeanCache(state.maps, 4, 1)
     assert not cache.incremental
     np.testing.assert_array_equal(cache.means(), state.maps.prob[:4])
+
+
+def test_the_false_positive_term_applies_in_the_last_steps_only_when_limited():
+    assert false_positive_term_applies(15, None) and false_positive_term_applies(15, 0)
+    assert not false_positive_term_applies(11, 10)
+    assert false_positive_term_applies(10, 10) and false_positive_term_applies(1, 10)

@@ -40,6 +40,7 @@ __all__ = [
     "expected_gain",
     "OUTCOME_WEIGHTINGS",
     "false_positive_gain",
+    "false_positive_term_applies",
     "interesting_gain",
 ]
 
@@ -535,6 +536,12 @@ def interesting_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,
     gain0 *= np.float32(1.0) - a
     gain1 += gain0
     return gain1
+
+
+def false_positive_term_applies(steps_left: int, last_steps: int | None) -> bool:
+    """Whether the false-positive term counts with ``steps_left`` steps of the budget to go,
+    when it is kept to the mission's last ``last_steps`` steps (None or 0: every step)."""
+    return not last_steps or steps_left <= last_steps
 
 
 def false_positive_gain(logodds: np.ndarray, prob: np.ndarray, entropy: np.ndarray,

@@ -17,6 +17,7 @@ import numpy as np
 from ..belief.field_prior import shared_prior
 from ..belief.gain import FootprintGainCache
 from ..belief.interest import BlockMeanCache, interest_smoother, square_cells
+from ..belief.mapping import false_positive_term_applies
 from ..config.schema import ACTOR_PLANES, GAIN_INTEREST_SMOOTHED, FeatureConfig
 from .mission import MissionState
 from .team import ACTION_DELTAS, N_ACTIONS
@@ -228,7 +229,7 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     false_positive = features.gain_false_positive if false_positive is None else false_positive
     if false_positive_steps is None:
         false_positive_steps = features.gain_false_positive_steps
-    if 0 < false_positive_steps < state.budget - state.step:
+    if not false_positive_term_applies(state.budget - state.step, false_positive_steps):
         false_positive = 0.0  # the clean-up of the last steps has not begun
     learned = interest != GAIN_INTEREST_SMOOTHED
     objective = "interesting" if smoothing > 0 or learned else "ig"
