@@ -220,3 +220,19 @@ def test_a_bad_gain_false_positive_on_the_command_line_exits_2_naming_it(tmp_pat
     if shown is not None:
         assert f"features.gain_false_positive = {shown}" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("value, message", [
+    ("-1", "features.gain_false_positive_steps = -1: must be an integer >= 0"),
+    ("1.5", "gain_false_positive_steps takes an integer"),
+])
+def test_a_bad_gain_false_positive_steps_on_the_command_line_exits_2_naming_it(
+        tmp_path, capsys, value, message):
+    from coma.cli import main as coma_main
+
+    out = tmp_path / "run"
+    assert coma_main(["--out", str(out), "--feature", "gain=true",
+                      "--feature", f"gain_false_positive_steps={value}"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not out.exists()
