@@ -165,6 +165,12 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
     "learned-mixture": {
         **_SPLIT_FLAGS, "timesteps": 600_000, "gain_prior": 20.0,
         "config": str(CHECKPOINTS / "ppo_learned_mixture_4agents_d25.yaml")},
+    # learned-mixture's run on planes that also value cleaning up likely false positives in
+    # the last 10 steps (ig_learned's default objective): seed 1 of three, its final policy
+    # (600,000 asked for, 600,064 trained: whole rollouts of 2,048).
+    "learned-cleanup": {
+        **_SPLIT_FLAGS, "timesteps": 600_064, "gain_prior": 20.0, "seed": 1,
+        "config": str(CHECKPOINTS / "ppo_learned_cleanup_4agents_d25.yaml")},
 }
 
 

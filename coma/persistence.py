@@ -51,14 +51,17 @@ SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 #: (``features.gain_smoothing`` = 5 m), its residual trained by COMA on the terrain mixture.
 #: ``learned-mixture``: the same recipe over ``ig_learned``'s objective
 #: (``features.gain_interest = learned``: the learned field prior in the gain planes).
+#: ``learned-cleanup``: ``learned-mixture``'s recipe on planes that also value re-measuring
+#: likely false positives in the last steps (``features.gain_false_positive``).
 #: Removed names (``mixed``) are refused with a hint: ``ipp_toolkit.planners.REMOVED_NAMES``.
 SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
                     "prior-mixture": "coma_prior_mixture_4agents_d25.pt",
                     "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt",
-                    "learned-mixture": "coma_learned_mixture_4agents_d25.pt"}
+                    "learned-mixture": "coma_learned_mixture_4agents_d25.pt",
+                    "learned-cleanup": "coma_learned_cleanup_4agents_d25.pt"}
 #: The shipped policy the ``coma`` planner flies by default: the best on validation missions
 #: (4 UAVs, 25 m, every terrain family at r_M = 0.5 m; docs/generalisation.md).
-DEFAULT_SHIPPED = "learned-mixture"
+DEFAULT_SHIPPED = "learned-cleanup"
 
 
 @dataclass

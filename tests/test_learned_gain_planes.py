@@ -236,3 +236,35 @@ def test_a_bad_gain_false_positive_steps_on_the_command_line_exits_2_naming_it(
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_the_default_ig_learned_and_coma_clean_up_in_the_same_last_steps():
+    """``ig_learned``'s default objective and the default ``coma``'s planes are the same: the
+    learned prior with the false-positive term in the last 10 steps; the prior alone stays one
+    option away, and the default ``coma`` flies ``ig_learned``'s planes' argmax for agent 0
+    (its residual is the untrained one its recipe selected)."""
+    from baselines.learned_prior import LearnedPriorPlanner
+    from coma.persistence import load_policy
+    from ipp_toolkit.planners import make_planner, planner_views
+
+    default = LearnedPriorPlanner()
+    assert (default.false_positive_weight, default.false_positive_steps) == (0.5, 10)
+    assert LearnedPriorPlanner(false_positive_weight=0).false_positive_weight == 0
+    coma = make_planner("coma")
+    trained = load_policy(coma.checkpoint)[0].env_config
+    features = trained.features
+    assert (features.gain_interest, features.gain_false_positive,
+            features.gain_false_positive_steps) == ("learned", 0.5, 10)
+    config = trained.replace(world={"resolution": 1.0})
+    for planner in (default, coma):
+        planner.reset(config, 0)
+    alone = LearnedPriorPlanner(false_positive_weight=0)
+    alone.reset(config, 0)
+    state = reset_mission(config, seed=0, mission=9)  # where the clean-up changes agent 0
+    changed = 0
+    while not state.done:
+        ours = default.act(planner_views(state, default))
+        assert coma.act(planner_views(state, coma))[0] == ours[0]
+        changed += alone.act(planner_views(state, alone))[0] != ours[0]
+        step_mission(state, ours)
+    assert changed > 0
