@@ -9,13 +9,13 @@ UAV's own local map, how likely each 2 m block is to be interesting, having lear
 shapes fields take (straight boundaries continue, hotspots have sizes) from simulator ground
 truth (``ipp-train prior``). No policy is learned: the decision is still the greedy argmax.
 
-In the last 10 of the 15 steps a cell the map holds above 0.5 that the prior doubts is given
-value too (``false_positive_weight`` 0.5, ``false_positive_steps`` 10,
-:class:`~baselines.spatial_gain.SpatialGainPlanner`): the entropy over interesting cells never
-counts such a false positive, the final F1 does. Cleaning up late keeps the F1 of
-``ig_spatial`` at a small cost in entropy; the same term on every step cost split too much
-(docs/field-prior.md). ``false_positive_weight=0`` flies the prior's objective
-alone.
+In the mission's last 10 steps (of 15 in the paper's missions) a cell the map holds above 0.5
+that the prior doubts is given value too (``false_positive_weight`` 0.5,
+``false_positive_steps`` 10, :class:`~baselines.spatial_gain.SpatialGainPlanner`): the entropy
+over interesting cells never counts such a false positive, the final F1 does. Cleaning up
+late keeps the F1 of ``ig_spatial`` at a small cost in entropy; the same term on every step
+cost split too much (docs/field-prior.md). ``false_positive_weight=0`` flies the prior's
+objective alone.
 
 ``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON
 record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read

@@ -59,8 +59,9 @@ SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY
                     "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt",
                     "learned-mixture": "coma_learned_mixture_4agents_d25.pt",
                     "learned-cleanup": "coma_learned_cleanup_4agents_d25.pt"}
-#: The shipped policy the ``coma`` planner flies by default: the best on validation missions
-#: (4 UAVs, 25 m, every terrain family at r_M = 0.5 m; docs/generalisation.md).
+#: The shipped policy the ``coma`` planner flies by default: chosen on validation missions
+#: (4 UAVs, 25 m, every terrain family and the team settings at r_M = 0.5 m; how:
+#: docs/field-prior.md).
 DEFAULT_SHIPPED = "learned-cleanup"
 
 

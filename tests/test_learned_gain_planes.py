@@ -244,14 +244,13 @@ def test_the_default_ig_learned_and_coma_clean_up_in_the_same_last_steps():
     option away, and the default ``coma`` flies ``ig_learned``'s planes' argmax for agent 0
     (its residual is the untrained one its recipe selected)."""
     from baselines.learned_prior import LearnedPriorPlanner
-    from coma.persistence import load_policy
     from ipp_toolkit.planners import make_planner, planner_views
 
     default = LearnedPriorPlanner()
     assert (default.false_positive_weight, default.false_positive_steps) == (0.5, 10)
     assert LearnedPriorPlanner(false_positive_weight=0).false_positive_weight == 0
     coma = make_planner("coma")
-    trained = load_policy(coma.checkpoint)[0].env_config
+    trained = coma.trained_config
     features = trained.features
     assert (features.gain_interest, features.gain_false_positive,
             features.gain_false_positive_steps) == ("learned", 0.5, 10)
