@@ -14,7 +14,7 @@ that the prior doubts is given value too (``false_positive_weight`` 0.5,
 ``false_positive_steps`` 10, :class:`~baselines.spatial_gain.SpatialGainPlanner`): the entropy
 over interesting cells never counts such a false positive, the final F1 does. Cleaning up
 late keeps the F1 of ``ig_spatial`` at a small cost in entropy; the same term on every step
-cost split too much (docs/field-prior.md). ``false_positive_weight=0`` flies the prior's
+cost split too much (docs/field-prior-cleanup.md). ``false_positive_weight=0`` flies the prior's
 objective alone.
 
 ``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON

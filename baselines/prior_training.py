@@ -10,7 +10,9 @@ visits (DAgger-style rounds):
    labels; fly the same number of validation missions alike;
 2. train the network on everything recorded so far (cross-entropy against the block shares,
    weighted by the share of each block inside the area), ``epochs`` passes;
-3. round r > 0: fly ``ig_learned`` with the best prior so far, record, train again.
+3. round r > 0: fly ``ig_learned`` with the best prior so far, record, train again; with
+   ``cleanup`` it flies ``ig_learned``'s default objective (the prior plus its clean-up of
+   likely false positives in the last steps), otherwise the prior's objective alone.
 
 Missions cycle over the team settings (``team_sizes`` x ``comm_ranges``) on the ``terrain``
 (the mixture of every family by default), so 2-, 4- and 8-UAV maps are equally many.
@@ -92,6 +94,9 @@ class PriorTrainingConfig:
         batch_size, learning_rate: Adam's minibatch and step size.
         width: the network's channels (:class:`PriorNetConfig`).
         seed: run seed (missions, agent choice, shuffling, initial weights).
+        cleanup: rounds r > 0 fly ``ig_learned`` with its default clean-up, so the prior
+            learns on the maps the deployed planner makes (False: the prior's objective
+            alone, as the shipped prior was trained).
     """
 
     rounds: int = 3
@@ -105,6 +110,7 @@ class PriorTrainingConfig:
     learning_rate: float = 2e-3
     width: int = 8
     seed: int = 0
+    cleanup: bool = False
 
     def __post_init__(self) -> None:
         for name in POSITIVE_FIELDS:
@@ -113,6 +119,8 @@ class PriorTrainingConfig:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        if not isinstance(self.cleanup, bool):
+            raise ValueError(f"cleanup must be True or False, got {self.cleanup!r}")
         if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
             raise ValueError(f"learning_rate must be a positive number, "
                              f"got {self.learning_rate!r}")
@@ -304,7 +312,7 @@ def _train(config: PriorTrainingConfig, env_config: EnvConfig, out: Path,
     started = time.perf_counter()
     for round_ in range(done_round, config.rounds):
         if len(train_parts) <= round_:
-            planner = _round_planner(out, round_)
+            planner = _round_planner(out, round_, config.cleanup)
             for namespace, parts, count in (("train", train_parts, config.missions),
                                             ("validation", validation_parts,
                                              config.validation_missions)):
@@ -346,11 +354,13 @@ def _train(config: PriorTrainingConfig, env_config: EnvConfig, out: Path,
     return out / "best.pt"
 
 
-def _round_planner(out: Path, round_: int) -> Planner:
-    """``ig_spatial`` in round 0, ``ig_learned`` with the best prior so far after it (the
-    prior's objective alone: no false-positive term)."""
+def _round_planner(out: Path, round_: int, cleanup: bool) -> Planner:
+    """``ig_spatial`` in round 0, ``ig_learned`` with the best prior so far after it: its
+    default objective with ``cleanup``, else the prior's objective alone."""
     if round_ == 0 or not (out / "best.pt").is_file():
         return SpatialGainPlanner()
+    if cleanup:
+        return LearnedPriorPlanner(out / "best.pt")
     return LearnedPriorPlanner(out / "best.pt", false_positive_weight=0.0)
 
 
@@ -393,6 +403,9 @@ def _open_run(out: Path, record: dict[str, Any], resume: bool, found: frozenset[
         stored = json.loads(config_path.read_text(encoding="utf-8"))
         if stored.get("kind") != PRIOR_COMMAND:
             raise ValueError(f"{str(out)!r} holds another command's run, not a prior's")
+        # A run recorded before a setting existed ran it at its default.
+        if isinstance(stored.get("training"), dict):
+            stored["training"] = {**PriorTrainingConfig().to_json(), **stored["training"]}
         for key in ("training", "env"):
             if stored.get(key) != json.loads(json.dumps(record[key])):
                 raise ValueError(f"--resume: the settings differ from the run in {str(out)!r} "
@@ -461,6 +474,10 @@ def _parser() -> argparse.ArgumentParser:
                         default="0,25,inf", metavar="D,D,...",
                         help="communication ranges (metres, inf) missions cycle over "
                              "(default: 0,25,inf)")
+    parser.add_argument("--cleanup", action="store_true",
+                        help="later rounds fly ig_learned with its clean-up of likely false "
+                             "positives in the last steps (default: the prior's objective "
+                             "alone)")
     parser.add_argument("--config", help="YAML mission config (world, terrain, sensor, ...)")
     parser.add_argument("--terrain", default=None, metavar="KIND",
                         help="terrain of the missions (default: mixture)")

@@ -43,6 +43,32 @@ def _is_number(value: Any) -> bool:
         and math.isfinite(value)
 
 
+def _float_or_text(text: str) -> float | str:
+    """``text`` as a float where it reads as one, else as is (refused by the caller)."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _resolutions(value: Any) -> tuple[float, ...]:
+    """``validation_resolutions`` as a tuple of metres, from a list, one number
+    (``--set validation_resolutions=0.1``) or a ``+``-separated text (``0.1+0.5``)."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        value = (value,)
+    if isinstance(value, str):
+        value = tuple(_float_or_text(t) for t in value.split("+") if t)
+    if not isinstance(value, list | tuple):
+        _fail("validation_resolutions", value, "must be a list of metres")
+    for metres in value:
+        if not _is_number(metres) or metres <= 0:
+            _fail("validation_resolutions", tuple(value),
+                  f"{metres!r} is not a positive number of metres")
+    if len(set(value)) != len(value):
+        _fail("validation_resolutions", tuple(value), "repeats a value")
+    return tuple(value)
+
+
 def _fail(name: str, value: Any, why: str) -> NoReturn:
     raise ValueError(f"invalid COMA config: {name} = {value!r}: {why}")
 
@@ -167,6 +193,11 @@ class COMAConfig:
         validation_terrains: terrain kinds of the validation missions, each flown in every
             setting (``()``: the training terrain), e.g. ``("split", "blobs", "fractal",
             "real")`` to select on every family.
+        validation_resolutions: map resolutions (metres per cell) the validation missions are
+            flown at, each in every validation setting (``()``: the training resolution),
+            e.g. ``(0.1, 0.5)`` to select a policy trained at 0.5 m on the paper's 0.1 m maps
+            too (a policy's lead can shrink at another resolution). Missions at 0.1 m cost
+            several times those at 0.5 m.
         selection: how ``best.pt`` is chosen: ``mean`` (lowest mean final entropy over the
             validation settings) or ``worst_vs_ig`` (lowest worst-case, over validation
             terrains and settings, of the mean final entropy minus ``ig``'s on the same
@@ -214,6 +245,7 @@ class COMAConfig:
     gain_prior: float = 0.0
     residual_penalty: float = 0.0
     validation_terrains: tuple[str, ...] = ()
+    validation_resolutions: tuple[float, ...] = ()
     selection: str = "mean"
     precision: str = "float32"
 
@@ -227,6 +259,8 @@ class COMAConfig:
             object.__setattr__(self, "validation_terrains", tuple(
                 t for t in self.validation_terrains.split("+") if t))
         object.__setattr__(self, "validation_terrains", tuple(self.validation_terrains))
+        object.__setattr__(self, "validation_resolutions",
+                           _resolutions(self.validation_resolutions))
         if self.selection not in ("mean", "worst_vs_ig"):
             _fail("selection", self.selection, "choose 'mean' or 'worst_vs_ig'")
         if self.precision not in PRECISIONS:

@@ -434,6 +434,7 @@ class _Run:
         if self.reference is not None:
             run_info["validation_reference"] = {
                 "planner": "ig", "terrains": [c.terrain.kind for c in self.checks],
+                "resolutions": [c.world.resolution for c in self.checks],
                 "final_entropy": self.reference}
         if warm_start is None and cfg.warm_start.enabled:
             warm_start = cfg.warm_start

@@ -61,7 +61,7 @@ SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY
                     "learned-cleanup": "coma_learned_cleanup_4agents_d25.pt"}
 #: The shipped policy the ``coma`` planner flies by default: chosen on validation missions
 #: (4 UAVs, 25 m, every terrain family and the team settings at r_M = 0.5 m; how:
-#: docs/field-prior.md).
+#: docs/field-prior-cleanup.md).
 DEFAULT_SHIPPED = "learned-cleanup"
 
 

@@ -136,11 +136,16 @@ def validate(actor: nn.Module, settings: Sequence[EnvConfig],
 def validation_settings(coma_config: COMAConfig, settings: Sequence[EnvConfig]
                         ) -> list[EnvConfig]:
     """The validation missions' configs: every training setting on every validation terrain
-    (``coma_config.validation_terrains``; none: the settings themselves)."""
-    if not coma_config.validation_terrains:
-        return list(settings)
-    return [config.replace(terrain={"kind": kind}) for config in settings
-            for kind in coma_config.validation_terrains]
+    (``coma_config.validation_terrains``) at every validation resolution
+    (``coma_config.validation_resolutions``); none of either: the settings themselves."""
+    checks = list(settings)
+    if coma_config.validation_terrains:
+        checks = [config.replace(terrain={"kind": kind}) for config in checks
+                  for kind in coma_config.validation_terrains]
+    if coma_config.validation_resolutions:
+        checks = [config.replace(world={"resolution": float(metres)}) for config in checks
+                  for metres in coma_config.validation_resolutions]
+    return checks
 
 
 def reference_scores(settings: Sequence[EnvConfig], seed: int, n_missions: int,

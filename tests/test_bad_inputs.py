@@ -138,6 +138,7 @@ def test_unknown_reset_option_is_named():
 @pytest.mark.parametrize("argv, message", [
     (["--terrain", "blob"], "terrain is one of split"),
     (["--set", "validation_terrains=split+blob"], "unknown terrain kind"),
+    (["--set", "validation_resolutions=0.1+0"], "validation_resolutions = (0.1, 0.0)"),
     (["--set", "selection=best"], "selection"),
     (["--set", "residual_penalty=-1"], "residual_penalty"),
     (["--init", "shipped:nope"], "unknown shipped policy 'nope'"),

@@ -493,8 +493,32 @@ def test_selection_by_the_worst_gap_to_ig_over_validation_terrains(tmp_path):
     best = load_policy(tmp_path / "run" / "best.pt")[1]
     assert best["validation"]["gap_worst"] <= min(gaps) + 1e-12
     assert tiny_coma(validation_terrains="split+real").validation_terrains == ("split", "real")
+    assert reference["resolutions"] == [env.world.resolution] * 2
     with pytest.raises(ValueError, match="selection"):
         tiny_coma(selection="best")
+
+
+def test_validation_at_other_resolutions_flies_every_check_at_each(tmp_path):
+    import json
+
+    from coma.validation import validation_settings
+
+    env = tiny_env(2)
+    config = tiny_coma(missions=4, validation_terrains=("split", "blobs"),
+                       validation_resolutions=(2.0, 1.0), selection="worst_vs_ig")
+    checks = validation_settings(config, [env])
+    assert [(c.terrain.kind, c.world.resolution) for c in checks] == [
+        ("split", 2.0), ("split", 1.0), ("blobs", 2.0), ("blobs", 1.0)]
+    train(config, env, tmp_path / "run", progress=False, tensorboard=False)
+    info = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert info["validation_reference"]["resolutions"] == [2.0, 1.0, 2.0, 1.0]
+    assert info["coma"]["validation_resolutions"] == [2.0, 1.0]
+    assert tiny_coma(validation_resolutions="0.1+0.5").validation_resolutions == (0.1, 0.5)
+    assert tiny_coma(validation_resolutions=0.1).validation_resolutions == (0.1,)
+    for bad, why in (("0.1+x", "'x' is not a positive number"),
+                     ((0.5, 0.5), "repeats a value"), ((-1.0,), "-1.0 is not a positive")):
+        with pytest.raises(ValueError, match=f"validation_resolutions = .*{why}"):
+            tiny_coma(validation_resolutions=bad)
 
 
 def test_coma_sees_what_the_pettingzoo_env_shows_on_the_same_missions():

@@ -230,3 +230,30 @@ def test_ipp_train_prior_refuses_another_command_s_folder(tmp_path, capsys):
     assert train_main(["prior", "--out", str(out), *TINY]) == 2
     assert "was made by ipp-compare" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == [".lock", "results.csv", "run.json"]
+
+
+def test_ipp_train_prior_cleanup_flies_the_deployed_objective_in_later_rounds(tmp_path):
+    import baselines.prior_training as training
+    from baselines.learned_prior import CLEANUP_WEIGHT
+    from reports.cli import train_main
+
+    out = tmp_path / "run"
+    assert train_main(["prior", "--out", str(out), *TINY, "--cleanup"]) == 0
+    assert json.loads((out / "config.json").read_text())["training"]["cleanup"] is True
+    assert type(training._round_planner(out, 0, True)).__name__ == "SpatialGainPlanner"
+    assert training._round_planner(out, 1, True).false_positive_weight == CLEANUP_WEIGHT
+    assert training._round_planner(out, 1, False).false_positive_weight == 0
+    with pytest.raises(ValueError, match="cleanup must be True or False, got 1"):
+        training.PriorTrainingConfig(cleanup=1)
+
+
+def test_ipp_train_prior_resumes_a_run_recorded_before_the_cleanup_setting(tmp_path):
+    from reports.cli import train_main
+
+    out = tmp_path / "run"
+    assert train_main(["prior", "--out", str(out), *TINY]) == 0
+    record = json.loads((out / "config.json").read_text())
+    del record["training"]["cleanup"]
+    (out / "config.json").write_text(json.dumps(record))
+    assert train_main(["prior", "--out", str(out), *TINY, "--resume"]) == 0
+    assert train_main(["prior", "--out", str(out), *TINY, "--cleanup", "--resume"]) == 2
