@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import math
-from functools import partial
 
 import numpy as np
 
-from ipp_toolkit.belief.gain import cell_objective, footprint_sums_in_box, gains_by_altitude
+from ipp_toolkit.belief.gain import footprint_sums_in_box, objective_table
 from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
+from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
 from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
 
@@ -32,12 +32,10 @@ def _bounding_box(rects: np.ndarray) -> Rect:
 def gain_table(config: EnvConfig, camera: Camera, objective: str,
                outcome_weighting: str = "predictive") -> ValueTable:
     """A table of the per-cell ``objective`` (:func:`~ipp_toolkit.belief.gain.cell_objective`)
-    by log-odds, one column ``altitude_z`` per altitude z of ``camera``."""
+    by log-odds, one column ``altitude_z`` per altitude z of ``camera``
+    (:func:`~ipp_toolkit.belief.gain.objective_table` of ``config``'s class weights)."""
     weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
-    derive = partial(gains_by_altitude, accuracy=camera.accuracy,
-                     delta_logodds=camera.delta_logodds,
-                     cell_gain=cell_objective(objective, weights, outcome_weighting))
-    return ValueTable(derive, [f"altitude_{z}" for z in range(len(camera.accuracy))])
+    return objective_table(weights, camera, objective, outcome_weighting)
 
 
 class InformationGainPlanner(Planner):
@@ -95,7 +93,7 @@ class InformationGainPlanner(Planner):
     #: :func:`~ipp_toolkit.belief.gain.cell_objective`).
     objective: str = "ig"
 
-    def __init__(self, overlap_discount: float = 0.5,
+    def __init__(self, overlap_discount: float = OVERLAP_DISCOUNT,
                  outcome_weighting: str = "predictive") -> None:
         if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
             raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
@@ -240,5 +238,5 @@ class PaperInformationGainPlanner(InformationGainPlanner):
 
     name = "ig_paper"
 
-    def __init__(self, overlap_discount: float = 0.5) -> None:
+    def __init__(self, overlap_discount: float = OVERLAP_DISCOUNT) -> None:
         super().__init__(overlap_discount, outcome_weighting="belief")

@@ -31,6 +31,7 @@ import numpy as np
 
 from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, prior_file, shared_prior
 from ipp_toolkit.planners import AgentView
+from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
 
 from .spatial_gain import SpatialGainPlanner
 
@@ -59,7 +60,8 @@ class LearnedPriorPlanner(SpatialGainPlanner):
     name = "ig_learned"
     needs_observations = False
 
-    def __init__(self, checkpoint: str | Path | None = None, overlap_discount: float = 0.5,
+    def __init__(self, checkpoint: str | Path | None = None,
+                 overlap_discount: float = OVERLAP_DISCOUNT,
                  false_positive_weight: float = CLEANUP_WEIGHT,
                  false_positive_steps: int | None = CLEANUP_STEPS) -> None:
         import torch

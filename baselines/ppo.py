@@ -319,7 +319,7 @@ def check_policy_size(channels: int, grid: int, width: int, features_dim: int, h
 class GainPriorExtractor(SmallCNN):
     """:class:`SmallCNN` features followed by each option's relative expected gain.
 
-    Output (B, features_dim + 6): the CNN's features, then ``gain(a) / max_a' gain(a')`` read
+    Output (B, features_dim + 6): the CNN's features, then ``gain(a) / |max_a' gain(a')|`` read
     from the ``gain`` planes at option a's waypoint
     (:func:`~ipp_toolkit.sim.features.option_gain_cells`; options outside the area read 0 and are
     masked). :class:`GainPriorMlpExtractor` passes the
@@ -343,7 +343,9 @@ class GainPriorExtractor(SmallCNN):
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         gains = observations[:, self.option_channel, self.option_row, self.option_col]
-        relative = gains / (gains.amax(dim=1, keepdim=True) + 1e-8)
+        # Over the best gain's magnitude: when every option's gain is negative the order
+        # stays the gains' order (the best reads -1).
+        relative = gains / (gains.amax(dim=1, keepdim=True).abs() + 1e-8)
         return torch.cat([super().forward(observations), relative], dim=1)
 
 

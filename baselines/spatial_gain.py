@@ -11,6 +11,7 @@ from ipp_toolkit.belief.mapping import false_positive_term_applies
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.planners import AgentView
+from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
 
 from .information_gain import InformationGainPlanner, gain_table
 
@@ -72,7 +73,7 @@ class SpatialGainPlanner(InformationGainPlanner):
     name = "ig_spatial"
     objective = "interesting"  # interesting_gain: weighted by interest_blocks in cell_gains
 
-    def __init__(self, sigma: float = 5.0, overlap_discount: float = 0.5,
+    def __init__(self, sigma: float = 5.0, overlap_discount: float = OVERLAP_DISCOUNT,
                  false_positive_weight: float = 0.0,
                  false_positive_steps: int | None = None) -> None:
         if not sigma > 0 or not math.isfinite(sigma):

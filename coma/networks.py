@@ -22,7 +22,7 @@ from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bfloat16_hardware", "bounded_softmax", "epsilon_at",
            "greedy_actions", "in_input_layout", "learning_forward", "masked_logits",
-           "mixed_precision"]
+           "mixed_precision", "relative_gains"]
 
 _KERNELS = (5, 4, 4)
 
@@ -158,7 +158,7 @@ def learning_forward(module: nn.Module, planes: torch.Tensor, precision: str) ->
 class GainPriorActor(nn.Module):
     """Actor whose logits are a learned residual over the ``ig`` planner's objective.
 
-    ``logits(u) = ConvNet(planes)(u) + beta * gain(u) / max_u' gain(u')``, where ``gain(u)`` is
+    ``logits(u) = ConvNet(planes)(u) + beta * gain(u) / |max_u' gain(u')|``, where ``gain(u)`` is
     read from the agent-centred ``gain`` planes (:func:`ipp_toolkit.sim.features.gain_planes`) at
     option u's waypoint: the horizontal moves next to the centre of ``gain_level``, up and
     down at the centre of ``gain_up`` / ``gain_down``. The ConvNet's output layer starts at
@@ -196,14 +196,18 @@ class GainPriorActor(nn.Module):
         self.in_channels = in_channels
         self.grid = grid
 
+    def plane_gains(self, planes: torch.Tensor) -> torch.Tensor:
+        """(B, C, G, G) planes -> (B, 6) each option's expected gain as the planes hold it.
+        Options outside the area read 0 (and are masked)."""
+        return planes[:, self.option_channel, self.option_row, self.option_col]
+
     def option_gains(self, planes: torch.Tensor) -> torch.Tensor:
         """(B, C, G, G) planes -> (B, 6) expected gain of each option over the best one's.
 
         Relative gains keep ``beta``'s effect the same late in a mission, when every
-        option's absolute gain has shrunk. Options outside the area read 0 (and are masked).
+        option's absolute gain has shrunk.
         """
-        gains = planes[:, self.option_channel, self.option_row, self.option_col]
-        return gains / (gains.amax(dim=1, keepdim=True) + 1e-8)
+        return relative_gains(self.plane_gains(planes))
 
     def parts(self, planes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, C, G, G) planes -> the (B, 6) residual and prior logits (their sum: forward)."""
@@ -212,6 +216,14 @@ class GainPriorActor(nn.Module):
     def forward(self, planes: torch.Tensor) -> torch.Tensor:
         residual, prior = self.parts(planes)
         return residual + prior
+
+
+def relative_gains(gains: torch.Tensor) -> torch.Tensor:
+    """(B, 6) options' gains -> the same over the best option's magnitude (the gain-prior
+    actors' prior term before its weight beta): the best option reads 1, or -1 when every
+    option's gain is negative (late in a mission, where only cells believed uninteresting
+    are left), so the order of the options is the order of their gains either way."""
+    return gains / (gains.amax(dim=1, keepdim=True).abs() + 1e-8)
 
 
 def bounded_softmax(logits: torch.Tensor, mask: torch.Tensor, eps: float) -> torch.Tensor:

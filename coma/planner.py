@@ -10,17 +10,19 @@ in :attr:`COMAPlanner.transfer_notes`).
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
 
 import numpy as np
 import torch
 
-from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig, FeatureConfig
 from ipp_toolkit.planners import AgentView, Planner, choose_for_views, policy_inputs
+from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT, TeammateDiscount
 
 from .config import mission_settings
-from .networks import masked_logits
+from .networks import GainPriorActor, masked_logits, relative_gains
 from .persistence import (
     DEFAULT_SHIPPED,
     check_transfer,
@@ -28,17 +30,25 @@ from .persistence import (
     resolve_policy,
 )
 
-__all__ = ["COMAPlanner", "COMAPriorPlanner"]
+__all__ = ["COMAPlanner", "COMAPriorPlanner", "choose_greedy", "teammate_discount"]
 
 
 class COMAPlanner(Planner):
     """Greedy (eps = 0, argmax over valid actions) COMA actor.
+
+    A gain-prior actor (:class:`~coma.networks.GainPriorActor`, whose logits add a learned
+    residual to the ``gain`` planes' values) decides with ``ig``'s discount of the cells
+    under heard, decided teammates' next footprints
+    (:class:`~ipp_toolkit.planners.discount.TeammateDiscount`): its untrained start then
+    chooses exactly what the ``ig`` planner of its planes' objective chooses.
 
     Args:
         checkpoint: a policy file (``best.pt`` / ``last.pt`` of ``ipp-train coma``) or a
             shipped policy by name, ``shipped:NAME`` (the keys of
             :data:`coma.persistence.SHIPPED_POLICIES`);
             default: the best validated shipped policy (``DEFAULT_SHIPPED``).
+        overlap_discount: a gain-prior actor's factor on covered cells, in [0, 1] (1: the
+            planes' values as they are, the choice before this rule); other actors ignore it.
     """
 
     name = "coma"
@@ -50,7 +60,8 @@ class COMAPlanner(Planner):
     #: For a deprecated alias: the spelling to use instead (warned at construction).
     deprecated = ""
 
-    def __init__(self, checkpoint: str | os.PathLike[str] | None = None):
+    def __init__(self, checkpoint: str | os.PathLike[str] | None = None,
+                 overlap_discount: float = OVERLAP_DISCOUNT):
         if self.deprecated:
             warnings.warn(f"planner {self.name!r} is deprecated; use {self.deprecated}",
                           DeprecationWarning, stacklevel=2)
@@ -68,6 +79,16 @@ class COMAPlanner(Planner):
         # Every (team size, range) the policy trained on, not only its base config's.
         self.trained_settings = mission_settings(networks.coma_config, networks.env_config)
         self.transfer_notes: list[str] = []
+        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
+            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
+        self.overlap_discount = float(overlap_discount)
+        # The discount reads each UAV's own local map.
+        self.needs_local_maps = self._discounts
+        self._discount: TeammateDiscount | None = None
+
+    @property
+    def _discounts(self) -> bool:
+        return isinstance(self.actor, GainPriorActor) and self.overlap_discount < 1.0
 
     def reset(self, config: EnvConfig, seed: int) -> None:
         # The trained setting closest to this mission: a team size or range that was trained
@@ -78,13 +99,71 @@ class COMAPlanner(Planner):
 
         trained = min(self.trained_settings, key=mismatches)
         self.transfer_notes = check_transfer(trained, config, self.checkpoint)
+        self._discount = teammate_discount(self.actor, config, self.observation_features,
+                                           self.overlap_discount)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) int64: each agent's likeliest valid action, chosen in agent order, avoiding
-        the 2-D targets heard lower-index teammates chose (``ig``'s rule; the actors' logits
-        come from one batched forward pass)."""
+        the 2-D targets heard lower-index teammates chose and, for a gain-prior actor,
+        discounting their footprints (``ig``'s rules; the actors' logits come from one
+        batched forward pass)."""
+        if self._discounts and self._discount is None:
+            raise RuntimeError("call reset(config, seed) before act()")
         observations, masks = policy_inputs(views)
-        return choose_for_views(masked_logits(self.actor, observations, masks), views)
+        return choose_greedy(self.actor, observations, masks, views, self._discount)
+
+
+def teammate_discount(actor: torch.nn.Module, config: EnvConfig, features: FeatureConfig,
+                      overlap_discount: float = OVERLAP_DISCOUNT) -> TeammateDiscount | None:
+    """The same-step discount a greedy ``actor`` decides with on missions of ``config``: a
+    gain-prior actor's over the planes of its ``features``; None for other actors or
+    ``overlap_discount`` 1."""
+    if not isinstance(actor, GainPriorActor) or overlap_discount == 1.0:
+        return None
+    return TeammateDiscount(config, features, overlap_discount)
+
+
+def choose_greedy(actor: torch.nn.Module, observations: np.ndarray, masks: np.ndarray,
+                  views: list[AgentView], discount: TeammateDiscount | None,
+                  scores: np.ndarray | None = None) -> np.ndarray:
+    """The deployed policy's joint action: each agent's likeliest valid action in agent
+    order, avoiding heard decided teammates' targets (``ig``'s rule) and, with ``discount``,
+    valuing the gain-prior term's cells under their footprints as ``ig`` does.
+
+    Args:
+        actor: the actor network.
+        observations: (N, C, G, G) float32 actor planes of the N agents.
+        masks: (N, 6) valid actions.
+        views: the agents' views (with local maps when ``discount`` is given).
+        discount: :func:`teammate_discount` of the actor and mission, or None.
+        scores: (N, 6) :func:`~coma.networks.masked_logits` of these planes when already
+            computed (e.g. in a larger batch).
+
+    Returns:
+        (N,) int64 actions, each valid.
+    """
+    if scores is None:
+        scores = masked_logits(actor, observations, masks)
+    if discount is None:
+        return choose_for_views(scores, views)
+    assert isinstance(actor, GainPriorActor)
+    with torch.no_grad():
+        planes = torch.as_tensor(observations, dtype=torch.float32)
+        residual = actor.residual(planes)
+        gains = actor.plane_gains(planes).numpy()
+        beta = actor.log_beta.exp()
+    discount.start_step(views)
+
+    def rescore(k: int, mate_targets: np.ndarray) -> np.ndarray:
+        if len(mate_targets) == 0:
+            return scores[k]  # nothing to discount: the forward pass's own logits
+        own = discount.discounted(views[k], gains[k], mate_targets)
+        with torch.no_grad():
+            prior = beta * relative_gains(torch.as_tensor(own[None], dtype=torch.float32))
+            logits = (residual[k:k + 1] + prior)[0].numpy()
+        return np.where(masks[k], logits, -np.inf)
+
+    return choose_for_views(scores, views, rescore)
 
 
 class COMAPriorPlanner(COMAPlanner):

@@ -19,6 +19,7 @@ import numpy as np
 from torch import nn
 
 from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.planners import agent_views
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.sim.features import actor_observations
 from ipp_toolkit.sim.mission import MissionGeometry, MissionState
@@ -26,6 +27,7 @@ from ipp_toolkit.sim.team import N_ACTIONS, choose_in_order
 
 from .config import COMAConfig
 from .networks import masked_logits
+from .planner import choose_greedy, teammate_discount
 from .rollout import actor_batches
 
 __all__ = ["GreedyFlights", "fly_greedy", "evaluate_greedy", "validate", "validation_settings",
@@ -72,9 +74,11 @@ def fly_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometr
     """Fly missions ``first_mission .. first_mission + n_missions - 1`` of run ``seed`` in
     lock-step (:func:`ipp_toolkit.sim.driver.fly_missions`) with the greedy policy and record
     each one (the actor scores the agents of each group of :func:`coma.rollout.actor_batches`
-    together, so a mission's record does not depend on the missions flown beside it)."""
+    together, so a mission's record does not depend on the missions flown beside it). The
+    policy decides as the ``coma`` planner flies it (:func:`coma.planner.choose_greedy`)."""
     features = env_config.features
     groups = actor_batches(first_mission, n_missions)
+    discount = teammate_discount(actor, env_config, features)
 
     def act(states: Sequence[MissionState]) -> np.ndarray:
         """(E, N) greedy actions of this step."""
@@ -84,9 +88,15 @@ def fly_greedy(actor: nn.Module, env_config: EnvConfig, geometry: MissionGeometr
             masked_logits(actor, obs[a:b].reshape(-1, *obs.shape[2:]),
                           masks[a:b].reshape(-1, N_ACTIONS)).reshape(b - a, -1, N_ACTIONS)
             for a, b in groups])
-        # As the coma planner flies: in agent order, avoiding heard teammates' targets.
-        return np.stack([choose_in_order(scores, s.positions, mask, s.heard)
-                         for scores, s, mask in zip(logits, states, masks, strict=True)])
+        # As the coma planner flies: in agent order, avoiding heard teammates' targets and,
+        # for a gain-prior actor, discounting their footprints.
+        if discount is None:
+            return np.stack([choose_in_order(scores, s.positions, mask, s.heard)
+                             for scores, s, mask in zip(logits, states, masks, strict=True)])
+        return np.stack([
+            choose_greedy(actor, planes, mask, agent_views(s, with_observations=False),
+                          discount, scores)
+            for planes, scores, s, mask in zip(obs, logits, states, masks, strict=True)])
 
     flight = fly_missions(start_missions(env_config, seed, first_mission, n_missions,
                                          namespace, geometry), act)

@@ -13,8 +13,8 @@ A cell is an ``ipp-compare`` folder (resumable); the study writes ``generalisati
 paired difference of every other planner to each reference planner (by default IG, the
 paper's baseline, and ``ig_spatial``, the best heuristic, where flown): mean ± standard error
 over missions and the share of missions ahead. A difference is **bold** where the planner is
-ahead by two standard errors (mean <= -2 SE). The figure plots the differences to the first
-reference only.
+ahead by two standard errors (mean < 0 and mean <= -2 SE; identical missions are level). The
+figure plots the differences to the first reference only.
 
 With ``backend="ray"`` every cell's missions fly as Ray tasks, on one Ray for the whole study
 (:func:`reports.studies.backend_session`).
@@ -109,7 +109,10 @@ def _paired_text(paired: Paired | None) -> str:
         return "-"
     se = f" ± {paired.se:.3f}" if math.isfinite(paired.se) else ""
     text = f"{paired.mean:+.3f}{se} ({100 * paired.win_rate:.0f} %)"
-    return f"**{text}**" if math.isfinite(paired.se) and paired.mean <= -2 * paired.se else text
+    # Strictly ahead: a planner that flies the reference's missions identically (mean and
+    # SE 0) is level, not ahead.
+    ahead = math.isfinite(paired.se) and paired.mean < 0 and paired.mean <= -2 * paired.se
+    return f"**{text}**" if ahead else text
 
 
 def _tables(cells: list[Cell], planners: list[str], references: Sequence[str],

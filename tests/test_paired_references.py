@@ -122,3 +122,13 @@ def test_a_summary_built_with_one_reference_still_renders_its_column():
                       missions=3, reference="ig", paired=paired)
     assert summary.paired_to == {"ig": paired}
     assert table_cells(to_markdown(summary))["mine"][-2] == "-0.200 ± 0.050 (100 %)"
+
+
+def test_only_a_planner_ahead_by_two_standard_errors_is_bold_not_an_identical_one():
+    from reports.generalisation import _paired_text
+
+    assert _paired_text(Paired(-0.02, 0.01, 0.7, 50)).startswith("**")
+    assert not _paired_text(Paired(-0.019, 0.01, 0.7, 50)).startswith("**")
+    # The same missions flown identically: mean and SE 0, level rather than ahead.
+    assert _paired_text(Paired(0.0, 0.0, 0.0, 50)) == "+0.000 ± 0.000 (0 %)"
+    assert not _paired_text(Paired(0.02, 0.005, 0.1, 50)).startswith("**")

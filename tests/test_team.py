@@ -157,3 +157,28 @@ def test_choose_in_order_on_a_hand_sized_case():
     alone = np.eye(2, dtype=bool)
     assert choose_in_order(scores, positions, masks, alone).tolist() == [
         east, ACTION_NAMES.index("west")]
+
+
+def test_choose_in_order_rescores_each_agent_with_its_decided_teammates_targets():
+    """``rescore(k, targets)`` replaces agent k's scores and is given the next waypoints of
+    exactly the heard teammates that decided before it."""
+    from ipp_toolkit.sim.team import ACTION_NAMES, choose_in_order
+
+    east, north, south = (ACTION_NAMES.index(name) for name in ("east", "north", "south"))
+    positions = np.array([[1, 2, 1], [3, 2, 1], [5, 5, 1]])
+    scores = np.zeros((3, 6))
+    scores[:, east] = 1.0
+    masks = np.ones((3, 6), dtype=bool)
+    hears = np.ones((3, 3), dtype=bool)
+    hears[2, 0] = False  # agent 2 hears agent 1 only
+    seen: dict[int, list[list[int]]] = {}
+
+    def rescore(k: int, targets: np.ndarray) -> np.ndarray:
+        seen[k] = targets.tolist()
+        own = scores[k].copy()
+        own[north if len(targets) else south] = 2.0
+        return own
+
+    actions = choose_in_order(scores, positions, masks, hears, rescore)
+    assert seen == {0: [], 1: [[1, 1, 1]], 2: [[3, 3, 1]]}
+    assert actions.tolist() == [south, north, north]

@@ -246,6 +246,9 @@ class FieldPrior:
         self.network = network.eval()
         self.config = config
         self.record = dict(record or {})
+        # The last square_values call: (resolution, size, squares, result). The gain planes
+        # and a planner's teammate discount ask for the same team's squares in one step.
+        self._last_squares: tuple[float, int, np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> FieldPrior:
@@ -306,9 +309,18 @@ class FieldPrior:
     def square_values(self, squares: np.ndarray, resolution: float, size: int) -> np.ndarray:
         """(N, H / s, W / s) float32 prior on the maps' ~0.5 m squares, from their means
         (:func:`square_inputs`): :meth:`fine_values` with ``fine_cells`` = s, without the
-        maps' cells (``size`` = H = W)."""
+        maps' cells (``size`` = H = W). The result is read-only: asked again for the same
+        squares (the last call's, compared value by value), it is returned without a second
+        forward pass."""
+        last = self._last_squares
+        if (last is not None and last[0] == resolution and last[1] == size
+                and last[2].shape == squares.shape and np.array_equal(last[2], squares)):
+            return last[3]
         coarse = self._forward(square_inputs(squares, resolution, size))
-        return self._resampled(coarse, resolution, size, _sub_block(resolution, size))
+        result = self._resampled(coarse, resolution, size, _sub_block(resolution, size))
+        result.flags.writeable = False
+        self._last_squares = (resolution, size, np.array(squares, copy=True), result)
+        return result
 
     @staticmethod
     def _resampled(coarse: np.ndarray, resolution: float, size: int,

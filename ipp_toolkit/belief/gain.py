@@ -58,10 +58,10 @@ from .mapping import (
     false_positive_gain,
     interesting_gain,
 )
-from .value_table import DerivedMemo, exact_memo
+from .value_table import DerivedMemo, ValueTable, exact_memo
 
 __all__ = ["CellGain", "FootprintGainCache", "OBJECTIVES", "cell_objective",
-           "footprint_sums", "footprint_sums_in_box", "gains_by_altitude",
+           "footprint_sums", "footprint_sums_in_box", "gains_by_altitude", "objective_table",
            "recomputed_footprint_sums"]
 
 #: (logodds, prob, entropy, accuracy, delta_logodds) -> per-cell gain, all (..., h, w) float32.
@@ -112,6 +112,17 @@ def gains_by_altitude(logodds: np.ndarray, accuracy: np.ndarray, delta_logodds: 
         prob, entropy = belief_columns(logodds)[:2]
     return [cell_gain(logodds, prob, entropy, accuracy[z], delta_logodds[z])
             for z in range(len(accuracy))]
+
+
+def objective_table(weights: tuple[float, float], camera: Camera, objective: str,
+                    outcome_weighting: str = "predictive") -> ValueTable:
+    """A table of the per-cell ``objective`` (:func:`cell_objective` of the class ``weights``
+    and ``outcome_weighting``) by log-odds, one column ``altitude_z`` per altitude z of
+    ``camera``: the gain-based planners look a map's cells up in it by value."""
+    derive = partial(gains_by_altitude, accuracy=camera.accuracy,
+                     delta_logodds=camera.delta_logodds,
+                     cell_gain=cell_objective(objective, weights, outcome_weighting))
+    return ValueTable(derive, [f"altitude_{z}" for z in range(len(camera.accuracy))])
 
 
 def footprint_sums(cells: np.ndarray, rects: np.ndarray) -> np.ndarray:

@@ -31,8 +31,8 @@ import numpy as np
 if TYPE_CHECKING:
     from .mapping import BeliefMaps
 
-__all__ = ["BlockMeanCache", "InterestSmoother", "block_means", "interest_smoother",
-           "smoothing_matrix", "square_cells"]
+__all__ = ["BlockMeanCache", "InterestSmoother", "block_means", "block_window",
+           "interest_smoother", "smoothing_matrix", "square_cells"]
 
 #: Side of the blocks the probabilities are averaged over before smoothing, in metres.
 BLOCK_METRES = 0.5
@@ -114,6 +114,14 @@ def _ordered_matches_numpy(shape: tuple[int, ...], block: int) -> bool:
     return _ORDER_CHECKED[key]
 
 
+def block_window(block_values: np.ndarray, block: int, rows: slice, cols: slice) -> np.ndarray:
+    """The per-cell values inside ``[rows, cols]`` of values given on ``block`` x ``block``
+    squares of cells ((H / block, W / block), one map), without expanding the whole map."""
+    r = np.arange(rows.start, rows.stop) // block
+    c = np.arange(cols.start, cols.stop) // block
+    return block_values[r[:, None], c[None, :]]
+
+
 class InterestSmoother:
     """pi = Gaussian-smoothed probability of the interesting class, per cell.
 
@@ -158,10 +166,7 @@ class InterestSmoother:
 
         Equal to ``self(prob)[rows, cols]`` without repeating the whole map back to cells.
         """
-        b = self.block
-        r = np.arange(rows.start, rows.stop) // b
-        c = np.arange(cols.start, cols.stop) // b
-        return block_values[r[:, None], c[None, :]]
+        return block_window(block_values, self.block, rows, cols)
 
 
 @functools.lru_cache(maxsize=16)

@@ -218,7 +218,9 @@ def policy_inputs(views: Sequence[AgentView], expected_shape: tuple[int, ...] | 
     return observations, masks
 
 
-def choose_for_views(scores: np.ndarray, views: Sequence[AgentView]) -> np.ndarray:
+def choose_for_views(scores: np.ndarray, views: Sequence[AgentView],
+                     rescore: Callable[[int, np.ndarray], np.ndarray] | None = None
+                     ) -> np.ndarray:
     """Each agent's best valid option, chosen in agent order like ``ig`` chooses.
 
     A learned planner scores every agent's options in one batched pass, then decides in
@@ -229,6 +231,8 @@ def choose_for_views(scores: np.ndarray, views: Sequence[AgentView]) -> np.ndarr
     Args:
         scores: (N, 6) values of the agents' options (logits, Q-values); higher is better.
         views: the N agents' views at this decision point.
+        rescore: optional ``rescore(k, targets)`` -> agent k's (6,) scores given its decided
+            teammates' (K, 3) targets, as for :func:`~ipp_toolkit.sim.team.choose_in_order`.
 
     Returns:
         (N,) int64 actions, each valid.
@@ -239,7 +243,7 @@ def choose_for_views(scores: np.ndarray, views: Sequence[AgentView]) -> np.ndarr
         heard[k, view.teammates] = True
     positions = np.stack([view.position for view in views])
     masks = np.stack([view.mask for view in views]).astype(bool)
-    return choose_in_order(np.asarray(scores), positions, masks, heard)
+    return choose_in_order(np.asarray(scores), positions, masks, heard, rescore)
 
 
 def planner_views(state: MissionState, planner: Planner) -> list[AgentView]:

@@ -18,7 +18,8 @@ from ..belief.field_prior import shared_prior
 from ..belief.gain import FootprintGainCache
 from ..belief.interest import BlockMeanCache, interest_smoother, square_cells
 from ..belief.mapping import false_positive_term_applies
-from ..config.schema import ACTOR_PLANES, GAIN_INTEREST_SMOOTHED, FeatureConfig
+from ..config.schema import ACTOR_PLANES, GAIN_INTEREST_SMOOTHED, FeatureConfig, RewardConfig
+from ..world.sensor import Camera
 from .mission import MissionState
 from .team import ACTION_DELTAS, N_ACTIONS
 
@@ -28,6 +29,8 @@ __all__ = [
     "gain_plane_channels",
     "option_gain_cells",
     "footprint_gain",
+    "gain_normaliser",
+    "plane_objective",
     "gain_planes",
     "state_plane_names",
     "critic_plane_names",
@@ -232,7 +235,7 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     if not false_positive_term_applies(state.budget - state.step, false_positive_steps):
         false_positive = 0.0  # the clean-up of the last steps has not begun
     learned = interest != GAIN_INTEREST_SMOOTHED
-    objective = "interesting" if smoothing > 0 or learned else "ig"
+    objective = plane_objective(smoothing, interest)
     cache = _footprint_cache(state, "gain_cache", objective)
     if objective == "interesting":
         world = state.config.world
@@ -250,11 +253,26 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
         if false_positive > 0:
             checking = _footprint_cache(state, "false_positive_cache", "false_positive")
             sums += false_positive * checking.weighted_sums(1.0 - weight, block)
-        scale = 1.0
     else:
         sums = cache.sums()
+    return (sums / gain_normaliser(reward, state.geometry.camera, objective)).astype(np.float32)
+
+
+def plane_objective(smoothing: float, interest: str) -> str:
+    """The per-cell objective (:data:`~ipp_toolkit.belief.gain.OBJECTIVES`) the ``gain`` planes
+    sum: ``interesting`` weighted by a probability of interest when it is smoothed
+    (``smoothing`` > 0 metres) or learned (``interest`` not ``smoothed``), else ``ig``."""
+    return "interesting" if smoothing > 0 or interest != GAIN_INTEREST_SMOOTHED else "ig"
+
+
+def gain_normaliser(reward: RewardConfig, camera: Camera, objective: str) -> float:
+    """What :func:`footprint_gain` divides a footprint's sum of the per-cell ``objective`` by:
+    the cell count of the largest footprint, times the larger class weight for ``ig``, so
+    the gain lies in [0, 1] whatever the map resolution."""
+    scale = 1.0
+    if objective != "interesting":
         scale = max(reward.weight_interesting, reward.weight_uninteresting, 1e-12)
-    return (sums / (state.geometry.camera.largest_footprint_cells * scale)).astype(np.float32)
+    return camera.largest_footprint_cells * scale
 
 
 def _footprint_cache(state: MissionState, slot: str, objective: str) -> FootprintGainCache:

@@ -6,6 +6,8 @@ iz the flight level. Masks are the one owner of "which action is valid" in the t
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 __all__ = [
@@ -93,7 +95,9 @@ def unclaimed_options(position: np.ndarray, mask: np.ndarray,
 
 
 def choose_in_order(scores: np.ndarray, positions: np.ndarray, masks: np.ndarray,
-                    heard: np.ndarray) -> np.ndarray:
+                    heard: np.ndarray,
+                    rescore: Callable[[int, np.ndarray], np.ndarray] | None = None
+                    ) -> np.ndarray:
     """Each agent's best option, chosen in agent order under :func:`unclaimed_options`.
 
     Args:
@@ -101,6 +105,10 @@ def choose_in_order(scores: np.ndarray, positions: np.ndarray, masks: np.ndarray
         positions: (N, 3) int waypoints.
         masks: (N, 6) valid actions.
         heard: (N, N) bool, ``heard[k, i]``: agent k hears agent i.
+        rescore: ``rescore(k, targets)`` -> agent k's (6,) scores given the (K, 3) next
+            waypoints its heard, already decided teammates chose (K may be 0); used instead
+            of ``scores[k]`` when given (``ig``'s discount of their footprints,
+            :class:`ipp_toolkit.planners.discount.TeammateDiscount`).
 
     Returns:
         (N,) int64 actions, each valid; ties go to the lowest action index.
@@ -112,7 +120,8 @@ def choose_in_order(scores: np.ndarray, positions: np.ndarray, masks: np.ndarray
     for k in range(n):
         mates = np.flatnonzero(heard[k, :k])  # heard and already decided
         allowed = unclaimed_options(positions[k], masks[k], targets[mates])
-        actions[k] = int(np.argmax(np.where(allowed, scores[k], -np.inf)))
+        own = scores[k] if rescore is None else rescore(k, targets[mates])
+        actions[k] = int(np.argmax(np.where(allowed, own, -np.inf)))
         targets[k] = positions[k] + ACTION_DELTAS[actions[k]]
     return actions
 

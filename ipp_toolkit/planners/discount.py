@@ -1,0 +1,175 @@
+"""``ig``'s discount of teammates' same-step footprints, for planners that read the gain planes.
+
+The ``ig`` family decides in agent order, and agent k values a cell that the next footprint
+of a heard, already decided teammate covers at ``overlap_discount`` (0.5) times its gain: the
+teammate will measure it this step. A learned planner that scores its options from the
+``gain`` planes (:func:`ipp_toolkit.sim.features.gain_planes`; the gain-prior actors of COMA
+and PPO) gets planes built before anyone decided, holding every option's whole gain.
+:class:`TeammateDiscount` gives such a planner the value ``ig``'s family would use: for agent
+k and the targets its decided teammates chose, each option's plane value minus
+``(1 - overlap_discount)`` times the part of it under their footprints, computed from agent
+k's own local map with the objective the planes were built with (``ig``'s, or
+``ig_spatial``'s / ``ig_learned``'s with a smoothed or learned probability of interest and the
+clean-up term). With the policy's own correction at zero, the planner then chooses what the
+``ig`` planner of the same objective chooses.
+
+Cost: nothing while no decided teammate is heard; otherwise the team's probability of
+interest (a learned prior answers from the gain planes' call of the same step, see
+:meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and a table look-up over
+the boxes of the options whose footprints a teammate's overlaps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..belief.field_prior import shared_prior
+from ..belief.gain import footprint_sums_in_box, objective_table
+from ..belief.interest import block_means, block_window, interest_smoother, square_cells
+from ..belief.mapping import false_positive_term_applies
+from ..config.schema import GAIN_INTEREST_SMOOTHED, EnvConfig, FeatureConfig
+from ..sim.features import gain_normaliser, plane_objective
+from ..sim.team import ACTION_DELTAS, N_ACTIONS
+from ..world.sensor import Camera
+from . import AgentView
+
+__all__ = ["OVERLAP_DISCOUNT", "TeammateDiscount"]
+
+OVERLAP_DISCOUNT = 0.5
+"""The ``ig`` family's default factor on cells a decided teammate's next footprint covers."""
+
+
+class TeammateDiscount:
+    """``ig``'s same-step discount on the options' values read from the ``gain`` planes.
+
+    Args:
+        config: the mission's config (its world, camera and class weights).
+        features: the feature switches the planes were built with (a policy's own: its
+            ``gain_smoothing``, ``gain_interest``, ``gain_false_positive`` and
+            ``gain_false_positive_steps``).
+        overlap_discount: factor in [0, 1] on covered cells; 1 leaves the values alone.
+    """
+
+    def __init__(self, config: EnvConfig, features: FeatureConfig,
+                 overlap_discount: float = OVERLAP_DISCOUNT) -> None:
+        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
+            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
+        self.overlap_discount = float(overlap_discount)
+        self.camera = Camera(config.world, config.sensor)
+        self.features = features
+        self.objective = plane_objective(features.gain_smoothing, features.gain_interest)
+        weights = (config.reward.weight_interesting, config.reward.weight_uninteresting)
+        self._table = objective_table(weights, self.camera, self.objective)
+        self._checking = (objective_table(weights, self.camera, "false_positive")
+                          if self.objective == "interesting" and features.gain_false_positive > 0
+                          else None)
+        self._normaliser = gain_normaliser(config.reward, self.camera, self.objective)
+        world = config.world
+        self._size, self._resolution = world.map_cells, world.resolution
+        self._block = square_cells(world.map_cells, world.resolution)
+        self._interest: dict[int, np.ndarray] = {}
+
+    def start_step(self, views: Sequence[AgentView]) -> None:
+        """Estimate, in one batch, every agent's probability of interest when one of them
+        hears a lower-index teammate this step; call before :meth:`discounted`."""
+        self._interest = {}
+        if self.objective != "interesting" or self.overlap_discount == 1.0:
+            return
+        if not any((np.asarray(view.teammates) < view.index).any() for view in views):
+            return
+        # The whole team, as the gain planes ask the learned prior: the same squares, so
+        # the prior answers from its last call instead of a second forward pass.
+        prob = np.stack([view.local_prob for view in views])
+        if prob.shape[-2:] != (self._size, self._size):
+            raise ValueError("TeammateDiscount needs the views' local maps (a planner that "
+                             "uses it sets needs_local_maps)")
+        means = block_means(prob, self._block)
+        if self.features.gain_interest != GAIN_INTEREST_SMOOTHED:
+            blocks = shared_prior(self.features.gain_interest).square_values(
+                means, self._resolution, self._size)
+        else:
+            blocks = interest_smoother(self._size, self._resolution,
+                                       self.features.gain_smoothing).smooth(means)
+        self._interest = {view.index: blocks[i] for i, view in enumerate(views)}
+
+    def discounted(self, view: AgentView, gains: np.ndarray, mate_targets: np.ndarray
+                   ) -> np.ndarray:
+        """(6,) the options' plane ``gains`` with the cells under the next footprints of
+        decided teammates (``mate_targets``: (K, 3) int their chosen waypoints) discounted.
+
+        Args:
+            view: the deciding agent's view, with its local map.
+            gains: (6,) the options' values read from its ``gain`` planes.
+            mate_targets: (K, 3) int next waypoints of the heard teammates that decided.
+        """
+        gains = np.asarray(gains, dtype=np.float64)
+        if len(mate_targets) == 0 or self.overlap_discount == 1.0:
+            return gains
+        return gains - (1.0 - self.overlap_discount) * self.covered_gains(view, mate_targets)
+
+    def covered_gains(self, view: AgentView, mate_targets: np.ndarray) -> np.ndarray:
+        """(6,) float64 the part of each option's plane value that lies under the footprints
+        from ``mate_targets`` (a cell several cover counts once); 0 for options outside the
+        area or the altitudes."""
+        camera = self.camera
+        z_count, grid = camera.rects.shape[0], camera.rects.shape[1]
+        targets = np.asarray(mate_targets, dtype=np.int64).reshape(-1, 3)
+        mate_rects = camera.rects[targets[:, 2], targets[:, 1], targets[:, 0]]
+        candidates = np.asarray(view.position, dtype=np.int64)[None, :] + ACTION_DELTAS
+        inside = ((candidates[:, :2] >= 0).all(1) & (candidates[:, :2] < grid).all(1)
+                  & (candidates[:, 2] >= 0) & (candidates[:, 2] < z_count))
+        covered = np.zeros(N_ACTIONS, dtype=np.float64)
+        for altitude in np.unique(candidates[inside, 2]).tolist():
+            options = np.flatnonzero(inside & (candidates[:, 2] == altitude))
+            ix, iy, _ = candidates[options].T
+            rects = camera.rects[altitude, iy, ix]
+            box = (int(rects[:, 0].min()), int(rects[:, 1].max()),
+                   int(rects[:, 2].min()), int(rects[:, 3].max()))
+            mask = _covered_mask(box, mate_rects)
+            if mask is None:
+                continue
+            values = self._cell_values(view, altitude, box)
+            values[~mask] = 0.0
+            covered[options] = footprint_sums_in_box(values, box, rects)
+        return covered / self._normaliser
+
+    def _cell_values(self, view: AgentView, altitude: int,
+                     box: tuple[int, int, int, int]) -> np.ndarray:
+        """(h, w) float32 the planes' per-cell objective of a reading at ``altitude`` over
+        ``box`` of ``view``'s local map."""
+        cells = (slice(box[0], box[1]), slice(box[2], box[3]))
+        logodds = view.local_logodds[cells]
+        column = f"altitude_{altitude}"
+        # Intern first: indices() may grow the table and replace its columns.
+        index = self._table.indices(logodds)
+        values = self._table.column(column)[index]
+        if self.objective != "interesting":
+            return values
+        interest = block_window(self._interest[view.index], self._block, *cells)
+        values = values * interest
+        features = self.features
+        if self._checking is not None and false_positive_term_applies(
+                view.budget - view.step, features.gain_false_positive_steps):
+            # Intern first: indices() may grow the table and replace its columns.
+            index = self._checking.indices(logodds)
+            checking = self._checking.column(column)[index]
+            values += (np.float32(features.gain_false_positive)
+                       * (np.float32(1.0) - interest) * checking)
+        return values
+
+
+def _covered_mask(box: tuple[int, int, int, int], rects: np.ndarray) -> np.ndarray | None:
+    """(h, w) bool cells of ``box`` inside any of ``rects`` ((K, 4) row0, row1, col0, col1);
+    None when none is."""
+    r0, r1, c0, c1 = box
+    mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+    hit = False
+    for q0, q1, s0, s1 in np.asarray(rects).tolist():
+        top, bottom, left, right = max(q0, r0), min(q1, r1), max(s0, c0), min(s1, c1)
+        if top < bottom and left < right:
+            mask[top - r0:bottom - r0, left - c0:right - c0] = True
+            hit = True
+    return mask if hit else None

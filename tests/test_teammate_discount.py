@@ -1,0 +1,168 @@
+"""``ig``'s discount of decided teammates' footprints for planners that read the gain planes
+(:class:`ipp_toolkit.planners.discount.TeammateDiscount`), and the gain-prior actors' use of
+it and of the planes' relative gains."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.planners import choose_for_views, planner_views
+from ipp_toolkit.planners.discount import TeammateDiscount
+from ipp_toolkit.sim.features import gain_planes, option_gain_cells
+from ipp_toolkit.sim.mission import reset_mission, step_mission
+from ipp_toolkit.sim.team import ACTION_DELTAS
+
+SPATIAL = {"gain": True, "gain_smoothing": 5.0}
+LEARNED_CLEANUP = {"gain": True, "gain_interest": "learned", "gain_false_positive": 0.5,
+                   "gain_false_positive_steps": 10}
+
+
+def _config(features: dict, agents: int = 4, comm: float = math.inf,
+            resolution: float = 1.0) -> EnvConfig:
+    return EnvConfig().replace(world={"resolution": resolution}, features=features,
+                               team={"n_agents": agents, "comm_range": comm},
+                               terrain={"kind": "blobs"})
+
+
+def _plane_option_gains(state) -> np.ndarray:
+    """(N, 6) each agent's options' values as the gain planes hold them."""
+    planes = gain_planes(state)
+    channel, row, col = option_gain_cells((0, 1, 2), planes.shape[-1])
+    return planes[:, channel, row, col].astype(np.float64)
+
+
+def _ig_planner(name: str):
+    from baselines.information_gain import InformationGainPlanner
+    from baselines.learned_prior import LearnedPriorPlanner
+    from baselines.spatial_gain import SpatialGainPlanner
+
+    return {"ig": InformationGainPlanner, "ig_spatial": SpatialGainPlanner,
+            "ig_learned": LearnedPriorPlanner}[name]()
+
+
+@pytest.mark.parametrize("features, name", [({"gain": True}, "ig"), (SPATIAL, "ig_spatial"),
+                                            (LEARNED_CLEANUP, "ig_learned")])
+def test_the_planes_argmax_with_the_discount_chooses_what_the_ig_planner_chooses(
+        features, name):
+    """Every agent, every step of a mission with every teammate heard: the planes' best
+    option with the decided teammates' footprints discounted is the ``ig`` planner's choice
+    for the planes' objective; without the discount some choice differs."""
+    config = _config(features)
+    planner = _ig_planner(name)
+    planner.reset(config, 0)
+    discount = TeammateDiscount(config, config.features)
+    # A mission where the discount changes a choice of each planner.
+    state = reset_mission(config, seed=0, mission=4, namespace="validation")
+    undiscounted_differs = 0
+    while not state.done:
+        views = planner_views(state, planner)
+        expected = planner.act(views)
+        gains = _plane_option_gains(state)
+        discount.start_step(views)
+
+        def rescore(k: int, targets: np.ndarray, gains=gains, views=views) -> np.ndarray:
+            return discount.discounted(views[k], gains[k], targets)
+
+        assert choose_for_views(gains, views, rescore).tolist() == expected.tolist()
+        undiscounted_differs += choose_for_views(gains, views).tolist() != expected.tolist()
+        step_mission(state, expected)
+    assert undiscounted_differs > 0
+
+
+def test_a_teammate_on_the_same_waypoint_covers_the_whole_option_and_a_far_one_none():
+    config = _config(LEARNED_CLEANUP, agents=2)
+    state = reset_mission(config, seed=1, mission=0, namespace="validation")
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+    views = planner_views(state, type("LocalMaps", (), {"needs_observations": False})())
+    discount = TeammateDiscount(config, config.features, overlap_discount=0.25)
+    discount.start_step(views)
+    gains = _plane_option_gains(state)[1]
+    view = views[1]
+    north = 1
+    same = (view.position + ACTION_DELTAS[north])[None, :]
+    covered = discount.covered_gains(view, same)
+    assert covered[north] == pytest.approx(gains[north], rel=1e-5, abs=1e-9)
+    assert discount.discounted(view, gains, same)[north] == pytest.approx(
+        0.25 * gains[north], rel=1e-4, abs=1e-9)
+    grid = state.geometry.grid_points
+    far = np.array([[0 if view.position[0] > grid // 2 else grid - 1,
+                     0 if view.position[1] > grid // 2 else grid - 1, 0]])
+    assert not discount.covered_gains(view, far).any()
+    assert discount.discounted(view, gains, np.empty((0, 3), dtype=int)).tolist() == \
+        gains.tolist()
+
+
+@pytest.mark.parametrize("value", [-0.1, 1.5, math.nan])
+def test_a_discount_outside_zero_to_one_is_refused_naming_it(value):
+    from coma.planner import COMAPlanner
+
+    config = _config(LEARNED_CLEANUP)
+    with pytest.raises(ValueError, match="overlap_discount"):
+        TeammateDiscount(config, config.features, value)
+    with pytest.raises(ValueError, match=f"overlap_discount must lie in \\[0, 1\\], got {value}"):
+        COMAPlanner(overlap_discount=value)
+
+
+def test_the_default_coma_flies_ig_learneds_choices_for_every_agent():
+    """The default ``coma`` (its residual the untrained start its recipe selected) chooses
+    what ``ig_learned`` chooses for every UAV at every step, teammates heard; with
+    ``overlap_discount=1`` (the planes' values as they are) it does not."""
+    from baselines.learned_prior import LearnedPriorPlanner
+    from ipp_toolkit.planners import make_planner
+
+    ig_learned = LearnedPriorPlanner()
+    coma = make_planner("coma")
+    plain = make_planner("coma", overlap_discount=1.0)
+    assert coma.needs_local_maps and not plain.needs_local_maps
+    config = coma.trained_config.replace(world={"resolution": 1.0},
+                                         team={"n_agents": 4, "comm_range": math.inf})
+    differs = 0
+    for mission in (0, 1):
+        for planner in (ig_learned, coma, plain):
+            planner.reset(config, 0)
+        state = reset_mission(config, seed=0, mission=mission, namespace="validation")
+        while not state.done:
+            expected = ig_learned.act(planner_views(state, ig_learned))
+            assert coma.act(planner_views(state, coma)).tolist() == expected.tolist()
+            differs += plain.act(planner_views(state, plain)).tolist() != expected.tolist()
+            step_mission(state, expected)
+    assert differs > 0
+
+
+def test_relative_gains_keep_the_gains_order_when_every_gain_is_negative():
+    """Late in a mission every option's gain can be negative (only cells believed
+    uninteresting left): the best option must still score highest."""
+    from baselines.ppo import GainPriorExtractor  # noqa: F401  (the same rule, below)
+    from coma.networks import relative_gains
+
+    gains = torch.tensor([[-0.0007, -0.0013, -0.0015, -0.001, -0.0009, -0.004],
+                          [0.002, 0.001, 0.0, -0.001, 0.0005, 0.0]])
+    relative = relative_gains(gains)
+    assert relative.argmax(dim=1).tolist() == [0, 0]
+    assert relative[0, 0].item() == pytest.approx(-1.0, rel=1e-4)
+    assert relative[1, 0].item() == pytest.approx(1.0, rel=1e-4)
+    assert (relative.argsort(dim=1) == gains.argsort(dim=1)).all()
+
+
+def test_ppos_gain_prior_reads_negative_gains_in_their_order():
+    from gymnasium import spaces
+
+    from baselines.ppo import GainPriorExtractor
+
+    grid = 11
+    space = spaces.Box(-1.0, 1.0, (3, grid, grid), dtype=np.float32)
+    extractor = GainPriorExtractor(space, (0, 1, 2), width=4, features_dim=8)
+    channel, row, col = option_gain_cells((0, 1, 2), grid)
+    planes = torch.zeros((1, 3, grid, grid))
+    gains = torch.tensor([-0.003, -0.001, -0.002, -0.004, -0.005, -0.006])
+    planes[0, torch.from_numpy(channel), torch.from_numpy(row), torch.from_numpy(col)] = gains
+    relative = extractor(planes)[0, -6:]
+    assert relative.argmax().item() == 1
+    assert (relative.argsort() == gains.argsort()).all()
