@@ -44,7 +44,12 @@ from ipp_toolkit.config.limits import check_layer_size, check_parameters
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
 from ipp_toolkit.planners import resolve_shipped
-from ipp_toolkit.sim.features import actor_plane_names, gain_plane_channels, option_gain_cells
+from ipp_toolkit.sim.features import (
+    actor_plane_names,
+    gain_plane_channels,
+    option_gain_cells,
+    relative_option_gains,
+)
 from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = [
@@ -55,15 +60,9 @@ __all__ = [
     "GainPriorMlpExtractor",
     "GainPriorMaskablePolicy",
     "GainPriorPolicy",
-    "policy_class",
-    "policy_kwargs",
-    "model_payload",
-    "policy_metadata",
-    "save_policy",
-    "load_policy",
-    "actor_logits",
-    "masked_greedy_actions",
-    "masked_argmax",
+    "policy_class", "policy_kwargs", "model_payload", "policy_metadata",
+    "save_policy", "load_policy",
+    "actor_logits", "masked_greedy_actions", "masked_argmax",
     "NoOptimizer",
     "CHECKPOINT_KIND",
     "TRAINING_KIND",
@@ -319,11 +318,11 @@ def check_policy_size(channels: int, grid: int, width: int, features_dim: int, h
 class GainPriorExtractor(SmallCNN):
     """:class:`SmallCNN` features followed by each option's relative expected gain.
 
-    Output (B, features_dim + 6): the CNN's features, then ``gain(a) / |max_a' gain(a')|`` read
-    from the ``gain`` planes at option a's waypoint
-    (:func:`~ipp_toolkit.sim.features.option_gain_cells`; options outside the area read 0 and are
-    masked). :class:`GainPriorMlpExtractor` passes the
-    six gains around the policy's hidden layer, so the action layer sees them linearly.
+    Output (B, features_dim + 6): the CNN's features, then :meth:`plane_gains` (the planes at
+    option a's waypoint, :func:`~ipp_toolkit.sim.features.option_gain_cells`; 0 and masked
+    outside the area) over the best one's magnitude
+    (:func:`~ipp_toolkit.sim.features.relative_option_gains`). :class:`GainPriorMlpExtractor`
+    passes these six around the policy's hidden layer: the action layer sees them linearly.
 
     Args:
         observation_space: Box of shape (C, G, G).
@@ -341,12 +340,13 @@ class GainPriorExtractor(SmallCNN):
         self.register_buffer("option_row", torch.from_numpy(row), persistent=False)
         self.register_buffer("option_col", torch.from_numpy(col), persistent=False)
 
+    def plane_gains(self, observations: torch.Tensor) -> torch.Tensor:
+        """(B, C, G, G) planes -> (B, 6) each option's gain as the planes hold it."""
+        return observations[:, self.option_channel, self.option_row, self.option_col]
+
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        gains = observations[:, self.option_channel, self.option_row, self.option_col]
-        # Over the best gain's magnitude: when every option's gain is negative the order
-        # stays the gains' order (the best reads -1).
-        relative = gains / (gains.amax(dim=1, keepdim=True).abs() + 1e-8)
-        return torch.cat([super().forward(observations), relative], dim=1)
+        return torch.cat([super().forward(observations),
+                          relative_option_gains(self.plane_gains(observations))], dim=1)
 
 
 class GainPriorMlpExtractor(nn.Module):

@@ -10,7 +10,10 @@ imports the training code (:mod:`baselines.sb3_training`, :mod:`baselines.sb3_ru
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -24,8 +27,11 @@ from ipp_toolkit.planners import (
     choose_for_views,
     policy_inputs,
 )
+from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT, TeammateDiscount
+from ipp_toolkit.sim.features import relative_option_gains
+from ipp_toolkit.sim.team import N_ACTIONS
 
-from .ppo import resolve_policy
+from .ppo import GainPriorExtractor, GainPriorMlpExtractor, resolve_policy
 from .sb3_policies import (
     RECURRENT_ALGORITHMS,
     LSTMStates,
@@ -51,8 +57,13 @@ class SB3Planner(Planner):
     masked action is never chosen. By default the agents choose in agent order, each its
     best option among those whose 2-D target no heard teammate of lower index already chose
     (``ig``'s rule, :func:`~ipp_toolkit.planners.choose_for_views`), instead of each taking
-    its own argmax and losing same-target contests. A RecurrentPPO policy keeps its LSTM
-    state per agent across the steps of a mission and starts each mission from zeros.
+    its own argmax and losing same-target contests. A policy with a gain prior
+    (``ipp-train ppo --gain-prior``) also values, in that order, the cells under the next
+    footprints of those teammates at ``overlap_discount`` times their gain, as ``ig`` does
+    (:class:`~ipp_toolkit.planners.discount.TeammateDiscount`: the six relative gains its
+    action layer reads are discounted, the rest of its forward pass kept). A RecurrentPPO
+    policy keeps its LSTM state per agent across the steps of a mission and starts each
+    mission from zeros.
 
     Args:
         checkpoint: a ``policy.pt`` (or ``checkpoint.pt``) of ``ipp-train sb3`` or
@@ -61,6 +72,8 @@ class SB3Planner(Planner):
         device: torch device of the forward pass.
         in_order: choose in agent order under the same-step rule (default); False gives
             every agent its own argmax, as the policy acted while it trained.
+        overlap_discount: a gain-prior policy's factor on covered cells in agent order, in
+            [0, 1] (1: the planes' gains as they are); other policies ignore it.
 
     Raises:
         CheckpointError: no checkpoint; a missing, corrupt or foreign one; or one trained for
@@ -73,7 +86,7 @@ class SB3Planner(Planner):
     needs_local_maps = False
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
-                 in_order: bool = True) -> None:
+                 in_order: bool = True, overlap_discount: float = OVERLAP_DISCOUNT) -> None:
         # Batches of N observations: extra intra-op threads only spin on busy cores.
         torch.set_num_threads(1)
         if checkpoint is None:
@@ -90,6 +103,15 @@ class SB3Planner(Planner):
             else self.meta.env_config.features
         self.transfer_notes: list[str] = []
         self._lstm_states: LSTMStates | None = None
+        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
+            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
+        self.overlap_discount = float(overlap_discount)
+        self._discounts = (self.in_order and overlap_discount < 1.0
+                           and isinstance(getattr(self.policy, "mlp_extractor", None),
+                                          GainPriorMlpExtractor))
+        # The discount reads each UAV's own local map.
+        self.needs_local_maps = self._discounts
+        self._discount: TeammateDiscount | None = None
 
     def reset(self, config: EnvConfig, seed: int) -> None:
         """Start a mission of ``config``: check the transfer and clear the LSTM states.
@@ -111,6 +133,9 @@ class SB3Planner(Planner):
         self.transfer_notes = [_UNKNOWN_SETTING] if self.meta.env_config is None else \
             check_policy_transfer(self.meta.env_config, config, str(self.checkpoint))
         self._lstm_states = None
+        if self._discounts:
+            features = self.observation_features or config.features
+            self._discount = TeammateDiscount(config, features, self.overlap_discount)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks."""
@@ -122,8 +147,42 @@ class SB3Planner(Planner):
         scores, states = action_scores(self.policy, self.algo, observations, states)
         self._lstm_states = states if self.algo in RECURRENT_ALGORITHMS else None
         if self.in_order:
-            return choose_for_views(scores.cpu().numpy(), views)
+            rescore = None
+            if self._discounts:
+                if self._discount is None:
+                    raise RuntimeError("call reset(config, seed) before act()")
+                rescore = _discounted_rescore(self.policy, observations, masks, views,
+                                              scores.cpu().numpy(), self._discount)
+            return choose_for_views(scores.cpu().numpy(), views, rescore)
         return masked_argmax(scores, masks)
+
+
+def _discounted_rescore(policy: Any, observations: np.ndarray, masks: np.ndarray,
+                        views: list[AgentView], scores: np.ndarray,
+                        discount: TeammateDiscount) -> Callable[[int, np.ndarray], np.ndarray]:
+    """``rescore(k, targets)`` for :func:`~ipp_toolkit.planners.choose_for_views`: a
+    gain-prior policy's logits for agent k with the six relative gains its action layer
+    reads recomputed from its planes' gains discounted under ``targets``' footprints."""
+    with torch.no_grad():
+        obs = torch.as_tensor(observations, dtype=torch.float32, device=policy.device)
+        extractor = policy.pi_features_extractor
+        assert isinstance(extractor, GainPriorExtractor)
+        latent = policy.mlp_extractor.forward_actor(policy.extract_features(obs, extractor))
+        gains = extractor.plane_gains(obs).cpu().numpy()
+    discount.start_step(views)
+
+    def rescore(k: int, mate_targets: np.ndarray) -> np.ndarray:
+        if len(mate_targets) == 0:
+            return scores[k]  # nothing to discount: the batched forward pass's own scores
+        own = discount.discounted(views[k], gains[k], mate_targets)
+        with torch.no_grad():
+            relative = relative_option_gains(
+                torch.as_tensor(own[None], dtype=torch.float32, device=latent.device))
+            row = torch.cat([latent[k:k + 1, :-N_ACTIONS], relative], dim=1)
+            logits = policy.action_net(row)[0].cpu().numpy()
+        return np.where(masks[k], logits, -np.inf)
+
+    return rescore
 
 
 class PPOPlanner(SB3Planner):
@@ -134,7 +193,7 @@ class PPOPlanner(SB3Planner):
             ``shipped:NAME`` (:data:`baselines.ppo.SHIPPED_POLICIES`); None loads the default
             shipped policy (:data:`baselines.ppo.DEFAULT_SHIPPED`).
         device: torch device of the forward pass.
-        in_order: as in :class:`SB3Planner`.
+        in_order, overlap_discount: as in :class:`SB3Planner`.
 
     Raises:
         CheckpointError: no shipped policy, or a missing, corrupt or foreign file.
@@ -143,7 +202,7 @@ class PPOPlanner(SB3Planner):
     name = "ppo"
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
-                 in_order: bool = True) -> None:
+                 in_order: bool = True, overlap_discount: float = OVERLAP_DISCOUNT) -> None:
         from . import ppo  # the default is read at call time (tests point it elsewhere)
 
         if checkpoint is None:
@@ -154,4 +213,4 @@ class PPOPlanner(SB3Planner):
                     "`ipp-train ppo --out runs/ppo` and pass ppo=runs/ppo/policy.pt "
                     "(checkpoint='runs/ppo/policy.pt')")
             checkpoint = ppo.DEFAULT_CHECKPOINT
-        super().__init__(checkpoint, device, in_order)
+        super().__init__(checkpoint, device, in_order, overlap_discount)

@@ -17,12 +17,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from ipp_toolkit.sim.features import option_gain_cells
+from ipp_toolkit.sim.features import option_gain_cells, relative_option_gains
 from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = ["ConvNet", "GainPriorActor", "bfloat16_hardware", "bounded_softmax", "epsilon_at",
            "greedy_actions", "in_input_layout", "learning_forward", "masked_logits",
-           "mixed_precision", "relative_gains"]
+           "mixed_precision"]
 
 _KERNELS = (5, 4, 4)
 
@@ -207,7 +207,7 @@ class GainPriorActor(nn.Module):
         Relative gains keep ``beta``'s effect the same late in a mission, when every
         option's absolute gain has shrunk.
         """
-        return relative_gains(self.plane_gains(planes))
+        return relative_option_gains(self.plane_gains(planes))
 
     def parts(self, planes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, C, G, G) planes -> the (B, 6) residual and prior logits (their sum: forward)."""
@@ -216,14 +216,6 @@ class GainPriorActor(nn.Module):
     def forward(self, planes: torch.Tensor) -> torch.Tensor:
         residual, prior = self.parts(planes)
         return residual + prior
-
-
-def relative_gains(gains: torch.Tensor) -> torch.Tensor:
-    """(B, 6) options' gains -> the same over the best option's magnitude (the gain-prior
-    actors' prior term before its weight beta): the best option reads 1, or -1 when every
-    option's gain is negative (late in a mission, where only cells believed uninteresting
-    are left), so the order of the options is the order of their gains either way."""
-    return gains / (gains.amax(dim=1, keepdim=True).abs() + 1e-8)
 
 
 def bounded_softmax(logits: torch.Tensor, mask: torch.Tensor, eps: float) -> torch.Tensor:

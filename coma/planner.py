@@ -20,9 +20,10 @@ import torch
 from ipp_toolkit.config.schema import EnvConfig, FeatureConfig
 from ipp_toolkit.planners import AgentView, Planner, choose_for_views, policy_inputs
 from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT, TeammateDiscount
+from ipp_toolkit.sim.features import relative_option_gains
 
 from .config import mission_settings
-from .networks import GainPriorActor, masked_logits, relative_gains
+from .networks import GainPriorActor, masked_logits
 from .persistence import (
     DEFAULT_SHIPPED,
     check_transfer,
@@ -159,7 +160,7 @@ def choose_greedy(actor: torch.nn.Module, observations: np.ndarray, masks: np.nd
             return scores[k]  # nothing to discount: the forward pass's own logits
         own = discount.discounted(views[k], gains[k], mate_targets)
         with torch.no_grad():
-            prior = beta * relative_gains(torch.as_tensor(own[None], dtype=torch.float32))
+            prior = beta * relative_option_gains(torch.as_tensor(own[None], dtype=torch.float32))
             logits = (residual[k:k + 1] + prior)[0].numpy()
         return np.where(masks[k], logits, -np.inf)
 

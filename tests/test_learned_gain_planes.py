@@ -271,7 +271,7 @@ def test_the_default_ig_learned_and_coma_clean_up_in_the_same_last_steps():
 
 def test_the_prior_answers_the_same_squares_again_without_a_second_forward_pass(monkeypatch):
     """The gain planes and a planner's teammate discount ask for the same team's squares in
-    one step: the second call returns the first's read-only result; other squares are
+    one step: the second call returns a copy of the first's answer; other squares are
     predicted afresh."""
     prior = FieldPrior.load(SHIPPED_PRIOR)
     forwards = []
@@ -281,12 +281,14 @@ def test_the_prior_answers_the_same_squares_again_without_a_second_forward_pass(
     squares = rng.random((2, 100, 100), dtype=np.float32)
     first = prior.square_values(squares, 0.5, 100)
     again = prior.square_values(squares.copy(), 0.5, 100)
-    assert again is first and len(forwards) == 1
-    assert not first.flags.writeable
+    assert len(forwards) == 1 and again is not first
+    np.testing.assert_array_equal(again, first)
+    first[0, 0, 0] = -1.0  # a caller's change does not reach the kept answer
+    assert prior.square_values(squares, 0.5, 100)[0, 0, 0] != -1.0 and len(forwards) == 1
     changed = squares.copy()
     changed[1, 3, 4] += 0.25
     other = prior.square_values(changed, 0.5, 100)
-    assert len(forwards) == 2 and not np.array_equal(other, first)
-    np.testing.assert_array_equal(other[0], first[0])
+    assert len(forwards) == 2 and not np.array_equal(other, again)
+    np.testing.assert_array_equal(other[0], again[0])
     prior.square_values(squares, 0.25, 100)  # another resolution: another prediction
     assert len(forwards) == 3

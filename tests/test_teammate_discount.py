@@ -108,6 +108,10 @@ def test_a_discount_outside_zero_to_one_is_refused_naming_it(value):
         TeammateDiscount(config, config.features, value)
     with pytest.raises(ValueError, match=f"overlap_discount must lie in \\[0, 1\\], got {value}"):
         COMAPlanner(overlap_discount=value)
+    from baselines.sb3_planner import PPOPlanner
+
+    with pytest.raises(ValueError, match=f"overlap_discount must lie in \\[0, 1\\], got {value}"):
+        PPOPlanner(overlap_discount=value)
 
 
 def test_the_default_coma_flies_ig_learneds_choices_for_every_agent():
@@ -136,15 +140,14 @@ def test_the_default_coma_flies_ig_learneds_choices_for_every_agent():
     assert differs > 0
 
 
-def test_relative_gains_keep_the_gains_order_when_every_gain_is_negative():
+def test_relative_option_gains_keep_the_gains_order_when_every_gain_is_negative():
     """Late in a mission every option's gain can be negative (only cells believed
     uninteresting left): the best option must still score highest."""
-    from baselines.ppo import GainPriorExtractor  # noqa: F401  (the same rule, below)
-    from coma.networks import relative_gains
+    from ipp_toolkit.sim.features import relative_option_gains
 
     gains = torch.tensor([[-0.0007, -0.0013, -0.0015, -0.001, -0.0009, -0.004],
                           [0.002, 0.001, 0.0, -0.001, 0.0005, 0.0]])
-    relative = relative_gains(gains)
+    relative = relative_option_gains(gains)
     assert relative.argmax(dim=1).tolist() == [0, 0]
     assert relative[0, 0].item() == pytest.approx(-1.0, rel=1e-4)
     assert relative[1, 0].item() == pytest.approx(1.0, rel=1e-4)
@@ -166,3 +169,39 @@ def test_ppos_gain_prior_reads_negative_gains_in_their_order():
     relative = extractor(planes)[0, -6:]
     assert relative.argmax().item() == 1
     assert (relative.argsort() == gains.argsort()).all()
+
+
+def test_an_untrained_gain_prior_ppo_flies_the_ig_planner_of_its_planes(tmp_path):
+    """A gain-prior PPO policy whose action layer reads only the gains (its untrained start)
+    flown by the ``ppo`` planner chooses what ``ig_spatial`` chooses for every UAV once the
+    decided teammates' footprints are discounted; with ``overlap_discount=1`` it does not."""
+    from types import SimpleNamespace
+
+    from gymnasium import spaces
+
+    from baselines import ppo
+    from baselines.ppo_training import training_env_config
+    from baselines.sb3_planner import PPOPlanner
+    from baselines.spatial_gain import SpatialGainPlanner
+
+    train = ppo.PPOTrainConfig(gain_prior=20.0, n_envs=1, n_steps=64, batch_size=128)
+    env_config = training_env_config(train, _config(SPATIAL))
+    shape = (len(ppo.actor_plane_names(env_config.features)), 11, 11)
+    policy = ppo._build_policy(train, env_config, shape)
+    model = SimpleNamespace(policy=policy, num_timesteps=0,
+                            observation_space=spaces.Box(-1.0, 1.0, shape, dtype=np.float32))
+    path = ppo.save_policy(tmp_path / "prior.pt", model, train, env_config)
+    planner, plain, spatial = PPOPlanner(path), PPOPlanner(path, overlap_discount=1.0), \
+        SpatialGainPlanner()
+    assert planner.needs_local_maps and not plain.needs_local_maps
+    config = env_config.replace(team={"n_agents": 4, "comm_range": math.inf})
+    for each in (planner, plain, spatial):
+        each.reset(config, 0)
+    state = reset_mission(config, seed=0, mission=4, namespace="validation")
+    differs = 0
+    while not state.done:
+        expected = spatial.act(planner_views(state, spatial))
+        assert planner.act(planner_views(state, planner)).tolist() == expected.tolist()
+        differs += plain.act(planner_views(state, plain)).tolist() != expected.tolist()
+        step_mission(state, expected)
+    assert differs > 0

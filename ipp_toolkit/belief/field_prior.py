@@ -309,18 +309,17 @@ class FieldPrior:
     def square_values(self, squares: np.ndarray, resolution: float, size: int) -> np.ndarray:
         """(N, H / s, W / s) float32 prior on the maps' ~0.5 m squares, from their means
         (:func:`square_inputs`): :meth:`fine_values` with ``fine_cells`` = s, without the
-        maps' cells (``size`` = H = W). The result is read-only: asked again for the same
-        squares (the last call's, compared value by value), it is returned without a second
-        forward pass."""
+        maps' cells (``size`` = H = W). Asked again for the same squares (the last call's,
+        compared value by value), it returns a copy of that answer without a second forward
+        pass."""
         last = self._last_squares
         if (last is not None and last[0] == resolution and last[1] == size
                 and last[2].shape == squares.shape and np.array_equal(last[2], squares)):
-            return last[3]
+            return last[3].copy()
         coarse = self._forward(square_inputs(squares, resolution, size))
         result = self._resampled(coarse, resolution, size, _sub_block(resolution, size))
-        result.flags.writeable = False
         self._last_squares = (resolution, size, np.array(squares, copy=True), result)
-        return result
+        return result.copy()
 
     @staticmethod
     def _resampled(coarse: np.ndarray, resolution: float, size: int,

@@ -11,6 +11,7 @@ other plane in [0, 1].
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +29,7 @@ __all__ = [
     "actor_plane_names",
     "gain_plane_channels",
     "option_gain_cells",
+    "relative_option_gains",
     "footprint_gain",
     "gain_normaliser",
     "plane_objective",
@@ -95,6 +97,15 @@ def option_gain_cells(gain_channels: Sequence[int], grid: int
     # Window cell (v, u) shows waypoint (y + v - c, x + u - c): option (dx, dy) is at
     # (c + dy, c + dx).
     return channel, centre + ACTION_DELTAS[:, 1], centre + ACTION_DELTAS[:, 0]
+
+
+def relative_option_gains(gains: Any) -> Any:
+    """(B, 6) options' gains (a torch tensor, e.g. read at :func:`option_gain_cells`) -> the
+    same over the best option's magnitude: the prior term of the gain-prior policies (COMA's
+    ``GainPriorActor``, PPO's ``gain_prior``) before its weight. The best option reads 1, or
+    -1 when every option's gain is negative (late in a mission, where only cells believed
+    uninteresting are left), so the options keep the order of their gains either way."""
+    return gains / (gains.amax(dim=1, keepdim=True).abs() + 1e-8)
 
 
 def state_plane_names(features: FeatureConfig) -> list[str]:
