@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ipp_toolkit.belief.gain import footprint_sums_in_box, objective_table
@@ -11,7 +9,12 @@ from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import AgentView, Planner
-from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
+from ipp_toolkit.planners.discount import (
+    OVERLAP_DISCOUNT,
+    bounding_box,
+    check_overlap_discount,
+    covered_mask,
+)
 from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
 
@@ -21,12 +24,6 @@ Rect = tuple[int, int, int, int]
 
 _HORIZONTAL = tuple(ACTION_NAMES.index(name) for name in ("north", "east", "south", "west"))
 _VERTICAL = tuple(ACTION_NAMES.index(name) for name in ("up", "down"))
-
-
-def _bounding_box(rects: np.ndarray) -> Rect:
-    """Union bounding box of (K, 4) rectangles (row0, row1, col0, col1)."""
-    return (int(rects[:, 0].min()), int(rects[:, 1].max()), int(rects[:, 2].min()),
-            int(rects[:, 3].max()))
 
 
 def gain_table(config: EnvConfig, camera: Camera, objective: str,
@@ -95,12 +92,10 @@ class InformationGainPlanner(Planner):
 
     def __init__(self, overlap_discount: float = OVERLAP_DISCOUNT,
                  outcome_weighting: str = "predictive") -> None:
-        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
-            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
         if outcome_weighting not in OUTCOME_WEIGHTINGS:
             raise ValueError(f"outcome_weighting must be one of {OUTCOME_WEIGHTINGS}, "
                              f"got {outcome_weighting!r}")
-        self.overlap_discount = float(overlap_discount)
+        self.overlap_discount = check_overlap_discount(overlap_discount)
         self.outcome_weighting = outcome_weighting
         self._config: EnvConfig | None = None
         self._camera: Camera | None = None
@@ -168,7 +163,7 @@ class InformationGainPlanner(Planner):
             ix, iy, iz = candidates[group].T
             altitude = int(iz[0])
             rects = camera.rects[altitude, iy, ix]  # (len(group), 4)
-            box = _bounding_box(rects)
+            box = bounding_box(rects)
             r0, r1, c0, c1 = box
             cells = (slice(r0, r1), slice(c0, c1))
             gain = self.cell_gains(view, altitude, cells)
@@ -203,13 +198,9 @@ class InformationGainPlanner(Planner):
         """Scale, in place, the gain of cells inside ``box`` under teammates' next footprints."""
         if len(mate_rects) == 0 or self.overlap_discount == 1.0:
             return
-        r0, r1, c0, c1 = box
-        covered = np.zeros(gain.shape, dtype=bool)
-        for q0, q1, s0, s1 in mate_rects.tolist():
-            top, bottom = max(q0, r0), min(q1, r1)
-            left, right = max(s0, c0), min(s1, c1)
-            if top < bottom and left < right:
-                covered[top - r0:bottom - r0, left - c0:right - c0] = True
+        covered = covered_mask(box, mate_rects)
+        if covered is None:
+            return
         # A mask, not one multiplication per footprint: a cell several teammates will see is
         # still discounted once.
         np.multiply(gain, np.float32(self.overlap_discount), out=gain, where=covered)

@@ -10,7 +10,6 @@ imports the training code (:mod:`baselines.sb3_training`, :mod:`baselines.sb3_ru
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,11 @@ from ipp_toolkit.planners import (
     choose_for_views,
     policy_inputs,
 )
-from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT, TeammateDiscount
+from ipp_toolkit.planners.discount import (
+    OVERLAP_DISCOUNT,
+    TeammateDiscount,
+    check_overlap_discount,
+)
 from ipp_toolkit.sim.features import relative_option_gains
 from ipp_toolkit.sim.team import N_ACTIONS
 
@@ -103,9 +106,7 @@ class SB3Planner(Planner):
             else self.meta.env_config.features
         self.transfer_notes: list[str] = []
         self._lstm_states: LSTMStates | None = None
-        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
-            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
-        self.overlap_discount = float(overlap_discount)
+        self.overlap_discount = check_overlap_discount(overlap_discount)
         self._discounts = (self.in_order and overlap_discount < 1.0
                            and isinstance(getattr(self.policy, "mlp_extractor", None),
                                           GainPriorMlpExtractor))
@@ -169,20 +170,15 @@ def _discounted_rescore(policy: Any, observations: np.ndarray, masks: np.ndarray
         assert isinstance(extractor, GainPriorExtractor)
         latent = policy.mlp_extractor.forward_actor(policy.extract_features(obs, extractor))
         gains = extractor.plane_gains(obs).cpu().numpy()
-    discount.start_step(views)
 
-    def rescore(k: int, mate_targets: np.ndarray) -> np.ndarray:
-        if len(mate_targets) == 0:
-            return scores[k]  # nothing to discount: the batched forward pass's own scores
-        own = discount.discounted(views[k], gains[k], mate_targets)
+    def logits_of(k: int, discounted: np.ndarray) -> np.ndarray:
         with torch.no_grad():
             relative = relative_option_gains(
-                torch.as_tensor(own[None], dtype=torch.float32, device=latent.device))
+                torch.as_tensor(discounted[None], dtype=torch.float32, device=latent.device))
             row = torch.cat([latent[k:k + 1, :-N_ACTIONS], relative], dim=1)
-            logits = policy.action_net(row)[0].cpu().numpy()
-        return np.where(masks[k], logits, -np.inf)
+            return policy.action_net(row)[0].cpu().numpy()
 
-    return rescore
+    return discount.rescorer(views, gains, scores, masks, logits_of)
 
 
 class PPOPlanner(SB3Planner):

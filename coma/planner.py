@@ -10,7 +10,6 @@ in :attr:`COMAPlanner.transfer_notes`).
 
 from __future__ import annotations
 
-import math
 import os
 import warnings
 
@@ -19,7 +18,11 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig, FeatureConfig
 from ipp_toolkit.planners import AgentView, Planner, choose_for_views, policy_inputs
-from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT, TeammateDiscount
+from ipp_toolkit.planners.discount import (
+    OVERLAP_DISCOUNT,
+    TeammateDiscount,
+    check_overlap_discount,
+)
 from ipp_toolkit.sim.features import relative_option_gains
 
 from .config import mission_settings
@@ -80,16 +83,10 @@ class COMAPlanner(Planner):
         # Every (team size, range) the policy trained on, not only its base config's.
         self.trained_settings = mission_settings(networks.coma_config, networks.env_config)
         self.transfer_notes: list[str] = []
-        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
-            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
-        self.overlap_discount = float(overlap_discount)
+        self.overlap_discount = check_overlap_discount(overlap_discount)
         # The discount reads each UAV's own local map.
-        self.needs_local_maps = self._discounts
+        self.needs_local_maps = _decides_with_discount(self.actor, self.overlap_discount)
         self._discount: TeammateDiscount | None = None
-
-    @property
-    def _discounts(self) -> bool:
-        return isinstance(self.actor, GainPriorActor) and self.overlap_discount < 1.0
 
     def reset(self, config: EnvConfig, seed: int) -> None:
         # The trained setting closest to this mission: a team size or range that was trained
@@ -108,7 +105,7 @@ class COMAPlanner(Planner):
         the 2-D targets heard lower-index teammates chose and, for a gain-prior actor,
         discounting their footprints (``ig``'s rules; the actors' logits come from one
         batched forward pass)."""
-        if self._discounts and self._discount is None:
+        if self.needs_local_maps and self._discount is None:
             raise RuntimeError("call reset(config, seed) before act()")
         observations, masks = policy_inputs(views)
         return choose_greedy(self.actor, observations, masks, views, self._discount)
@@ -119,9 +116,15 @@ def teammate_discount(actor: torch.nn.Module, config: EnvConfig, features: Featu
     """The same-step discount a greedy ``actor`` decides with on missions of ``config``: a
     gain-prior actor's over the planes of its ``features``; None for other actors or
     ``overlap_discount`` 1."""
-    if not isinstance(actor, GainPriorActor) or overlap_discount == 1.0:
+    if not _decides_with_discount(actor, overlap_discount):
         return None
     return TeammateDiscount(config, features, overlap_discount)
+
+
+def _decides_with_discount(actor: torch.nn.Module, overlap_discount: float) -> bool:
+    """Whether a greedy ``actor`` discounts decided teammates' footprints: a gain-prior
+    actor's prior term, unless ``overlap_discount`` is 1."""
+    return isinstance(actor, GainPriorActor) and overlap_discount < 1.0
 
 
 def choose_greedy(actor: torch.nn.Module, observations: np.ndarray, masks: np.ndarray,
@@ -153,17 +156,14 @@ def choose_greedy(actor: torch.nn.Module, observations: np.ndarray, masks: np.nd
         residual = actor.residual(planes)
         gains = actor.plane_gains(planes).numpy()
         beta = actor.log_beta.exp()
-    discount.start_step(views)
 
-    def rescore(k: int, mate_targets: np.ndarray) -> np.ndarray:
-        if len(mate_targets) == 0:
-            return scores[k]  # nothing to discount: the forward pass's own logits
-        own = discount.discounted(views[k], gains[k], mate_targets)
+    def logits_of(k: int, discounted: np.ndarray) -> np.ndarray:
         with torch.no_grad():
-            prior = beta * relative_option_gains(torch.as_tensor(own[None], dtype=torch.float32))
-            logits = (residual[k:k + 1] + prior)[0].numpy()
-        return np.where(masks[k], logits, -np.inf)
+            relative = relative_option_gains(torch.as_tensor(discounted[None],
+                                                             dtype=torch.float32))
+            return (residual[k:k + 1] + beta * relative)[0].numpy()
 
+    rescore = discount.rescorer(views, gains, scores, masks, logits_of)
     return choose_for_views(scores, views, rescore)
 
 

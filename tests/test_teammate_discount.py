@@ -45,6 +45,23 @@ def _ig_planner(name: str):
             "ig_learned": LearnedPriorPlanner}[name]()
 
 
+def _fly_beside(reference, discounting, plain, config: EnvConfig, missions) -> int:
+    """Fly validation ``missions`` with ``reference``'s actions, asserting at every step that
+    ``discounting`` chooses the same joint action; return the steps where ``plain`` did not."""
+    differs = 0
+    for mission in missions:
+        for planner in (reference, discounting, plain):
+            planner.reset(config, 0)
+        state = reset_mission(config, seed=0, mission=mission, namespace="validation")
+        while not state.done:
+            expected = reference.act(planner_views(state, reference))
+            assert discounting.act(planner_views(state, discounting)).tolist() == \
+                expected.tolist()
+            differs += plain.act(planner_views(state, plain)).tolist() != expected.tolist()
+            step_mission(state, expected)
+    return differs
+
+
 @pytest.mark.parametrize("features, name", [({"gain": True}, "ig"), (SPATIAL, "ig_spatial"),
                                             (LEARNED_CLEANUP, "ig_learned")])
 def test_the_planes_argmax_with_the_discount_chooses_what_the_ig_planner_chooses(
@@ -127,17 +144,7 @@ def test_the_default_coma_flies_ig_learneds_choices_for_every_agent():
     assert coma.needs_local_maps and not plain.needs_local_maps
     config = coma.trained_config.replace(world={"resolution": 1.0},
                                          team={"n_agents": 4, "comm_range": math.inf})
-    differs = 0
-    for mission in (0, 1):
-        for planner in (ig_learned, coma, plain):
-            planner.reset(config, 0)
-        state = reset_mission(config, seed=0, mission=mission, namespace="validation")
-        while not state.done:
-            expected = ig_learned.act(planner_views(state, ig_learned))
-            assert coma.act(planner_views(state, coma)).tolist() == expected.tolist()
-            differs += plain.act(planner_views(state, plain)).tolist() != expected.tolist()
-            step_mission(state, expected)
-    assert differs > 0
+    assert _fly_beside(ig_learned, coma, plain, config, missions=(0, 1)) > 0
 
 
 def test_relative_option_gains_keep_the_gains_order_when_every_gain_is_negative():
@@ -195,13 +202,4 @@ def test_an_untrained_gain_prior_ppo_flies_the_ig_planner_of_its_planes(tmp_path
         SpatialGainPlanner()
     assert planner.needs_local_maps and not plain.needs_local_maps
     config = env_config.replace(team={"n_agents": 4, "comm_range": math.inf})
-    for each in (planner, plain, spatial):
-        each.reset(config, 0)
-    state = reset_mission(config, seed=0, mission=4, namespace="validation")
-    differs = 0
-    while not state.done:
-        expected = spatial.act(planner_views(state, spatial))
-        assert planner.act(planner_views(state, planner)).tolist() == expected.tolist()
-        differs += plain.act(planner_views(state, plain)).tolist() != expected.tolist()
-        step_mission(state, expected)
-    assert differs > 0
+    assert _fly_beside(spatial, planner, plain, config, missions=(4,)) > 0

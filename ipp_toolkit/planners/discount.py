@@ -22,7 +22,7 @@ the boxes of the options whose footprints a teammate's overlaps.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -36,10 +36,41 @@ from ..sim.team import ACTION_DELTAS, N_ACTIONS
 from ..world.sensor import Camera
 from . import AgentView
 
-__all__ = ["OVERLAP_DISCOUNT", "TeammateDiscount"]
+__all__ = ["OVERLAP_DISCOUNT", "TeammateDiscount", "bounding_box", "check_overlap_discount",
+           "covered_mask"]
 
 OVERLAP_DISCOUNT = 0.5
 """The ``ig`` family's default factor on cells a decided teammate's next footprint covers."""
+
+#: (row0, row1, col0, col1) of a rectangle of map cells.
+Rect = tuple[int, int, int, int]
+
+
+def check_overlap_discount(value: float) -> float:
+    """``value`` as a float, or ValueError naming it unless it lies in [0, 1]."""
+    if not 0.0 <= value <= 1.0 or math.isnan(value):
+        raise ValueError(f"overlap_discount must lie in [0, 1], got {value!r}")
+    return float(value)
+
+
+def bounding_box(rects: np.ndarray) -> Rect:
+    """Union bounding box of (K, 4) rectangles (row0, row1, col0, col1)."""
+    return (int(rects[:, 0].min()), int(rects[:, 1].max()), int(rects[:, 2].min()),
+            int(rects[:, 3].max()))
+
+
+def covered_mask(box: Rect, rects: np.ndarray) -> np.ndarray | None:
+    """(h, w) bool cells of ``box`` inside any of ``rects`` ((K, 4) row0, row1, col0, col1):
+    a mask, so a cell several rectangles cover counts once; None when none is covered."""
+    r0, r1, c0, c1 = box
+    mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+    hit = False
+    for q0, q1, s0, s1 in np.asarray(rects).tolist():
+        top, bottom, left, right = max(q0, r0), min(q1, r1), max(s0, c0), min(s1, c1)
+        if top < bottom and left < right:
+            mask[top - r0:bottom - r0, left - c0:right - c0] = True
+            hit = True
+    return mask if hit else None
 
 
 class TeammateDiscount:
@@ -55,9 +86,7 @@ class TeammateDiscount:
 
     def __init__(self, config: EnvConfig, features: FeatureConfig,
                  overlap_discount: float = OVERLAP_DISCOUNT) -> None:
-        if not 0.0 <= overlap_discount <= 1.0 or math.isnan(overlap_discount):
-            raise ValueError(f"overlap_discount must lie in [0, 1], got {overlap_discount!r}")
-        self.overlap_discount = float(overlap_discount)
+        self.overlap_discount = check_overlap_discount(overlap_discount)
         self.camera = Camera(config.world, config.sensor)
         self.features = features
         self.objective = plane_objective(features.gain_smoothing, features.gain_interest)
@@ -110,6 +139,31 @@ class TeammateDiscount:
             return gains
         return gains - (1.0 - self.overlap_discount) * self.covered_gains(view, mate_targets)
 
+    def rescorer(self, views: Sequence[AgentView], gains: np.ndarray, scores: np.ndarray,
+                 masks: np.ndarray, logits_of: Callable[[int, np.ndarray], np.ndarray]
+                 ) -> Callable[[int, np.ndarray], np.ndarray]:
+        """``rescore(k, targets)`` for :func:`~ipp_toolkit.planners.choose_for_views`: agent
+        k's ``scores`` while no decided teammate is heard, else ``logits_of(k, discounted)``
+        (a policy's (6,) logits from its options' discounted gains), masked. Starts the step
+        (:meth:`start_step`).
+
+        Args:
+            views: the team's views, with local maps.
+            gains: (N, 6) the options' values read from each agent's ``gain`` planes.
+            scores: (N, 6) the policy's scores from its batched forward pass.
+            masks: (N, 6) valid actions.
+            logits_of: the policy's logits of agent k given its (6,) discounted gains.
+        """
+        self.start_step(views)
+
+        def rescore(k: int, mate_targets: np.ndarray) -> np.ndarray:
+            if len(mate_targets) == 0:
+                return scores[k]  # nothing to discount: the batched forward pass's scores
+            logits = logits_of(k, self.discounted(views[k], gains[k], mate_targets))
+            return np.where(masks[k], logits, -np.inf)
+
+        return rescore
+
     def covered_gains(self, view: AgentView, mate_targets: np.ndarray) -> np.ndarray:
         """(6,) float64 the part of each option's plane value that lies under the footprints
         from ``mate_targets`` (a cell several cover counts once); 0 for options outside the
@@ -126,9 +180,8 @@ class TeammateDiscount:
             options = np.flatnonzero(inside & (candidates[:, 2] == altitude))
             ix, iy, _ = candidates[options].T
             rects = camera.rects[altitude, iy, ix]
-            box = (int(rects[:, 0].min()), int(rects[:, 1].max()),
-                   int(rects[:, 2].min()), int(rects[:, 3].max()))
-            mask = _covered_mask(box, mate_rects)
+            box = bounding_box(rects)
+            mask = covered_mask(box, mate_rects)
             if mask is None:
                 continue
             values = self._cell_values(view, altitude, box)
@@ -136,8 +189,7 @@ class TeammateDiscount:
             covered[options] = footprint_sums_in_box(values, box, rects)
         return covered / self._normaliser
 
-    def _cell_values(self, view: AgentView, altitude: int,
-                     box: tuple[int, int, int, int]) -> np.ndarray:
+    def _cell_values(self, view: AgentView, altitude: int, box: Rect) -> np.ndarray:
         """(h, w) float32 the planes' per-cell objective of a reading at ``altitude`` over
         ``box`` of ``view``'s local map."""
         cells = (slice(box[0], box[1]), slice(box[2], box[3]))
@@ -160,16 +212,3 @@ class TeammateDiscount:
                        * (np.float32(1.0) - interest) * checking)
         return values
 
-
-def _covered_mask(box: tuple[int, int, int, int], rects: np.ndarray) -> np.ndarray | None:
-    """(h, w) bool cells of ``box`` inside any of ``rects`` ((K, 4) row0, row1, col0, col1);
-    None when none is."""
-    r0, r1, c0, c1 = box
-    mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
-    hit = False
-    for q0, q1, s0, s1 in np.asarray(rects).tolist():
-        top, bottom, left, right = max(q0, r0), min(q1, r1), max(s0, c0), min(s1, c1)
-        if top < bottom and left < right:
-            mask[top - r0:bottom - r0, left - c0:right - c0] = True
-            hit = True
-    return mask if hit else None
