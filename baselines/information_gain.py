@@ -15,6 +15,12 @@ from ipp_toolkit.planners.discount import (
     check_overlap_discount,
     covered_mask,
 )
+from ipp_toolkit.planners.lookahead import (
+    LOOKAHEAD_DISCOUNT,
+    check_lookahead,
+    continuation_values,
+    mission_lookahead,
+)
 from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
 
@@ -81,6 +87,14 @@ class InformationGainPlanner(Planner):
         outcome_weighting: how the two readings are weighted in the expected gain, one of
             :data:`ipp_toolkit.belief.mapping.OUTCOME_WEIGHTINGS`: ``predictive`` (default) or
             ``belief``, the paper authors' form (see :class:`PaperInformationGainPlanner`).
+        lookahead_steps: d in [1, 4]: a move is also worth ``lookahead_discount`` times the
+            best value of the d - 1 moves of the agent's own path after it, each counting
+            the cells no earlier footprint of the path covers
+            (:mod:`ipp_toolkit.planners.lookahead`);
+            1 (default): the greedy choice.
+        lookahead_discount: gamma in [0, 1], the weight per step further along the path.
+        lookahead_silent: look ahead on missions without communication too (default: greedy
+            there, :func:`~ipp_toolkit.planners.lookahead.mission_lookahead`).
     """
 
     name = "ig"
@@ -91,11 +105,17 @@ class InformationGainPlanner(Planner):
     objective: str = "ig"
 
     def __init__(self, overlap_discount: float = OVERLAP_DISCOUNT,
-                 outcome_weighting: str = "predictive") -> None:
+                 outcome_weighting: str = "predictive", lookahead_steps: int = 1,
+                 lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                 lookahead_silent: bool = False) -> None:
         if outcome_weighting not in OUTCOME_WEIGHTINGS:
             raise ValueError(f"outcome_weighting must be one of {OUTCOME_WEIGHTINGS}, "
                              f"got {outcome_weighting!r}")
         self.overlap_discount = check_overlap_discount(overlap_discount)
+        self.lookahead_steps, self.lookahead_discount = check_lookahead(lookahead_steps,
+                                                                        lookahead_discount)
+        self.lookahead_silent = bool(lookahead_silent)
+        self._lookahead = 1  # the steps looked at on the missions of the last reset
         self.outcome_weighting = outcome_weighting
         self._config: EnvConfig | None = None
         self._camera: Camera | None = None
@@ -107,6 +127,8 @@ class InformationGainPlanner(Planner):
             camera = Camera(config.world, config.sensor)
             self._gains = gain_table(config, camera, self.objective, self.outcome_weighting)
             self._camera, self._config = camera, config
+        self._lookahead = mission_lookahead(self.lookahead_steps, self.lookahead_silent,
+                                            config.team.comm_range)
 
     @property
     def camera(self) -> Camera:
@@ -169,6 +191,17 @@ class InformationGainPlanner(Planner):
             gain = self.cell_gains(view, altitude, cells)
             self._discount(gain, box, mate_rects)
             values[group] = footprint_sums_in_box(gain, box, rects)
+        steps = min(self._lookahead, view.budget - view.step)
+        if steps > 1:
+
+            def cell_values(altitude: int, box: Rect) -> np.ndarray:
+                gain = self.cell_gains(view, altitude, (slice(box[0], box[1]),
+                                                        slice(box[2], box[3])))
+                self._discount(gain, box, mate_rects)
+                return gain
+
+            values += self.lookahead_discount * continuation_values(
+                camera.rects, candidates, allowed, steps, self.lookahead_discount, cell_values)
         return values
 
     def cell_gains(self, view: AgentView, altitude: int,

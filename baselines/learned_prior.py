@@ -7,7 +7,10 @@ their targets avoided) and replaces ``pi`` by a learned field prior
 (:class:`ipp_toolkit.belief.field_prior.FieldPrior`): a small network that predicts, from the
 UAV's own local map, how likely each 2 m block is to be interesting, having learned the
 shapes fields take (straight boundaries continue, hotspots have sizes) from simulator ground
-truth (``ipp-train prior``). No policy is learned: the decision is still the greedy argmax.
+truth (``ipp-train prior``). No policy is learned: the decision is an argmax of the
+objective, which, when the team communicates, also counts half the best value of the next
+two moves of the UAV's own path (``lookahead_steps`` 3, :mod:`ipp_toolkit.planners.lookahead`;
+greedy without communication, where the lookahead drew UAVs together; docs/lookahead.md).
 
 In the mission's last 10 steps (of 15 in the paper's missions) a cell the map holds above 0.5
 that the prior doubts is given value too (``false_positive_weight`` 0.5,
@@ -20,7 +23,8 @@ objective alone.
 ``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON
 record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read
 the same file); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
-unused. Cost: ``ig_spatial``'s work plus one batched forward pass of the prior per step.
+unused. Cost: ``ig_spatial``'s work plus one batched forward pass of the prior per step,
+and the lookahead's per-cell values over about 30 m square per UAV and step.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import numpy as np
 from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, prior_file, shared_prior
 from ipp_toolkit.planners import AgentView
 from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
+from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS
 
 from .spatial_gain import SpatialGainPlanner
 
@@ -55,6 +60,9 @@ class LearnedPriorPlanner(SpatialGainPlanner):
         false_positive_weight, false_positive_steps: as for
             :class:`~baselines.spatial_gain.SpatialGainPlanner`; the defaults clean up in the
             last 10 steps, weight 0 flies the prior's objective alone.
+        lookahead_steps, lookahead_discount, lookahead_silent: as for
+            :class:`~baselines.information_gain.InformationGainPlanner`; by default three
+            steps, greedy without communication (docs/lookahead.md).
     """
 
     name = "ig_learned"
@@ -63,12 +71,17 @@ class LearnedPriorPlanner(SpatialGainPlanner):
     def __init__(self, checkpoint: str | Path | None = None,
                  overlap_discount: float = OVERLAP_DISCOUNT,
                  false_positive_weight: float = CLEANUP_WEIGHT,
-                 false_positive_steps: int | None = CLEANUP_STEPS) -> None:
+                 false_positive_steps: int | None = CLEANUP_STEPS,
+                 lookahead_steps: int = LOOKAHEAD_STEPS,
+                 lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                 lookahead_silent: bool = False) -> None:
         import torch
 
         super().__init__(overlap_discount=overlap_discount,
                          false_positive_weight=false_positive_weight,
-                         false_positive_steps=false_positive_steps)
+                         false_positive_steps=false_positive_steps,
+                         lookahead_steps=lookahead_steps, lookahead_discount=lookahead_discount,
+                         lookahead_silent=lookahead_silent)
         # A batch of N small maps: extra intra-op threads only spin on busy cores.
         torch.set_num_threads(1)
         path = prior_file(DEFAULT_PRIOR if checkpoint is None else checkpoint)

@@ -12,6 +12,7 @@ from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.planners import AgentView
 from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
+from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT
 
 from .information_gain import InformationGainPlanner, gain_table
 
@@ -68,6 +69,8 @@ class SpatialGainPlanner(InformationGainPlanner):
         overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
         false_positive_weight: w >= 0 of the false-positive term.
         false_positive_steps: k >= 1, the last steps in which the term applies; None: all.
+        lookahead_steps, lookahead_discount, lookahead_silent: as for
+            :class:`~baselines.information_gain.InformationGainPlanner` (default: greedy).
     """
 
     name = "ig_spatial"
@@ -75,7 +78,9 @@ class SpatialGainPlanner(InformationGainPlanner):
 
     def __init__(self, sigma: float = 5.0, overlap_discount: float = OVERLAP_DISCOUNT,
                  false_positive_weight: float = 0.0,
-                 false_positive_steps: int | None = None) -> None:
+                 false_positive_steps: int | None = None, lookahead_steps: int = 1,
+                 lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                 lookahead_silent: bool = False) -> None:
         if not sigma > 0 or not math.isfinite(sigma):
             raise ValueError(f"sigma must be a positive number of metres, got {sigma!r}")
         if not 0 <= false_positive_weight < math.inf:
@@ -83,7 +88,9 @@ class SpatialGainPlanner(InformationGainPlanner):
                              f"{false_positive_weight!r}")
         if false_positive_steps is not None:
             false_positive_steps = check_int("false_positive_steps", false_positive_steps, 1)
-        super().__init__(overlap_discount)
+        super().__init__(overlap_discount, lookahead_steps=lookahead_steps,
+                         lookahead_discount=lookahead_discount,
+                         lookahead_silent=lookahead_silent)
         self.sigma = float(sigma)
         self.false_positive_weight = float(false_positive_weight)
         self.false_positive_steps = false_positive_steps

@@ -23,6 +23,7 @@ from ipp_toolkit.planners.discount import (
     TeammateDiscount,
     check_overlap_discount,
 )
+from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, check_lookahead
 from ipp_toolkit.sim.features import relative_option_gains
 
 from .config import mission_settings
@@ -53,6 +54,12 @@ class COMAPlanner(Planner):
             default: the best validated shipped policy (``DEFAULT_SHIPPED``).
         overlap_discount: a gain-prior actor's factor on covered cells, in [0, 1] (1: the
             planes' values as they are, the choice before this rule); other actors ignore it.
+        lookahead_steps, lookahead_discount: a gain-prior actor's prior term also values
+            each option's best continuation along the agent's own path, as the ``ig``
+            planners with these options do (:mod:`ipp_toolkit.planners.lookahead`); 1 step:
+            the planes' one-step values; by default three steps, greedy without
+            communication unless ``lookahead_silent`` (docs/lookahead.md). Other actors
+            ignore them.
     """
 
     name = "coma"
@@ -65,7 +72,10 @@ class COMAPlanner(Planner):
     deprecated = ""
 
     def __init__(self, checkpoint: str | os.PathLike[str] | None = None,
-                 overlap_discount: float = OVERLAP_DISCOUNT):
+                 overlap_discount: float = OVERLAP_DISCOUNT,
+                 lookahead_steps: int = LOOKAHEAD_STEPS,
+                 lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                 lookahead_silent: bool = False):
         if self.deprecated:
             warnings.warn(f"planner {self.name!r} is deprecated; use {self.deprecated}",
                           DeprecationWarning, stacklevel=2)
@@ -84,8 +94,11 @@ class COMAPlanner(Planner):
         self.trained_settings = mission_settings(networks.coma_config, networks.env_config)
         self.transfer_notes: list[str] = []
         self.overlap_discount = check_overlap_discount(overlap_discount)
-        # The discount reads each UAV's own local map.
-        self.needs_local_maps = _decides_with_discount(self.actor, self.overlap_discount)
+        self.lookahead = (*check_lookahead(lookahead_steps, lookahead_discount),
+                          bool(lookahead_silent))
+        # The discount and the lookahead read each UAV's own local map.
+        self.needs_local_maps = _decides_with_discount(self.actor, self.overlap_discount,
+                                                       self.lookahead[0])
         self._discount: TeammateDiscount | None = None
 
     def reset(self, config: EnvConfig, seed: int) -> None:
@@ -98,7 +111,7 @@ class COMAPlanner(Planner):
         trained = min(self.trained_settings, key=mismatches)
         self.transfer_notes = check_transfer(trained, config, self.checkpoint)
         self._discount = teammate_discount(self.actor, config, self.observation_features,
-                                           self.overlap_discount)
+                                           self.overlap_discount, *self.lookahead)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) int64: each agent's likeliest valid action, chosen in agent order, avoiding
@@ -112,19 +125,24 @@ class COMAPlanner(Planner):
 
 
 def teammate_discount(actor: torch.nn.Module, config: EnvConfig, features: FeatureConfig,
-                      overlap_discount: float = OVERLAP_DISCOUNT) -> TeammateDiscount | None:
-    """The same-step discount a greedy ``actor`` decides with on missions of ``config``: a
-    gain-prior actor's over the planes of its ``features``; None for other actors or
-    ``overlap_discount`` 1."""
-    if not _decides_with_discount(actor, overlap_discount):
+                      overlap_discount: float = OVERLAP_DISCOUNT, lookahead_steps: int = 1,
+                      lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                      lookahead_silent: bool = False) -> TeammateDiscount | None:
+    """The same-step discount (and lookahead) a greedy ``actor`` decides with on missions of
+    ``config``: a gain-prior actor's over the planes of its ``features``; None for other
+    actors, or ``overlap_discount`` 1 without a lookahead."""
+    if not _decides_with_discount(actor, overlap_discount, lookahead_steps):
         return None
-    return TeammateDiscount(config, features, overlap_discount)
+    return TeammateDiscount(config, features, overlap_discount, lookahead_steps,
+                            lookahead_discount, lookahead_silent)
 
 
-def _decides_with_discount(actor: torch.nn.Module, overlap_discount: float) -> bool:
-    """Whether a greedy ``actor`` discounts decided teammates' footprints: a gain-prior
-    actor's prior term, unless ``overlap_discount`` is 1."""
-    return isinstance(actor, GainPriorActor) and overlap_discount < 1.0
+def _decides_with_discount(actor: torch.nn.Module, overlap_discount: float,
+                           lookahead_steps: int = 1) -> bool:
+    """Whether a greedy ``actor`` rescores its prior term: a gain-prior actor's, unless
+    ``overlap_discount`` is 1 and it does not look ahead."""
+    return isinstance(actor, GainPriorActor) and (overlap_discount < 1.0
+                                                  or lookahead_steps > 1)
 
 
 def choose_greedy(actor: torch.nn.Module, observations: np.ndarray, masks: np.ndarray,

@@ -120,16 +120,17 @@ def _fly(planner, config, mission=0):
 
 def test_the_learned_planner_with_the_gaussian_prior_flies_as_ig_spatial(tmp_path):
     """With the prior's prediction replaced by ig_spatial's smoothing, the planner makes
-    ig_spatial's every choice (with the same false-positive weight): the plumbing (blocks,
-    windows, agents) is the same."""
+    ig_spatial's every choice (with the same false-positive term and lookahead): the plumbing
+    (blocks, windows, agents) is the same."""
     config = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 4},
                                  terrain={"kind": "blobs"})
     _tiny_prior(tmp_path / "prior.pt")
     smoother = interest_smoother(config.world.map_cells, config.world.resolution, 5.0)
-    for weight in (0.0, 0.2):
-        learned = LearnedPriorPlanner(tmp_path / "prior.pt", false_positive_weight=weight)
+    for weight, steps in ((0.0, 1), (0.2, 1), (0.2, 3)):
+        learned = LearnedPriorPlanner(tmp_path / "prior.pt", false_positive_weight=weight,
+                                      false_positive_steps=None, lookahead_steps=steps)
         learned.prior.fine_values = lambda prob, resolution, fine: smoother.block_values(prob)
-        spatial = SpatialGainPlanner(false_positive_weight=weight)
+        spatial = SpatialGainPlanner(false_positive_weight=weight, lookahead_steps=steps)
         np.testing.assert_array_equal(_fly(learned, config), _fly(spatial, config))
 
 

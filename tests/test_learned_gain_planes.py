@@ -120,8 +120,9 @@ def test_the_first_agents_best_learned_option_is_ig_learneds_choice(false_positi
     config = EnvConfig().replace(world={"resolution": 0.5},
                                  features={**LEARNED, "gain_false_positive": false_positive,
                                            "gain_false_positive_steps": steps})
+    # one step: the planes hold one-step values (the lookahead: tests/test_lookahead.py)
     planner = LearnedPriorPlanner(false_positive_weight=false_positive,
-                                  false_positive_steps=steps or None)
+                                  false_positive_steps=steps or None, lookahead_steps=1)
     planner.reset(config, 0)
     state = reset_mission(config, seed=0, mission=1)
     channel, row, col = option_gain_cells([0, 1, 2], state.geometry.grid_points)

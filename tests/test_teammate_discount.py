@@ -41,8 +41,9 @@ def _ig_planner(name: str):
     from baselines.learned_prior import LearnedPriorPlanner
     from baselines.spatial_gain import SpatialGainPlanner
 
+    # one step: the planes' values are one-step values (the lookahead is tested below)
     return {"ig": InformationGainPlanner, "ig_spatial": SpatialGainPlanner,
-            "ig_learned": LearnedPriorPlanner}[name]()
+            "ig_learned": LearnedPriorPlanner}[name](lookahead_steps=1)
 
 
 def _fly_beside(reference, discounting, plain, config: EnvConfig, missions) -> int:
@@ -132,19 +133,40 @@ def test_a_discount_outside_zero_to_one_is_refused_naming_it(value):
 
 
 def test_the_default_coma_flies_ig_learneds_choices_for_every_agent():
-    """The default ``coma`` (its residual the untrained start its recipe selected) chooses
-    what ``ig_learned`` chooses for every UAV at every step, teammates heard; with
-    ``overlap_discount=1`` (the planes' values as they are) it does not."""
+    """The default ``coma`` (its residual the untrained start its recipe selected), greedy,
+    chooses what a greedy ``ig_learned`` chooses for every UAV at every step, teammates
+    heard; with ``overlap_discount=1`` (the planes' values as they are) it does not."""
     from baselines.learned_prior import LearnedPriorPlanner
     from ipp_toolkit.planners import make_planner
 
-    ig_learned = LearnedPriorPlanner()
-    coma = make_planner("coma")
-    plain = make_planner("coma", overlap_discount=1.0)
+    ig_learned = LearnedPriorPlanner(lookahead_steps=1)
+    coma = make_planner("coma", lookahead_steps=1)
+    plain = make_planner("coma", overlap_discount=1.0, lookahead_steps=1)
     assert coma.needs_local_maps and not plain.needs_local_maps
     config = coma.trained_config.replace(world={"resolution": 1.0},
                                          team={"n_agents": 4, "comm_range": math.inf})
     assert _fly_beside(ig_learned, coma, plain, config, missions=(0, 1)) > 0
+
+
+SILENT = {"lookahead_steps": 3, "lookahead_discount": 0.5, "lookahead_silent": True}
+
+
+@pytest.mark.parametrize("options, comm", [(SILENT, 0.0), (SILENT, math.inf), ({}, 25.0)])
+def test_coma_looking_ahead_flies_ig_learneds_choices_with_the_same_lookahead(options, comm):
+    """With a three-step lookahead (without communication too) the default ``coma`` values
+    each option's continuation as ``ig_learned`` with the same options does, and so flies
+    its choices (a greedy ``coma`` does not, on these missions); so do the defaults of both.
+    """
+    from baselines.learned_prior import LearnedPriorPlanner
+    from ipp_toolkit.planners import make_planner
+
+    ig_learned = LearnedPriorPlanner(**options)
+    coma = make_planner("coma", **options)
+    greedy = make_planner("coma", lookahead_steps=1)
+    assert coma.needs_local_maps
+    config = coma.trained_config.replace(world={"resolution": 1.0},
+                                         team={"n_agents": 4, "comm_range": comm})
+    assert _fly_beside(ig_learned, coma, greedy, config, missions=(0, 1)) > 0
 
 
 def test_relative_option_gains_keep_the_gains_order_when_every_gain_is_negative():

@@ -35,6 +35,12 @@ from ..sim.features import gain_normaliser, plane_objective
 from ..sim.team import ACTION_DELTAS, N_ACTIONS
 from ..world.sensor import Camera
 from . import AgentView
+from .lookahead import (
+    LOOKAHEAD_DISCOUNT,
+    check_lookahead,
+    continuation_values,
+    mission_lookahead,
+)
 
 __all__ = ["OVERLAP_DISCOUNT", "TeammateDiscount", "bounding_box", "check_overlap_discount",
            "covered_mask"]
@@ -74,7 +80,8 @@ def covered_mask(box: Rect, rects: np.ndarray) -> np.ndarray | None:
 
 
 class TeammateDiscount:
-    """``ig``'s same-step discount on the options' values read from the ``gain`` planes.
+    """``ig``'s same-step discount on the options' values read from the ``gain`` planes, and
+    optionally the ``ig`` family's lookahead over the agent's own path.
 
     Args:
         config: the mission's config (its world, camera and class weights).
@@ -82,11 +89,24 @@ class TeammateDiscount:
             ``gain_smoothing``, ``gain_interest``, ``gain_false_positive`` and
             ``gain_false_positive_steps``).
         overlap_discount: factor in [0, 1] on covered cells; 1 leaves the values alone.
+        lookahead_steps, lookahead_discount: each option's value also gains
+            ``lookahead_discount`` times its best continuation along the agent's own path
+            (:func:`~ipp_toolkit.planners.lookahead.continuation_values`, the planes'
+            objective, teammates' footprints discounted), as the ``ig`` planner with these
+            options values its moves; 1 step (default): the planes' one-step values.
+        lookahead_silent: look ahead on missions without communication too (default:
+            not, :func:`~ipp_toolkit.planners.lookahead.mission_lookahead`).
     """
 
     def __init__(self, config: EnvConfig, features: FeatureConfig,
-                 overlap_discount: float = OVERLAP_DISCOUNT) -> None:
+                 overlap_discount: float = OVERLAP_DISCOUNT, lookahead_steps: int = 1,
+                 lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                 lookahead_silent: bool = False) -> None:
         self.overlap_discount = check_overlap_discount(overlap_discount)
+        steps, self.lookahead_discount = check_lookahead(lookahead_steps, lookahead_discount)
+        #: the steps looked at on these missions
+        self.lookahead_steps = mission_lookahead(steps, lookahead_silent,
+                                                 config.team.comm_range)
         self.camera = Camera(config.world, config.sensor)
         self.features = features
         self.objective = plane_objective(features.gain_smoothing, features.gain_interest)
@@ -105,9 +125,10 @@ class TeammateDiscount:
         """Estimate, in one batch, every agent's probability of interest when one of them
         hears a lower-index teammate this step; call before :meth:`discounted`."""
         self._interest = {}
-        if self.objective != "interesting" or self.overlap_discount == 1.0:
+        if self.objective != "interesting" or not self.active:
             return
-        if not any((np.asarray(view.teammates) < view.index).any() for view in views):
+        if self.lookahead_steps == 1 and not any(
+                (np.asarray(view.teammates) < view.index).any() for view in views):
             return
         # The whole team, as the gain planes ask the learned prior: the same squares, so
         # the prior answers from its last call instead of a second forward pass.
@@ -123,6 +144,15 @@ class TeammateDiscount:
             blocks = interest_smoother(self._size, self._resolution,
                                        self.features.gain_smoothing).smooth(means)
         self._interest = {view.index: blocks[i] for i, view in enumerate(views)}
+
+    @property
+    def active(self) -> bool:
+        """Whether it changes any value: a discount below 1 or a lookahead."""
+        return self.overlap_discount < 1.0 or self.lookahead_steps > 1
+
+    def looks_ahead(self, view: AgentView) -> bool:
+        """Whether ``view``'s options get a continuation (two or more steps left)."""
+        return min(self.lookahead_steps, view.budget - view.step) > 1
 
     def discounted(self, view: AgentView, gains: np.ndarray, mate_targets: np.ndarray
                    ) -> np.ndarray:
@@ -157,12 +187,38 @@ class TeammateDiscount:
         self.start_step(views)
 
         def rescore(k: int, mate_targets: np.ndarray) -> np.ndarray:
-            if len(mate_targets) == 0:
-                return scores[k]  # nothing to discount: the batched forward pass's scores
-            logits = logits_of(k, self.discounted(views[k], gains[k], mate_targets))
-            return np.where(masks[k], logits, -np.inf)
+            ahead = self.looks_ahead(views[k])
+            if len(mate_targets) == 0 and not ahead:
+                return scores[k]  # nothing to change: the batched forward pass's scores
+            values = self.discounted(views[k], gains[k], mate_targets)
+            if ahead:
+                values = values + self.lookahead_discount * self.continuation(
+                    views[k], mate_targets, np.asarray(masks[k], dtype=bool))
+            return np.where(masks[k], logits_of(k, values), -np.inf)
 
         return rescore
+
+    def continuation(self, view: AgentView, mate_targets: np.ndarray, valid: np.ndarray
+                     ) -> np.ndarray:
+        """(6,) float64 each valid option's best continuation in plane units
+        (:func:`~ipp_toolkit.planners.lookahead.continuation_values` of the planes' objective,
+        cells under ``mate_targets``' footprints discounted); 0 for the others."""
+        camera = self.camera
+        targets = np.asarray(mate_targets, dtype=np.int64).reshape(-1, 3)
+        mate_rects = camera.rects[targets[:, 2], targets[:, 1], targets[:, 0]]
+        discounting = len(mate_rects) > 0 and self.overlap_discount < 1.0
+
+        def cell_values(altitude: int, box: Rect) -> np.ndarray:
+            values = self._cell_values(view, altitude, box)
+            mask = covered_mask(box, mate_rects) if discounting else None
+            if mask is not None:
+                np.multiply(values, np.float32(self.overlap_discount), out=values, where=mask)
+            return values
+
+        candidates = np.asarray(view.position, dtype=np.int64)[None, :] + ACTION_DELTAS
+        steps = min(self.lookahead_steps, view.budget - view.step)
+        return continuation_values(camera.rects, candidates, valid, steps,
+                                   self.lookahead_discount, cell_values) / self._normaliser
 
     def covered_gains(self, view: AgentView, mate_targets: np.ndarray) -> np.ndarray:
         """(6,) float64 the part of each option's plane value that lies under the footprints
