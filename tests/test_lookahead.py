@@ -77,12 +77,14 @@ def _brute_force(planner, view, first_target, depth, gamma, mate_rects):
     return best
 
 
-@pytest.mark.parametrize("depth, gamma", [(2, 1.0), (3, 0.5)])
-def test_continuation_values_match_a_cell_by_cell_count(depth, gamma):
+@pytest.mark.parametrize("depth, gamma, steps, agent", [(2, 1.0, 3, 1), (3, 0.5, 3, 1),
+                                                        (3, 0.5, 0, 0), (3, 0.5, 8, 0),
+                                                        (4, 0.7, 5, 1)])
+def test_continuation_values_match_a_cell_by_cell_count(depth, gamma, steps, agent):
     config = _config()
     planner = SpatialGainPlanner()
-    views = _views_after(planner, config, steps=3)
-    view = views[1]
+    views = _views_after(planner, config, steps=steps)
+    view = views[agent]
     candidates = view.position[None, :].astype(np.int64) + ACTION_DELTAS
     allowed = view.mask.astype(bool)
     # a teammate's next footprint where the agent is: its cells count half

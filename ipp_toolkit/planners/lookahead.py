@@ -12,9 +12,10 @@ The path is open loop (the map is not updated between its readings) and a cell c
 at its first reading on the path: a second reading of the same ground is worth less and
 counting it zero keeps every term a rectangle sum. Footprints are rectangles and so are
 their intersections, so each term is an inclusion-exclusion over the earlier footprints,
-taken from a summed-area table of each altitude's per-cell values over the box the paths can
-reach. Paths that leave the grid of waypoints are skipped; a path is as long as the steps
-left in the mission allow.
+taken from a summed-area table of each altitude's per-cell values, summed first into the
+cells of the grid the footprints' edges cut the box the paths can reach into. Paths that
+leave the grid of waypoints are skipped; a path is as long as the steps left in the mission
+allow.
 
 The per-cell values come from the planner (a callable), with whatever the planner applies to
 the first move (a teammate's same-step discount) applied to the whole path: used by the
@@ -22,7 +23,8 @@ the first move (a teammate's same-step discount) applied to the whole path: used
 (:class:`~ipp_toolkit.planners.discount.TeammateDiscount`).
 
 Cost per UAV and step: the per-cell values of each altitude the paths reach over that box
-(about 30 m square at d = 3), one cumulative sum per altitude, and 6^(d-1) paths per move.
+(about 25-35 m square at d = 3), two passes summing them into the edges' grid, and 6^(d-1)
+paths per move.
 """
 
 from __future__ import annotations
@@ -98,6 +100,53 @@ def _intersect(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def _rectangle_sums(later: np.ndarray, iz: np.ndarray, valid: np.ndarray,
+                    first_rects: np.ndarray,
+                    cell_values: Callable[[int, tuple[int, int, int, int]], np.ndarray]
+                    ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``sums(rect, altitude)``: the per-cell values at ``altitude`` summed over (..., 4)
+    rectangles whose edges are edges of ``later`` (A, S, T, 4) or ``first_rects`` (A, 4)
+    footprints and that lie in the box of the valid later footprints at that altitude.
+
+    Every sum the lookahead takes is over a later footprint or a part of it, read at that
+    footprint's altitude, so per altitude the values are summed into the cells of the grid
+    the footprints' edges cut that box into, and one small summed-area table is taken over
+    that grid.
+    """
+    from .discount import bounding_box  # discount imports this module
+
+    reached = np.unique(iz[valid]).tolist()
+    row_edges = np.unique(np.concatenate([first_rects[:, :2].ravel(),
+                                          later[valid][..., :2].ravel()]))
+    col_edges = np.unique(np.concatenate([first_rects[:, 2:].ravel(),
+                                          later[valid][..., 2:].ravel()]))
+    size = int(max(row_edges[-1], col_edges[-1])) + 1
+    n_z = int(iz.max()) + 1
+    row_index = np.zeros((n_z, size), dtype=np.int64)  # map row -> table row, per altitude
+    col_index = np.zeros((n_z, size), dtype=np.int64)
+    tables = np.zeros((n_z, len(row_edges), len(col_edges)), dtype=np.float64)
+    for altitude in reached:
+        r0, r1, c0, c1 = bounding_box(later[valid[:, :, None] & (iz == altitude)])
+        rows = row_edges[(row_edges >= r0) & (row_edges <= r1)]
+        cols = col_edges[(col_edges >= c0) & (col_edges <= c1)]
+        row_index[altitude, rows] = np.arange(len(rows))
+        col_index[altitude, cols] = np.arange(len(cols))
+        grid = np.add.reduceat(np.asarray(cell_values(altitude, (r0, r1, c0, c1)),
+                                          dtype=np.float64), rows[:-1] - r0, axis=0)
+        grid = np.add.reduceat(grid, cols[:-1] - c0, axis=1)
+        table = tables[altitude, 1:len(rows), 1:len(cols)]
+        np.cumsum(grid, axis=0, out=table)
+        np.cumsum(table, axis=1, out=table)
+
+    def sums(rect: np.ndarray, altitude: np.ndarray) -> np.ndarray:
+        q0, q1 = row_index[altitude, rect[..., 0]], row_index[altitude, rect[..., 1]]
+        s0, s1 = col_index[altitude, rect[..., 2]], col_index[altitude, rect[..., 3]]
+        return (tables[altitude, q1, s1] - tables[altitude, q0, s1]
+                - tables[altitude, q1, s0] + tables[altitude, q0, s0])
+
+    return sums
+
+
 def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: np.ndarray,
                         steps: int, discount: float,
                         cell_values: Callable[[int, tuple[int, int, int, int]], np.ndarray]
@@ -115,8 +164,6 @@ def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: n
         cell_values: ``(altitude, box) -> (h, w)`` per-cell value of a reading at
             ``altitude`` of each cell of ``box`` (row0, row1, col0, col1).
     """
-    from .discount import bounding_box  # discount imports this module
-
     n_z, n_y, n_x = rects.shape[:3]
     first = np.flatnonzero(allowed)
     values = np.zeros(N_ACTIONS, dtype=np.float64)
@@ -129,34 +176,10 @@ def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: n
     ix, iy, iz = np.moveaxis(np.clip(paths, 0, top), -1, 0)
     later = rects[iz, iy, ix]  # (A, S, T, 4)
     first_rects = rects[starts[:, 2], starts[:, 1], starts[:, 0]]  # (A, 4)
-    # Every sum is over a later footprint or a part of it, read at that footprint's altitude:
-    # one table per altitude, over the box of the later footprints at that altitude.
-    reached = np.unique(iz[valid]).tolist()
-    corners = np.zeros((n_z, 2), dtype=np.int64)  # (row0, col0) of each altitude's box
-    boxes = {}
-    for altitude in reached:
-        at = valid[:, :, None] & (iz == altitude)
-        boxes[altitude] = bounding_box(later[at])
-        corners[altitude] = boxes[altitude][0], boxes[altitude][2]
-    height = max(box[1] - box[0] for box in boxes.values()) + 1
-    width = max(box[3] - box[2] for box in boxes.values()) + 1
-    tables = np.zeros((n_z, height, width), dtype=np.float64)
-    for altitude, box in boxes.items():
-        table = tables[altitude, 1:box[1] - box[0] + 1, 1:box[3] - box[2] + 1]
-        np.cumsum(cell_values(altitude, box), axis=0, dtype=np.float64, out=table)
-        np.cumsum(table, axis=1, out=table)
-    # A path off the grid reads nothing: an empty rectangle at a reached altitude's corner.
-    iz = np.where(valid[:, :, None], iz, reached[0])
-    row, col = corners[reached[0]]
-    later = np.where(valid[:, :, None, None], later, np.array([row, row, col, col]))
-
-    def sums(rect: np.ndarray, altitude: np.ndarray) -> np.ndarray:
-        row0, col0 = corners[altitude, 0], corners[altitude, 1]
-        q0, q1, s0, s1 = (rect[..., 0] - row0, rect[..., 1] - row0, rect[..., 2] - col0,
-                          rect[..., 3] - col0)
-        return (tables[altitude, q1, s1] - tables[altitude, q0, s1]
-                - tables[altitude, q1, s0] + tables[altitude, q0, s0])
-
+    sums = _rectangle_sums(later, iz, valid, first_rects, cell_values)
+    # A path off the grid reads nothing: an empty rectangle (all zero).
+    iz = np.where(valid[:, :, None], iz, 0)
+    later = np.where(valid[:, :, None, None], later, 0)
     earlier = [np.broadcast_to(first_rects[:, None, :], later.shape[:2] + (4,))]
     total = np.zeros(valid.shape, dtype=np.float64)
     for t in range(steps - 1):
