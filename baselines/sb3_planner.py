@@ -31,6 +31,7 @@ from ipp_toolkit.planners.discount import (
     TeammateDiscount,
     check_overlap_discount,
 )
+from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, check_lookahead
 from ipp_toolkit.sim.features import relative_option_gains
 from ipp_toolkit.sim.team import N_ACTIONS
 
@@ -77,6 +78,10 @@ class SB3Planner(Planner):
             every agent its own argmax, as the policy acted while it trained.
         overlap_discount: a gain-prior policy's factor on covered cells in agent order, in
             [0, 1] (1: the planes' gains as they are); other policies ignore it.
+        lookahead_steps, lookahead_discount, lookahead_silent: a gain-prior policy's six
+            gains also count each option's best continuation along the UAV's own path, as
+            the ``ig`` planners with these options do (:mod:`ipp_toolkit.planners.lookahead`;
+            default 1 step: the planes' one-step gains); other policies ignore them.
 
     Raises:
         CheckpointError: no checkpoint; a missing, corrupt or foreign one; or one trained for
@@ -89,7 +94,9 @@ class SB3Planner(Planner):
     needs_local_maps = False
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
-                 in_order: bool = True, overlap_discount: float = OVERLAP_DISCOUNT) -> None:
+                 in_order: bool = True, overlap_discount: float = OVERLAP_DISCOUNT,
+                 lookahead_steps: int = 1, lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                 lookahead_silent: bool = False) -> None:
         # Batches of N observations: extra intra-op threads only spin on busy cores.
         torch.set_num_threads(1)
         if checkpoint is None:
@@ -107,10 +114,12 @@ class SB3Planner(Planner):
         self.transfer_notes: list[str] = []
         self._lstm_states: LSTMStates | None = None
         self.overlap_discount = check_overlap_discount(overlap_discount)
-        self._discounts = (self.in_order and overlap_discount < 1.0
+        self.lookahead = (*check_lookahead(lookahead_steps, lookahead_discount),
+                          bool(lookahead_silent))
+        self._discounts = (self.in_order and (overlap_discount < 1.0 or lookahead_steps > 1)
                            and isinstance(getattr(self.policy, "mlp_extractor", None),
                                           GainPriorMlpExtractor))
-        # The discount reads each UAV's own local map.
+        # The discount and the lookahead read each UAV's own local map.
         self.needs_local_maps = self._discounts
         self._discount: TeammateDiscount | None = None
 
@@ -136,7 +145,8 @@ class SB3Planner(Planner):
         self._lstm_states = None
         if self._discounts:
             features = self.observation_features or config.features
-            self._discount = TeammateDiscount(config, features, self.overlap_discount)
+            self._discount = TeammateDiscount(config, features, self.overlap_discount,
+                                              *self.lookahead)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks."""
@@ -189,7 +199,9 @@ class PPOPlanner(SB3Planner):
             ``shipped:NAME`` (:data:`baselines.ppo.SHIPPED_POLICIES`); None loads the default
             shipped policy (:data:`baselines.ppo.DEFAULT_SHIPPED`).
         device: torch device of the forward pass.
-        in_order, overlap_discount: as in :class:`SB3Planner`.
+        in_order, overlap_discount, lookahead_steps, lookahead_discount, lookahead_silent:
+            as in :class:`SB3Planner`; by default a gain-prior policy looks three steps
+            ahead with communication, as ``ig_learned`` does (docs/lookahead.md).
 
     Raises:
         CheckpointError: no shipped policy, or a missing, corrupt or foreign file.
@@ -198,7 +210,10 @@ class PPOPlanner(SB3Planner):
     name = "ppo"
 
     def __init__(self, checkpoint: str | Path | None = None, device: str = "cpu",
-                 in_order: bool = True, overlap_discount: float = OVERLAP_DISCOUNT) -> None:
+                 in_order: bool = True, overlap_discount: float = OVERLAP_DISCOUNT,
+                 lookahead_steps: int = LOOKAHEAD_STEPS,
+                 lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                 lookahead_silent: bool = False) -> None:
         from . import ppo  # the default is read at call time (tests point it elsewhere)
 
         if checkpoint is None:
@@ -209,4 +224,5 @@ class PPOPlanner(SB3Planner):
                     "`ipp-train ppo --out runs/ppo` and pass ppo=runs/ppo/policy.pt "
                     "(checkpoint='runs/ppo/policy.pt')")
             checkpoint = ppo.DEFAULT_CHECKPOINT
-        super().__init__(checkpoint, device, in_order, overlap_discount)
+        super().__init__(checkpoint, device, in_order, overlap_discount, lookahead_steps,
+                         lookahead_discount, lookahead_silent)

@@ -203,7 +203,8 @@ def test_ppos_gain_prior_reads_negative_gains_in_their_order():
 def test_an_untrained_gain_prior_ppo_flies_the_ig_planner_of_its_planes(tmp_path):
     """A gain-prior PPO policy whose action layer reads only the gains (its untrained start)
     flown by the ``ppo`` planner chooses what ``ig_spatial`` chooses for every UAV once the
-    decided teammates' footprints are discounted; with ``overlap_discount=1`` it does not."""
+    decided teammates' footprints are discounted; with ``overlap_discount=1`` it does not.
+    With a lookahead it chooses what ``ig_spatial`` with the same lookahead chooses."""
     from types import SimpleNamespace
 
     from gymnasium import spaces
@@ -220,8 +221,13 @@ def test_an_untrained_gain_prior_ppo_flies_the_ig_planner_of_its_planes(tmp_path
     model = SimpleNamespace(policy=policy, num_timesteps=0,
                             observation_space=spaces.Box(-1.0, 1.0, shape, dtype=np.float32))
     path = ppo.save_policy(tmp_path / "prior.pt", model, train, env_config)
-    planner, plain, spatial = PPOPlanner(path), PPOPlanner(path, overlap_discount=1.0), \
-        SpatialGainPlanner()
+    planner, plain, spatial = (PPOPlanner(path, lookahead_steps=1),
+                               PPOPlanner(path, overlap_discount=1.0, lookahead_steps=1),
+                               SpatialGainPlanner())
     assert planner.needs_local_maps and not plain.needs_local_maps
     config = env_config.replace(team={"n_agents": 4, "comm_range": math.inf})
     assert _fly_beside(spatial, planner, plain, config, missions=(4,)) > 0
+    # with a lookahead, as ig_spatial with the same one
+    ahead = PPOPlanner(path)  # the default: three steps with communication
+    assert _fly_beside(SpatialGainPlanner(lookahead_steps=3), ahead, planner, config,
+                       missions=(4,)) > 0

@@ -44,8 +44,8 @@ __all__ = ["LOOKAHEAD_DISCOUNT", "LOOKAHEAD_STEPS", "MAX_LOOKAHEAD_STEPS", "chec
 MAX_LOOKAHEAD_STEPS = 4
 #: The default weight per step further along the path.
 LOOKAHEAD_DISCOUNT = 0.5
-#: The steps the learned-prior planners look at by default (``ig_learned`` and the default
-#: ``coma``); the other ``ig`` planners are greedy (1) unless asked.
+#: The steps the learned-prior planners look at by default (``ig_learned``, ``coma`` and
+#: ``ppo``); the other ``ig`` planners and ``sb3`` are greedy (1) unless asked.
 LOOKAHEAD_STEPS = 3
 
 
