@@ -13,13 +13,14 @@ from ipp_toolkit.planners.discount import (
     OVERLAP_DISCOUNT,
     bounding_box,
     check_overlap_discount,
-    covered_mask,
+    discount_covered,
 )
 from ipp_toolkit.planners.lookahead import (
     LOOKAHEAD_DISCOUNT,
     check_lookahead,
     continuation_values,
     mission_lookahead,
+    steps_left,
 )
 from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
@@ -191,7 +192,7 @@ class InformationGainPlanner(Planner):
             gain = self.cell_gains(view, altitude, cells)
             self._discount(gain, box, mate_rects)
             values[group] = footprint_sums_in_box(gain, box, rects)
-        steps = min(self._lookahead, view.budget - view.step)
+        steps = steps_left(self._lookahead, view)
         if steps > 1:
 
             def cell_values(altitude: int, box: Rect) -> np.ndarray:
@@ -229,14 +230,7 @@ class InformationGainPlanner(Planner):
 
     def _discount(self, gain: np.ndarray, box: Rect, mate_rects: np.ndarray) -> None:
         """Scale, in place, the gain of cells inside ``box`` under teammates' next footprints."""
-        if len(mate_rects) == 0 or self.overlap_discount == 1.0:
-            return
-        covered = covered_mask(box, mate_rects)
-        if covered is None:
-            return
-        # A mask, not one multiplication per footprint: a cell several teammates will see is
-        # still discounted once.
-        np.multiply(gain, np.float32(self.overlap_discount), out=gain, where=covered)
+        discount_covered(gain, box, mate_rects, self.overlap_discount)
 
 
 class PaperInformationGainPlanner(InformationGainPlanner):

@@ -11,12 +11,15 @@ k and the targets its decided teammates chose, each option's plane value minus
 k's own local map with the objective the planes were built with (``ig``'s, or
 ``ig_spatial``'s / ``ig_learned``'s with a smoothed or learned probability of interest and the
 clean-up term). With the policy's own correction at zero, the planner then chooses what the
-``ig`` planner of the same objective chooses.
+``ig`` planner of the same objective chooses. With ``lookahead_steps`` > 1 it also adds each
+option's best continuation along the agent's own path, as the ``ig`` planner with the same
+options does (:mod:`ipp_toolkit.planners.lookahead`).
 
-Cost: nothing while no decided teammate is heard; otherwise the team's probability of
-interest (a learned prior answers from the gain planes' call of the same step, see
-:meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and a table look-up over
-the boxes of the options whose footprints a teammate's overlaps.
+Cost without a lookahead: nothing while no decided teammate is heard; otherwise the team's
+probability of interest (a learned prior answers from the gain planes' call of the same
+step, see :meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and a table
+look-up over the boxes of the options whose footprints a teammate's overlaps. A lookahead adds, for
+every agent and step, the probability of interest and the continuation's per-cell values.
 """
 
 from __future__ import annotations
@@ -40,10 +43,11 @@ from .lookahead import (
     check_lookahead,
     continuation_values,
     mission_lookahead,
+    steps_left,
 )
 
 __all__ = ["OVERLAP_DISCOUNT", "TeammateDiscount", "bounding_box", "check_overlap_discount",
-           "covered_mask"]
+           "covered_mask", "discount_covered"]
 
 OVERLAP_DISCOUNT = 0.5
 """The ``ig`` family's default factor on cells a decided teammate's next footprint covers."""
@@ -77,6 +81,17 @@ def covered_mask(box: Rect, rects: np.ndarray) -> np.ndarray | None:
             mask[top - r0:bottom - r0, left - c0:right - c0] = True
             hit = True
     return mask if hit else None
+
+
+def discount_covered(values: np.ndarray, box: Rect, rects: np.ndarray, factor: float) -> None:
+    """Scale, in place, the (h, w) ``values`` of ``box``'s cells inside any of ``rects``
+    ((K, 4) decided teammates' next footprints) by ``factor``: once per cell, however many
+    rectangles cover it. Nothing to do without rectangles or with ``factor`` 1."""
+    if len(rects) == 0 or factor == 1.0:
+        return
+    covered = covered_mask(box, rects)
+    if covered is not None:
+        np.multiply(values, np.float32(factor), out=values, where=covered)
 
 
 class TeammateDiscount:
@@ -123,7 +138,8 @@ class TeammateDiscount:
 
     def start_step(self, views: Sequence[AgentView]) -> None:
         """Estimate, in one batch, every agent's probability of interest when one of them
-        hears a lower-index teammate this step; call before :meth:`discounted`."""
+        hears a lower-index teammate this step, or always with a lookahead; call before
+        :meth:`discounted`."""
         self._interest = {}
         if self.objective != "interesting" or not self.active:
             return
@@ -152,7 +168,7 @@ class TeammateDiscount:
 
     def looks_ahead(self, view: AgentView) -> bool:
         """Whether ``view``'s options get a continuation (two or more steps left)."""
-        return min(self.lookahead_steps, view.budget - view.step) > 1
+        return steps_left(self.lookahead_steps, view) > 1
 
     def discounted(self, view: AgentView, gains: np.ndarray, mate_targets: np.ndarray
                    ) -> np.ndarray:
@@ -206,18 +222,15 @@ class TeammateDiscount:
         camera = self.camera
         targets = np.asarray(mate_targets, dtype=np.int64).reshape(-1, 3)
         mate_rects = camera.rects[targets[:, 2], targets[:, 1], targets[:, 0]]
-        discounting = len(mate_rects) > 0 and self.overlap_discount < 1.0
 
         def cell_values(altitude: int, box: Rect) -> np.ndarray:
             values = self._cell_values(view, altitude, box)
-            mask = covered_mask(box, mate_rects) if discounting else None
-            if mask is not None:
-                np.multiply(values, np.float32(self.overlap_discount), out=values, where=mask)
+            discount_covered(values, box, mate_rects, self.overlap_discount)
             return values
 
         candidates = np.asarray(view.position, dtype=np.int64)[None, :] + ACTION_DELTAS
-        steps = min(self.lookahead_steps, view.budget - view.step)
-        return continuation_values(camera.rects, candidates, valid, steps,
+        return continuation_values(camera.rects, candidates, valid,
+                                   steps_left(self.lookahead_steps, view),
                                    self.lookahead_discount, cell_values) / self._normaliser
 
     def covered_gains(self, view: AgentView, mate_targets: np.ndarray) -> np.ndarray:

@@ -36,9 +36,10 @@ from collections.abc import Callable
 import numpy as np
 
 from ..sim.team import ACTION_DELTAS, N_ACTIONS
+from . import AgentView
 
 __all__ = ["LOOKAHEAD_DISCOUNT", "LOOKAHEAD_STEPS", "MAX_LOOKAHEAD_STEPS", "check_lookahead",
-           "continuation_values", "mission_lookahead"]
+           "continuation_values", "mission_lookahead", "steps_left"]
 
 #: Most moves a path may look at (6^(d-1) continuations per first move).
 MAX_LOOKAHEAD_STEPS = 4
@@ -59,6 +60,12 @@ def mission_lookahead(steps: int, silent: bool, comm_range: float) -> int:
     of each other half as often again; with communication it fell (docs/lookahead.md).
     """
     return steps if silent or comm_range > 0 else 1
+
+
+def steps_left(steps: int, view: AgentView) -> int:
+    """The moves a path from ``view`` looks at: ``steps``, or fewer near the mission's end
+    (a path never runs past the budget)."""
+    return min(steps, view.budget - view.step)
 
 
 def check_lookahead(steps: int, discount: float) -> tuple[int, float]:
