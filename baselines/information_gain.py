@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ipp_toolkit.belief.gain import footprint_sums_in_box, objective_table
+from ipp_toolkit.belief.interest import square_cells
 from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig
@@ -22,6 +23,13 @@ from ipp_toolkit.planners.lookahead import (
     mission_lookahead,
     steps_left,
 )
+from ipp_toolkit.planners.segments import (
+    SegmentBox,
+    SegmentGrid,
+    SegmentSums,
+    objective_segment_values,
+)
+from ipp_toolkit.probability import logit
 from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
 
@@ -121,6 +129,9 @@ class InformationGainPlanner(Planner):
         self._config: EnvConfig | None = None
         self._camera: Camera | None = None
         self._gains: ValueTable | None = None
+        self._segments: SegmentGrid | None = None
+        self._kept_sums: SegmentSums | None = None  # built on the lookahead's first use
+        self._view_sums: tuple[AgentView, np.ndarray] | None = None
 
     def reset(self, config: EnvConfig, seed: int) -> None:
         """Build the camera geometry and gain table for ``config`` (kept while it is unchanged)."""
@@ -128,6 +139,11 @@ class InformationGainPlanner(Planner):
             camera = Camera(config.world, config.sensor)
             self._gains = gain_table(config, camera, self.objective, self.outcome_weighting)
             self._camera, self._config = camera, config
+            world = config.world
+            self._segments = SegmentGrid(camera.rects, world.map_cells,
+                                         square_cells(world.map_cells, world.resolution))
+            self._kept_sums = None
+        self._view_sums = None
         self._lookahead = mission_lookahead(self.lookahead_steps, self.lookahead_silent,
                                             config.team.comm_range)
 
@@ -194,16 +210,69 @@ class InformationGainPlanner(Planner):
             values[group] = footprint_sums_in_box(gain, box, rects)
         steps = steps_left(self._lookahead, view)
         if steps > 1:
+            grid = self.segment_grid
 
-            def cell_values(altitude: int, box: Rect) -> np.ndarray:
-                gain = self.cell_gains(view, altitude, (slice(box[0], box[1]),
-                                                        slice(box[2], box[3])))
-                self._discount(gain, box, mate_rects)
-                return gain
+            def segment_values(altitude: int, box: SegmentBox) -> np.ndarray:
+                values = self.segment_values(view, altitude, box)
+                grid.discount(values, mate_rects, self.overlap_discount, box)
+                return values
 
             values += self.lookahead_discount * continuation_values(
-                camera.rects, candidates, allowed, steps, self.lookahead_discount, cell_values)
+                camera.rects, candidates, allowed, steps, self.lookahead_discount,
+                segment_values, grid)
         return values
+
+    @property
+    def segment_grid(self) -> SegmentGrid:
+        """The segments the lookahead sums over (:mod:`ipp_toolkit.planners.segments`)."""
+        if self._segments is None:
+            raise RuntimeError("call reset(config, seed) first")
+        return self._segments
+
+    def segment_values(self, view: AgentView, altitude: int, box: SegmentBox) -> np.ndarray:
+        """(i1 - i0, j1 - j0) float64 :meth:`cell_gains` of a reading at ``altitude`` summed
+        over each segment of ``box`` (i0, i1, j0, j1) of :attr:`segment_grid`: what the
+        lookahead sums.
+
+        The built-in objectives keep their tables' segment sums per agent across steps
+        (:class:`~ipp_toolkit.planners.segments.SegmentSums`); a subclass that overrides
+        :meth:`cell_gains` alone gets its values summed from :meth:`cell_gains` over the
+        whole map (the same values, slower).
+        """
+        if type(self).cell_gains is not InformationGainPlanner.cell_gains:
+            return self._summed_cell_gains(view, altitude, box)
+        i0, i1, j0, j1 = box
+        return objective_segment_values(self._table_sums(view)[..., i0:i1, j0:j1], altitude,
+                                        None)
+
+    def _summed_cell_gains(self, view: AgentView, altitude: int, box: SegmentBox
+                           ) -> np.ndarray:
+        """(i1 - i0, j1 - j0) float64 :meth:`cell_gains` over ``box``, summed per segment."""
+        layout = self.segment_grid.layout
+        i0, i1, j0, j1 = box
+        r, c = layout.row_edges, layout.col_edges
+        cells = np.zeros((self.segment_grid.size,) * 2, dtype=np.float32)
+        cells[r[i0]:r[i1], c[j0]:c[j1]] = self.cell_gains(
+            view, altitude, (slice(r[i0], r[i1]), slice(c[j0], c[j1])))
+        return layout.segment_sums(cells, region=(r[i0], r[i1], c[j0], c[j1]))[i0:i1, j0:j1]
+
+    def _segment_tables(self) -> list[ValueTable]:
+        """The tables whose segment sums :meth:`segment_values` reads: the gain table."""
+        assert self._gains is not None
+        return [self._gains]
+
+    def _table_sums(self, view: AgentView) -> np.ndarray:
+        """(T, Z, R, C) the segment sums of :meth:`_segment_tables` on ``view``'s map (one
+        refresh per view)."""
+        if self._view_sums is None or self._view_sums[0] is not view:
+            if self._kept_sums is None:
+                assert self._config is not None
+                self._kept_sums = SegmentSums(self.segment_grid, self._segment_tables(),
+                                              [f"altitude_{z}" for z in
+                                               range(len(self.camera.accuracy))],
+                                              logit(self._config.world.prior))
+            self._view_sums = (view, self._kept_sums(view))
+        return self._view_sums[1]
 
     def cell_gains(self, view: AgentView, altitude: int,
                    cells: tuple[slice, slice]) -> np.ndarray:

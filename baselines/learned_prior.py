@@ -24,7 +24,7 @@ objective alone.
 record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read
 the same file); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
 unused. Cost: ``ig_spatial``'s work plus one batched forward pass of the prior per step,
-and the lookahead's per-cell values over about 25-35 m square per UAV and step.
+and the lookahead's segment values (:mod:`ipp_toolkit.planners.segments`) per UAV and step.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.planners import AgentView
 from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
 from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT
+from ipp_toolkit.planners.segments import SegmentBox, objective_segment_values
 
 from .information_gain import InformationGainPlanner, gain_table
 
@@ -146,3 +147,26 @@ class SpatialGainPlanner(InformationGainPlanner):
             checking *= np.float32(self.false_positive_weight) * (np.float32(1.0) - interest)
             gain += checking
         return gain
+
+    def segment_values(self, view: AgentView, altitude: int, box: SegmentBox) -> np.ndarray:
+        """:meth:`cell_gains` at ``altitude`` summed over each segment of ``box``, from the
+        tables' kept segment sums and :meth:`interest_blocks` (see
+        :meth:`InformationGainPlanner.segment_values`)."""
+        if type(self).cell_gains is not SpatialGainPlanner.cell_gains:
+            return self._summed_cell_gains(view, altitude, box)
+        if self._interest is None or self._interest[0] is not view:
+            self._interest = (view, self.interest_blocks(view))
+        weight = self.false_positive_weight if false_positive_term_applies(
+            view.budget - view.step, self.false_positive_steps) else 0.0
+        i0, i1, j0, j1 = box
+        return objective_segment_values(self._table_sums(view)[..., i0:i1, j0:j1], altitude,
+                                        self.segment_grid.block_weights(self._interest[1], box),
+                                        weight)
+
+    def _segment_tables(self) -> list[ValueTable]:
+        """The gain table and, with the false-positive term, its table."""
+        tables = super()._segment_tables()
+        if self.false_positive_weight > 0:
+            assert self._false_positive_gains is not None
+            tables.append(self._false_positive_gains)
+        return tables

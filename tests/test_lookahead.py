@@ -7,17 +7,19 @@ import itertools
 import numpy as np
 import pytest
 
+from baselines.information_gain import InformationGainPlanner
 from baselines.learned_prior import LearnedPriorPlanner
 from baselines.spatial_gain import SpatialGainPlanner
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import planner_views
 from ipp_toolkit.planners.lookahead import continuation_values
+from ipp_toolkit.planners.segments import SegmentSums
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.sim.team import ACTION_DELTAS, N_ACTIONS
 
 
-def _config(agents: int = 2) -> EnvConfig:
-    return EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": agents},
+def _config(agents: int = 2, resolution: float = 1.0) -> EnvConfig:
+    return EnvConfig().replace(world={"resolution": resolution}, team={"n_agents": agents},
                                terrain={"kind": "blobs"})
 
 
@@ -77,12 +79,25 @@ def _brute_force(planner, view, first_target, depth, gamma, mate_rects):
     return best
 
 
-@pytest.mark.parametrize("depth, gamma, steps, agent", [(2, 1.0, 3, 1), (3, 0.5, 3, 1),
-                                                        (3, 0.5, 0, 0), (3, 0.5, 8, 0),
-                                                        (4, 0.7, 5, 1)])
-def test_continuation_values_match_a_cell_by_cell_count(depth, gamma, steps, agent):
-    config = _config()
-    planner = SpatialGainPlanner()
+class _OwnCellGains(SpatialGainPlanner):
+    """A subclass that overrides ``cell_gains`` alone: its lookahead sums its own values."""
+
+    def cell_gains(self, view, altitude, cells):
+        return super().cell_gains(view, altitude, cells) * np.float32(1.0 + altitude)
+
+
+@pytest.mark.parametrize("depth, gamma, steps, agent, kind, resolution", [
+    (2, 1.0, 3, 1, SpatialGainPlanner, 1.0), (3, 0.5, 3, 1, SpatialGainPlanner, 1.0),
+    (3, 0.5, 0, 0, SpatialGainPlanner, 1.0), (3, 0.5, 8, 0, SpatialGainPlanner, 1.0),
+    (4, 0.7, 5, 1, SpatialGainPlanner, 1.0), (3, 0.5, 6, 1, InformationGainPlanner, 1.0),
+    (3, 0.5, 4, 0, _OwnCellGains, 1.0),
+    (3, 0.5, 9, 1, lambda: SpatialGainPlanner(false_positive_weight=0.5), 1.0),
+    (3, 0.5, 5, 1, LearnedPriorPlanner, 0.25),  # probability of interest on 2 x 2 cells
+])
+def test_continuation_values_match_a_cell_by_cell_count(depth, gamma, steps, agent, kind,
+                                                        resolution):
+    config = _config(resolution=resolution)
+    planner = kind()
     views = _views_after(planner, config, steps=steps)
     view = views[agent]
     candidates = view.position[None, :].astype(np.int64) + ACTION_DELTAS
@@ -90,18 +105,20 @@ def test_continuation_values_match_a_cell_by_cell_count(depth, gamma, steps, age
     # a teammate's next footprint where the agent is: its cells count half
     mate_rects = planner.camera.rects[view.position[2], view.position[1],
                                       view.position[0]][None]
+    grid = planner.segment_grid
 
-    def cell_values(altitude, box):
-        gain = planner.cell_gains(view, altitude, (slice(box[0], box[1]), slice(box[2], box[3])))
-        planner._discount(gain, box, mate_rects)
-        return gain
+    def segment_values(altitude, box):
+        values = planner.segment_values(view, altitude, box)
+        grid.discount(values, mate_rects, planner.overlap_discount, box)
+        return values
 
     got = continuation_values(planner.camera.rects, candidates, allowed, depth, gamma,
-                              cell_values)
+                              segment_values, grid)
     for action in range(N_ACTIONS):
         if allowed[action]:
             want = _brute_force(planner, view, candidates[action], depth, gamma, mate_rects)
-            assert got[action] == pytest.approx(want, rel=1e-9, abs=1e-9)
+            # per cell: float32 products summed; per segment: float64 sums times the weight
+            assert got[action] == pytest.approx(want, rel=1e-6, abs=1e-9)
         else:
             assert got[action] == 0.0
 
@@ -130,3 +147,30 @@ def test_the_default_looks_ahead_with_communication_and_is_greedy_without():
 def test_bad_lookahead_options_are_refused_naming_them(options, message):
     with pytest.raises(ValueError, match=message):
         SpatialGainPlanner(**options)
+
+
+def test_kept_segment_sums_equal_sums_from_scratch():
+    """The sums kept across steps (refreshed where the maps changed) are the sums of the
+    current maps, bit for bit, for every agent, at every step, on two missions in a row."""
+    config = _config(agents=4, resolution=0.25).replace(team={"comm_range": 25.0})
+    planner = LearnedPriorPlanner()
+    columns = [f"altitude_{z}" for z in range(3)]
+    kept = None
+    for mission in range(2):
+        state, = start_missions(config, 0, mission, 1, "validation")
+        planner.reset(config, seed=0)
+        if kept is None:
+            kept = SegmentSums(planner.segment_grid, planner._segment_tables(), columns, 0.0)
+        checked: list[int] = []
+
+        def policy(states, kept=kept, checked=checked):
+            views = planner_views(states[0], planner)
+            for view in views:
+                fresh = SegmentSums(planner.segment_grid, planner._segment_tables(), columns,
+                                    float(view.step))  # any start: the sums of the map
+                np.testing.assert_array_equal(kept(view), fresh(view))
+            checked.append(1)
+            return [planner.act(views)]
+
+        fly_missions([state], policy)
+        assert len(checked) == config.team.budget

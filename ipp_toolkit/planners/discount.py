@@ -19,7 +19,8 @@ Cost without a lookahead: nothing while no decided teammate is heard; otherwise 
 probability of interest (a learned prior answers from the gain planes' call of the same
 step, see :meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and a table
 look-up over the boxes of the options whose footprints a teammate's overlaps. A lookahead adds, for
-every agent and step, the probability of interest and the continuation's per-cell values.
+every agent and step, the probability of interest and the continuation's segment values
+(its tables' segment sums kept per agent, :class:`~ipp_toolkit.planners.segments.SegmentSums`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from ..belief.gain import footprint_sums_in_box, objective_table
 from ..belief.interest import block_means, block_window, interest_smoother, square_cells
 from ..belief.mapping import false_positive_term_applies
 from ..config.schema import GAIN_INTEREST_SMOOTHED, EnvConfig, FeatureConfig
+from ..probability import logit
 from ..sim.features import gain_normaliser, plane_objective
 from ..sim.team import ACTION_DELTAS, N_ACTIONS
 from ..world.sensor import Camera
@@ -45,6 +47,7 @@ from .lookahead import (
     mission_lookahead,
     steps_left,
 )
+from .segments import SegmentBox, SegmentGrid, SegmentSums, objective_segment_values
 
 __all__ = ["OVERLAP_DISCOUNT", "TeammateDiscount", "bounding_box", "check_overlap_discount",
            "covered_mask", "discount_covered"]
@@ -135,6 +138,12 @@ class TeammateDiscount:
         self._size, self._resolution = world.map_cells, world.resolution
         self._block = square_cells(world.map_cells, world.resolution)
         self._interest: dict[int, np.ndarray] = {}
+        # The lookahead's segment sums of the objective's tables, kept per agent.
+        self._segments = SegmentGrid(self.camera.rects, self._size, self._block)
+        tables = [self._table] + ([self._checking] if self._checking is not None else [])
+        self._kept_sums = SegmentSums(self._segments, tables,
+                                      [f"altitude_{z}" for z in range(len(self.camera.accuracy))],
+                                      logit(world.prior))
 
     def start_step(self, views: Sequence[AgentView]) -> None:
         """Estimate, in one batch, every agent's probability of interest when one of them
@@ -219,19 +228,29 @@ class TeammateDiscount:
         """(6,) float64 each valid option's best continuation in plane units
         (:func:`~ipp_toolkit.planners.lookahead.continuation_values` of the planes' objective,
         cells under ``mate_targets``' footprints discounted); 0 for the others."""
-        camera = self.camera
+        camera, grid = self.camera, self._segments
         targets = np.asarray(mate_targets, dtype=np.int64).reshape(-1, 3)
         mate_rects = camera.rects[targets[:, 2], targets[:, 1], targets[:, 0]]
+        sums = self._kept_sums(view)
+        weight = 0.0
+        if self._checking is not None and false_positive_term_applies(
+                view.budget - view.step, self.features.gain_false_positive_steps):
+            weight = self.features.gain_false_positive
 
-        def cell_values(altitude: int, box: Rect) -> np.ndarray:
-            values = self._cell_values(view, altitude, box)
-            discount_covered(values, box, mate_rects, self.overlap_discount)
+        def segment_values(altitude: int, box: SegmentBox) -> np.ndarray:
+            i0, i1, j0, j1 = box
+            interest = (grid.block_weights(self._interest[view.index], box)
+                        if self.objective == "interesting" else None)
+            values = objective_segment_values(sums[..., i0:i1, j0:j1], altitude, interest,
+                                              weight)
+            grid.discount(values, mate_rects, self.overlap_discount, box)
             return values
 
         candidates = np.asarray(view.position, dtype=np.int64)[None, :] + ACTION_DELTAS
         return continuation_values(camera.rects, candidates, valid,
                                    steps_left(self.lookahead_steps, view),
-                                   self.lookahead_discount, cell_values) / self._normaliser
+                                   self.lookahead_discount, segment_values, grid
+                                   ) / self._normaliser
 
     def covered_gains(self, view: AgentView, mate_targets: np.ndarray) -> np.ndarray:
         """(6,) float64 the part of each option's plane value that lies under the footprints

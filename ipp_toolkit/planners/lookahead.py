@@ -12,19 +12,21 @@ The path is open loop (the map is not updated between its readings) and a cell c
 at its first reading on the path: a second reading of the same ground is worth less and
 counting it zero keeps every term a rectangle sum. Footprints are rectangles and so are
 their intersections, so each term is an inclusion-exclusion over the earlier footprints,
-taken from a summed-area table of each altitude's per-cell values, summed first into the
-cells of the grid the footprints' edges cut the box the paths can reach into. Paths that
-leave the grid of waypoints are skipped; a path is as long as the steps left in the mission
-allow.
+taken from a summed-area table of each altitude's values over the segments every footprint
+edge and every ~0.5 m block edge cut the map into (:mod:`ipp_toolkit.planners.segments`),
+within the box the paths can reach at that altitude. Paths that leave the grid of waypoints
+are skipped; a path is as long as the steps left in the mission allow.
 
-The per-cell values come from the planner (a callable), with whatever the planner applies to
+The segment values come from the planner (a callable), with whatever the planner applies to
 the first move (a teammate's same-step discount) applied to the whole path: used by the
 ``ig`` family (``lookahead_steps``) and by the planners that read the gain planes
-(:class:`~ipp_toolkit.planners.discount.TeammateDiscount`).
+(:class:`~ipp_toolkit.planners.discount.TeammateDiscount`). Their tables' segment sums are
+kept per UAV and summed again only where its map changed
+(:class:`~ipp_toolkit.planners.segments.SegmentSums`).
 
-Cost per UAV and step: the per-cell values of each altitude the paths reach over that box
-(about 25-35 m square at d = 3), two passes summing them into the edges' grid, and 6^(d-1)
-paths per move.
+Cost per UAV and step: the segment sums where the map changed (its own and the heard
+readings), one product per segment of each altitude's box (about 100 x 100 segments at
+r_M = 0.1 m, d = 3) and its summed-area table, and 6^(d-1) paths per move.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ import numpy as np
 
 from ..sim.team import ACTION_DELTAS, N_ACTIONS
 from . import AgentView
+from .segments import SegmentBox, SegmentGrid
 
 __all__ = ["LOOKAHEAD_DISCOUNT", "LOOKAHEAD_STEPS", "MAX_LOOKAHEAD_STEPS", "check_lookahead",
            "continuation_values", "mission_lookahead", "steps_left"]
@@ -107,47 +110,28 @@ def _intersect(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rectangle_sums(later: np.ndarray, iz: np.ndarray, valid: np.ndarray,
-                    first_rects: np.ndarray,
-                    cell_values: Callable[[int, tuple[int, int, int, int]], np.ndarray]
-                    ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """``sums(rect, altitude)``: the per-cell values at ``altitude`` summed over (..., 4)
-    rectangles whose edges are edges of ``later`` (A, S, T, 4) or ``first_rects`` (A, 4)
-    footprints and that lie in the box of the valid later footprints at that altitude.
-
-    Every sum the lookahead takes is over a later footprint or a part of it, read at that
-    footprint's altitude, so per altitude the values are summed into the cells of the grid
-    the footprints' edges cut that box into, and one small summed-area table is taken over
-    that grid.
-    """
-    from .discount import bounding_box  # discount imports this module
-
-    reached = np.unique(iz[valid]).tolist()
-    row_edges = np.unique(np.concatenate([first_rects[:, :2].ravel(),
-                                          later[valid][..., :2].ravel()]))
-    col_edges = np.unique(np.concatenate([first_rects[:, 2:].ravel(),
-                                          later[valid][..., 2:].ravel()]))
-    size = int(max(row_edges[-1], col_edges[-1])) + 1
-    n_z = int(iz.max()) + 1
-    row_index = np.zeros((n_z, size), dtype=np.int64)  # map row -> table row, per altitude
-    col_index = np.zeros((n_z, size), dtype=np.int64)
-    tables = np.zeros((n_z, len(row_edges), len(col_edges)), dtype=np.float64)
-    for altitude in reached:
-        r0, r1, c0, c1 = bounding_box(later[valid[:, :, None] & (iz == altitude)])
-        rows = row_edges[(row_edges >= r0) & (row_edges <= r1)]
-        cols = col_edges[(col_edges >= c0) & (col_edges <= c1)]
-        row_index[altitude, rows] = np.arange(len(rows))
-        col_index[altitude, cols] = np.arange(len(cols))
-        grid = np.add.reduceat(np.asarray(cell_values(altitude, (r0, r1, c0, c1)),
-                                          dtype=np.float64), rows[:-1] - r0, axis=0)
-        grid = np.add.reduceat(grid, cols[:-1] - c0, axis=1)
-        table = tables[altitude, 1:len(rows), 1:len(cols)]
-        np.cumsum(grid, axis=0, out=table)
-        np.cumsum(table, axis=1, out=table)
+def _segment_tables(later: np.ndarray, iz: np.ndarray, valid: np.ndarray,
+                    segment_values: Callable[[int, SegmentBox], np.ndarray],
+                    shape: tuple[int, int]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``sums(rect, altitude)``: the values at ``altitude`` summed over (..., 4) rectangles of
+    whole segments (cut indices) that lie in the box of the valid ``later`` (A, S, T, 4)
+    footprints (cut indices) at that altitude, from a summed-area table over that box's
+    segments of a grid of ``shape`` segments (:mod:`ipp_toolkit.planners.segments`)."""
+    # One array for every altitude: each altitude's table sits at its box's segments, so a
+    # rectangle's corners index it directly (the rest is never read).
+    tables = np.empty((int(iz.max()) + 1, shape[0] + 1, shape[1] + 1))
+    for altitude in np.unique(iz[valid]).tolist():
+        reached = later[valid[:, :, None] & (iz == altitude)]
+        i0, j0 = reached[:, [0, 2]].min(axis=0).tolist()
+        i1, j1 = reached[:, [1, 3]].max(axis=0).tolist()
+        table = tables[altitude, i0:i1 + 1, j0:j1 + 1]
+        table[0], table[:, 0] = 0.0, 0.0
+        np.cumsum(segment_values(altitude, (i0, i1, j0, j1)), axis=0, out=table[1:, 1:])
+        np.cumsum(table[1:, 1:], axis=1, out=table[1:, 1:])
+    tables[0, 0, 0] = 0.0  # what the empty rectangle of a path off the grid reads
 
     def sums(rect: np.ndarray, altitude: np.ndarray) -> np.ndarray:
-        q0, q1 = row_index[altitude, rect[..., 0]], row_index[altitude, rect[..., 1]]
-        s0, s1 = col_index[altitude, rect[..., 2]], col_index[altitude, rect[..., 3]]
+        q0, q1, s0, s1 = np.moveaxis(rect, -1, 0)
         return (tables[altitude, q1, s1] - tables[altitude, q0, s1]
                 - tables[altitude, q1, s0] + tables[altitude, q0, s0])
 
@@ -156,8 +140,8 @@ def _rectangle_sums(later: np.ndarray, iz: np.ndarray, valid: np.ndarray,
 
 def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: np.ndarray,
                         steps: int, discount: float,
-                        cell_values: Callable[[int, tuple[int, int, int, int]], np.ndarray]
-                        ) -> np.ndarray:
+                        segment_values: Callable[[int, SegmentBox], np.ndarray],
+                        grid: SegmentGrid) -> np.ndarray:
     """(6,) float64 best discounted value of the ``steps - 1`` moves after each first move.
 
     The planner adds ``discount`` times it to each move's own footprint value.
@@ -168,8 +152,10 @@ def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: n
         allowed: (6,) bool first moves to evaluate (the others get 0).
         steps: moves looked at in all, the first included (< 2: all 0).
         discount: gamma, the weight per step further along the path.
-        cell_values: ``(altitude, box) -> (h, w)`` per-cell value of a reading at
-            ``altitude`` of each cell of ``box`` (row0, row1, col0, col1).
+        segment_values: ``(altitude, box) -> (i1 - i0, j1 - j0)`` float64 the per-cell
+            values of a reading at ``altitude`` summed over each segment of ``box`` (i0, i1,
+            j0, j1) of ``grid`` (:mod:`ipp_toolkit.planners.segments`).
+        grid: the segments: cut by every footprint edge of ``rects``.
     """
     n_z, n_y, n_x = rects.shape[:3]
     first = np.flatnonzero(allowed)
@@ -181,9 +167,11 @@ def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: n
     paths = starts[:, None, None, :] + _continuations(steps - 1)[None]  # (A, S, T, 3)
     valid = ((paths >= 0) & (paths <= top)).all(axis=(2, 3))  # (A, S)
     ix, iy, iz = np.moveaxis(np.clip(paths, 0, top), -1, 0)
-    later = rects[iz, iy, ix]  # (A, S, T, 4)
-    first_rects = rects[starts[:, 2], starts[:, 1], starts[:, 0]]  # (A, 4)
-    sums = _rectangle_sums(later, iz, valid, first_rects, cell_values)
+    # Rectangles as the indices of their edges among the grid's cuts: the cuts are ordered, so
+    # intersections (minima and maxima of edges) are taken on the indices alike.
+    later = grid.edge_index(rects[iz, iy, ix])  # (A, S, T, 4)
+    first_rects = grid.edge_index(rects[starts[:, 2], starts[:, 1], starts[:, 0]])  # (A, 4)
+    sums = _segment_tables(later, iz, valid, segment_values, grid.shape)
     # A path off the grid reads nothing: an empty rectangle (all zero).
     iz = np.where(valid[:, :, None], iz, 0)
     later = np.where(valid[:, :, None, None], later, 0)

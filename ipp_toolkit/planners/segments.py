@@ -1,0 +1,210 @@
+"""Per-segment sums of a UAV's per-cell values, kept across steps, for the lookahead.
+
+The lookahead (:mod:`ipp_toolkit.planners.lookahead`) sums a planner's per-cell values over
+footprints and over the intersections of footprints. Every edge of such a rectangle is the
+edge of some footprint, and the probability of interest that the ``interesting`` objective
+weights cells by is constant over ~0.5 m blocks (:func:`~ipp_toolkit.belief.interest.
+square_cells`). So :class:`SegmentGrid` cuts the map by every footprint edge (all altitudes)
+and every block edge into segments (about 170 x 170 at r_M = 0.1 m, against 500 x 500
+cells), and a sum over any such rectangle of per-cell values times a per-block weight is a
+sum over whole segments of weight x the segment's sum.
+
+A per-cell value of the ``ig`` family is a column of a table looked up by the cell's
+log-odds (:class:`~ipp_toolkit.belief.value_table.ValueTable`), so its segment sums depend
+on the UAV's local map alone: :class:`SegmentSums` keeps them per UAV and sums again only
+the segments where the map changed since the UAV's last call (its own reading and the ones
+it heard: a few footprints). :func:`objective_segment_values` turns them into the segment
+values of a planner's objective at one altitude.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..belief.box_sums import BoxLayout
+from ..belief.value_table import ValueTable
+from . import AgentView
+
+__all__ = ["SegmentBox", "SegmentGrid", "SegmentSums", "objective_segment_values"]
+
+
+#: (i0, i1, j0, j1) a box of whole segments: rows i0..i1 and columns j0..j1 of segments.
+SegmentBox = tuple[int, int, int, int]
+
+
+class SegmentGrid:
+    """The cells of a ``size`` x ``size`` map cut by the edges of every footprint of ``rects``
+    and of every ``block`` x ``block`` square: a
+    :class:`~ipp_toolkit.belief.box_sums.BoxLayout` of the footprints of all altitudes.
+
+    Args:
+        rects: (Z, G, G, 4) int footprints (row0, row1, col0, col1) of every waypoint
+            (``Camera.rects``).
+        size: cells per side of the maps.
+        block: side in cells of the squares per-block weights are given on (divides size).
+
+    Attributes:
+        layout: the segments' :class:`~ipp_toolkit.belief.box_sums.BoxLayout` (its
+            ``row_edges``, ``col_edges`` and ``segment_sums``).
+        shape: (R, C), rows and columns of segments.
+    """
+
+    def __init__(self, rects: np.ndarray, size: int, block: int) -> None:
+        rects = np.asarray(rects, dtype=np.int64)
+        self.size, self.block = int(size), int(block)
+        self.layout = BoxLayout(rects[..., 0:2].reshape(-1, 2), rects[..., 2:4].reshape(-1, 2),
+                                self.size, self.block)
+        self.shape = self.layout.shape
+        # map coordinate of a cut -> its index among the cuts (-1: not a cut)
+        self._row_at = np.full(size + 1, -1, dtype=np.int64)
+        self._row_at[self.layout.row_edges] = np.arange(len(self.layout.row_edges))
+        self._col_at = np.full(size + 1, -1, dtype=np.int64)
+        self._col_at[self.layout.col_edges] = np.arange(len(self.layout.col_edges))
+        self._areas = np.outer(np.diff(self.layout.row_edges),
+                               np.diff(self.layout.col_edges)).astype(np.float64)
+
+    def edge_index(self, rects: np.ndarray) -> np.ndarray:
+        """(..., 4) int the cut indices of the edges of (..., 4) rectangles (row0, row1,
+        col0, col1) whose edges are cuts (a footprint, or an intersection of footprints)."""
+        rects = np.asarray(rects, dtype=np.int64)
+        out = np.empty(rects.shape, dtype=np.int64)
+        out[..., :2] = self._row_at[rects[..., :2]]
+        out[..., 2:] = self._col_at[rects[..., 2:]]
+        return out
+
+    def block_weights(self, blocks: np.ndarray, box: SegmentBox | None = None) -> np.ndarray:
+        """(i1 - i0, j1 - j0) float64 the weight of each segment of ``box`` (default: all)
+        from (size / block, size / block) per-block weights."""
+        i0, i1, j0, j1 = box if box is not None else (0, self.shape[0], 0, self.shape[1])
+        layout = self.layout
+        return np.asarray(blocks, dtype=np.float64)[layout.row_block[i0:i1, None],
+                                                    layout.col_block[None, j0:j1]]
+
+    def discount(self, values: np.ndarray, rects: np.ndarray, factor: float,
+                 box: SegmentBox | None = None) -> None:
+        """Scale, in place, the values of ``box``'s segments (default: all) inside any of
+        (K, 4) ``rects`` (decided teammates' next footprints) by ``factor``: once per
+        segment, however many cover it (:func:`~ipp_toolkit.planners.discount.
+        discount_covered`, by segments)."""
+        if len(rects) == 0 or factor == 1.0:
+            return
+        i0, _, j0, _ = box if box is not None else (0, 0, 0, 0)
+        h, w = values.shape
+        covered = np.zeros((h, w), dtype=bool)
+        for q0, q1, s0, s1 in self.edge_index(np.asarray(rects).reshape(-1, 4)).tolist():
+            covered[max(q0 - i0, 0):max(q1 - i0, 0), max(s0 - j0, 0):max(s1 - j0, 0)] = True
+        values[covered] *= factor
+
+    def constant_sums(self, value: float) -> np.ndarray:
+        """(R, C) float64 the segment sums of a map whose every cell holds float32
+        ``value``: what :meth:`~ipp_toolkit.belief.box_sums.BoxLayout.segment_sums` gives,
+        bit for bit (the float64 sums of fewer than 2^29 copies of a float32 are exact)."""
+        return self._areas * np.float64(np.float32(value))
+
+
+class SegmentSums:
+    """Per UAV: the sums over each segment of ``grid`` of table columns of its local map.
+
+    Args:
+        grid: the segments.
+        tables: the tables looked up by log-odds; each gives the ``columns`` (one per
+            altitude, ``altitude_z``).
+        columns: the column names, in altitude order.
+        start: the log-odds every cell of a map holds at a mission's start (the prior's).
+
+    Calling it with a view gives (T, Z, R, C) float64: table t's column z summed over every
+    segment of the view's local map. Kept per agent index: a call sums again only the
+    segments of the rows and columns where the map differs from the one of that agent's last
+    call, or at a mission's first step from a map at ``start`` (any map works: what differs
+    is summed again).
+    """
+
+    def __init__(self, grid: SegmentGrid, tables: Sequence[ValueTable],
+                 columns: Sequence[str], start: float) -> None:
+        self.grid = grid
+        self.tables = list(tables)
+        self.columns = list(columns)
+        self.start = np.float32(start)
+        self._maps: dict[int, np.ndarray] = {}
+        self._sums: dict[int, np.ndarray] = {}
+        self._cells = np.zeros((grid.size, grid.size), dtype=np.float32)  # scratch
+
+    def __call__(self, view: AgentView) -> np.ndarray:
+        logodds = view.local_logodds
+        size = self.grid.size
+        if logodds.shape != (size, size) or logodds.dtype != np.float32:
+            raise ValueError(f"the view's local map is {logodds.dtype} of shape "
+                             f"{logodds.shape}; the segments were cut for {size} x {size} "
+                             "float32 cells")
+        if view.index not in self._maps or view.step == 0:
+            self._restart(view.index)
+        kept, sums = self._maps[view.index], self._sums[view.index]
+        layout = self.grid.layout
+        r, c = layout.row_edges, layout.col_edges
+        for i0, i1, j0, j1 in self._changed_boxes(kept, logodds):
+            cells = (slice(r[i0], r[i1]), slice(c[j0], c[j1]))
+            part = logodds[cells]
+            region = (int(r[i0]), int(r[i1]), int(c[j0]), int(c[j1]))
+            for t, table in enumerate(self.tables):
+                # Intern first: indices() may grow the table and replace its columns.
+                index = table.indices(part)
+                for z, name in enumerate(self.columns):
+                    self._cells[cells] = table.column(name)[index]
+                    layout.segment_sums(self._cells, out=sums[t, z], region=region)
+            kept[cells] = part
+        return sums
+
+    def _restart(self, agent: int) -> None:
+        """Agent ``agent``'s kept map and sums: a map at :attr:`start` everywhere."""
+        self._maps[agent] = np.full((self.grid.size,) * 2, self.start, dtype=np.float32)
+        sums = np.empty((len(self.tables), len(self.columns)) + self.grid.shape)
+        for t, table in enumerate(self.tables):
+            index = int(table.indices(np.array([self.start], dtype=np.float32))[0])
+            for z, name in enumerate(self.columns):
+                sums[t, z] = self.grid.constant_sums(table.column(name)[index])
+        self._sums[agent] = sums
+
+    def _changed_boxes(self, kept: np.ndarray, logodds: np.ndarray) -> list[SegmentBox]:
+        """Boxes of whole segments covering every cell where ``logodds`` differs from
+        ``kept`` (bit patterns compared): one per run of consecutive changed segment rows,
+        over the columns that changed in it."""
+        layout = self.grid.layout
+        differs = kept.view(np.uint32) != logodds.view(np.uint32)
+        changed_rows = np.logical_or.reduceat(differs.any(axis=1), layout.row_edges[:-1])
+        rows = np.flatnonzero(changed_rows)
+        boxes: list[SegmentBox] = []
+        if len(rows) == 0:
+            return boxes
+        breaks = np.flatnonzero(np.diff(rows) > 1)
+        for first, last in zip(np.r_[rows[0], rows[breaks + 1]], np.r_[rows[breaks], rows[-1]],
+                               strict=True):
+            i0, i1 = int(first), int(last) + 1
+            band = differs[layout.row_edges[i0]:layout.row_edges[i1]].any(axis=0)
+            cols = np.flatnonzero(np.logical_or.reduceat(band, layout.col_edges[:-1]))
+            boxes.append((i0, i1, int(cols[0]), int(cols[-1]) + 1))
+        return boxes
+
+
+def objective_segment_values(sums: np.ndarray, altitude: int, interest: np.ndarray | None,
+                             false_positive_weight: float = 0.0) -> np.ndarray:
+    """(R, C) float64 the segment values of a reading at ``altitude`` of the ``ig`` family's
+    objectives, from a :class:`SegmentSums` result.
+
+    Args:
+        sums: (T, Z, R, C) segment sums of the objective's gain table (t = 0) and, for the
+            false-positive term, of the ``false_positive`` table (t = 1).
+        altitude: the altitude index z of the reading.
+        interest: (R, C) the probability of interest of each segment
+            (:meth:`SegmentGrid.block_weights`), or None for the ``ig`` objective (the gain
+            alone).
+        false_positive_weight: w > 0 adds w x (1 - interest) x the false-positive sums (the
+            clean-up term, where it applies).
+    """
+    if interest is None:
+        return sums[0, altitude].copy()
+    values = interest * sums[0, altitude]
+    if false_positive_weight > 0:
+        values += false_positive_weight * (1.0 - interest) * sums[1, altitude]
+    return values

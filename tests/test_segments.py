@@ -1,0 +1,67 @@
+"""The segment grid of the lookahead: hand-sized cuts, discount and sums."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from baselines.information_gain import InformationGainPlanner
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.planners.segments import SegmentGrid, SegmentSums, objective_segment_values
+
+
+def _grid() -> SegmentGrid:
+    # one altitude, a 1 x 2 grid of waypoints: footprints rows [1, 5), columns [0, 3) and [2, 6)
+    rects = np.array([[[[1, 5, 0, 3], [1, 5, 2, 6]]]])
+    return SegmentGrid(rects, size=8, block=4)
+
+
+def test_the_cuts_are_every_footprint_edge_and_every_block_edge():
+    grid = _grid()
+    np.testing.assert_array_equal(grid.layout.row_edges, [0, 1, 4, 5, 8])
+    np.testing.assert_array_equal(grid.layout.col_edges, [0, 2, 3, 4, 6, 8])
+    assert grid.shape == (4, 5)
+    np.testing.assert_array_equal(grid.edge_index(np.array([1, 5, 2, 6])), [1, 3, 1, 4])
+    weights = grid.block_weights(np.array([[1.0, 2.0], [3.0, 4.0]]))
+    np.testing.assert_array_equal(weights[:, 0], [1, 1, 3, 3])
+    np.testing.assert_array_equal(weights[0], [1, 1, 1, 2, 2])
+
+
+def test_a_segment_two_footprints_cover_is_discounted_once():
+    grid = _grid()
+    values = np.ones(grid.shape)
+    grid.discount(values, np.array([[1, 5, 0, 3], [1, 5, 2, 6]]), 0.5)
+    want = np.ones(grid.shape)
+    want[1:3, 0:4] = 0.5  # rows [1, 5), columns [0, 6): the overlap [2, 3) too, once
+    np.testing.assert_array_equal(values, want)
+    box_values = np.ones((2, 2))  # segments rows 2..3, columns 3..4 of the grid
+    grid.discount(box_values, np.array([[1, 5, 2, 6]]), 0.5, box=(2, 4, 3, 5))
+    np.testing.assert_array_equal(box_values, [[0.5, 1.0], [1.0, 1.0]])
+
+
+def test_constant_sums_are_the_layouts_sums_of_a_constant_map_bit_for_bit():
+    grid = _grid()
+    value = np.float32(0.1)
+    cells = np.full((8, 8), value, dtype=np.float32)
+    np.testing.assert_array_equal(grid.constant_sums(value), grid.layout.segment_sums(cells))
+    sums = grid.layout.segment_sums(np.arange(64, dtype=np.float32).reshape(8, 8))
+    assert sums[1, 0] == 8 + 9 + 16 + 17 + 24 + 25  # rows [1, 4), columns [0, 2)
+
+
+def test_objective_values_weight_the_gain_and_the_clean_up_term():
+    sums = np.stack([np.full((2, 1, 3), 2.0), np.full((2, 1, 3), 10.0)])  # (T, Z, R, C)
+    interest = np.array([[0.0, 0.5, 1.0]])
+    np.testing.assert_array_equal(objective_segment_values(sums, 1, None), [[2.0] * 3])
+    np.testing.assert_allclose(objective_segment_values(sums, 1, interest, 0.5),
+                               [[5.0, 3.5, 2.0]])
+
+
+def test_a_map_of_another_size_is_refused_naming_it():
+    planner = InformationGainPlanner()
+    planner.reset(EnvConfig().replace(world={"resolution": 1.0}), seed=0)
+    kept = SegmentSums(planner.segment_grid, planner._segment_tables(), ["altitude_0"], 0.0)
+    view = SimpleNamespace(index=0, step=0, local_logodds=np.zeros((7, 7), np.float32))
+    with pytest.raises(ValueError, match=r"shape \(7, 7\)"):
+        kept(view)
