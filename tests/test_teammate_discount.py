@@ -117,6 +117,41 @@ def test_a_teammate_on_the_same_waypoint_covers_the_whole_option_and_a_far_one_n
         gains.tolist()
 
 
+def test_the_covered_part_of_each_option_is_the_cell_by_cell_sum_under_a_neighbour():
+    """A teammate one waypoint east: every option's covered part is the ``ig_spatial``
+    objective summed cell by cell over its footprint's cells inside the teammate's (the
+    smoothing on 2 x 2 cell squares at r_M = 0.25 m)."""
+    config = _config(SPATIAL, agents=2, resolution=0.25)
+    state = reset_mission(config, seed=1, mission=0, namespace="validation")
+    rng = np.random.default_rng(1)
+    for _ in range(4):
+        step_mission(state, [rng.choice(np.flatnonzero(m)) for m in state.masks()])
+    reference = _ig_planner("ig_spatial")
+    reference.reset(config, 0)
+    views = planner_views(state, reference)
+    discount = TeammateDiscount(config, config.features)
+    discount.start_step(views)
+    view = views[1]
+    east = 2
+    mate = (view.position + ACTION_DELTAS[east])[None, :]
+    rects = reference.camera.rects
+    r0, r1, c0, c1 = rects[mate[0, 2], mate[0, 1], mate[0, 0]]
+    size = view.local_logodds.shape[0]
+    under = np.zeros((size, size), dtype=bool)
+    under[r0:r1, c0:c1] = True
+    covered = discount.covered_gains(view, mate)
+    assert covered.any()
+    for action, (x, y, z) in enumerate(view.position + ACTION_DELTAS):
+        if not (0 <= z < rects.shape[0] and 0 <= min(x, y) and max(x, y) < rects.shape[1]):
+            assert covered[action] == 0.0
+            continue
+        q0, q1, s0, s1 = rects[z, y, x]
+        cells = reference.cell_gains(view, z, (slice(0, size), slice(0, size)))
+        want = cells[q0:q1, s0:s1][under[q0:q1, s0:s1]].sum(dtype=np.float64)
+        assert covered[action] == pytest.approx(want / discount._normaliser, rel=1e-5,
+                                                abs=1e-12)
+
+
 @pytest.mark.parametrize("value", [-0.1, 1.5, math.nan])
 def test_a_discount_outside_zero_to_one_is_refused_naming_it(value):
     from coma.planner import COMAPlanner

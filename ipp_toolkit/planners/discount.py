@@ -17,10 +17,11 @@ options does (:mod:`ipp_toolkit.planners.lookahead`).
 
 Cost without a lookahead: nothing while no decided teammate is heard; otherwise the team's
 probability of interest (a learned prior answers from the gain planes' call of the same
-step, see :meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and a table
-look-up over the boxes of the options whose footprints a teammate's overlaps. A lookahead adds, for
-every agent and step, the probability of interest and the continuation's segment values
-(its tables' segment sums kept per agent, :class:`~ipp_toolkit.planners.segments.SegmentSums`).
+step, see :meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and the
+objective's sums over the segments of the options' footprints
+(:mod:`ipp_toolkit.planners.segments`: the tables' segment sums are kept per agent and summed
+again where its map changed). A lookahead adds, for every agent and step, the probability
+of interest and the continuation's summed-area tables over those segments.
 """
 
 from __future__ import annotations
@@ -31,8 +32,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..belief.field_prior import shared_prior
-from ..belief.gain import footprint_sums_in_box, objective_table
-from ..belief.interest import block_means, block_window, interest_smoother, square_cells
+from ..belief.gain import objective_table
+from ..belief.interest import block_means, interest_smoother, square_cells
 from ..belief.mapping import false_positive_term_applies
 from ..config.schema import GAIN_INTEREST_SMOOTHED, EnvConfig, FeatureConfig
 from ..probability import logit
@@ -229,20 +230,10 @@ class TeammateDiscount:
         (:func:`~ipp_toolkit.planners.lookahead.continuation_values` of the planes' objective,
         cells under ``mate_targets``' footprints discounted); 0 for the others."""
         camera, grid = self.camera, self._segments
-        targets = np.asarray(mate_targets, dtype=np.int64).reshape(-1, 3)
-        mate_rects = camera.rects[targets[:, 2], targets[:, 1], targets[:, 0]]
-        sums = self._kept_sums(view)
-        weight = 0.0
-        if self._checking is not None and false_positive_term_applies(
-                view.budget - view.step, self.features.gain_false_positive_steps):
-            weight = self.features.gain_false_positive
+        mate_rects = self._rects_of(mate_targets)
 
         def segment_values(altitude: int, box: SegmentBox) -> np.ndarray:
-            i0, i1, j0, j1 = box
-            interest = (grid.block_weights(self._interest[view.index], box)
-                        if self.objective == "interesting" else None)
-            values = objective_segment_values(sums[..., i0:i1, j0:j1], altitude, interest,
-                                              weight)
+            values = self._segment_values(view, altitude, box)
             grid.discount(values, mate_rects, self.overlap_discount, box)
             return values
 
@@ -256,47 +247,45 @@ class TeammateDiscount:
         """(6,) float64 the part of each option's plane value that lies under the footprints
         from ``mate_targets`` (a cell several cover counts once); 0 for options outside the
         area or the altitudes."""
-        camera = self.camera
-        z_count, grid = camera.rects.shape[0], camera.rects.shape[1]
-        targets = np.asarray(mate_targets, dtype=np.int64).reshape(-1, 3)
-        mate_rects = camera.rects[targets[:, 2], targets[:, 1], targets[:, 0]]
+        camera, grid = self.camera, self._segments
+        z_count, n_points = camera.rects.shape[0], camera.rects.shape[1]
+        mate_rects = self._rects_of(mate_targets)
         candidates = np.asarray(view.position, dtype=np.int64)[None, :] + ACTION_DELTAS
-        inside = ((candidates[:, :2] >= 0).all(1) & (candidates[:, :2] < grid).all(1)
+        inside = ((candidates[:, :2] >= 0).all(1) & (candidates[:, :2] < n_points).all(1)
                   & (candidates[:, 2] >= 0) & (candidates[:, 2] < z_count))
         covered = np.zeros(N_ACTIONS, dtype=np.float64)
         for altitude in np.unique(candidates[inside, 2]).tolist():
             options = np.flatnonzero(inside & (candidates[:, 2] == altitude))
             ix, iy, _ = candidates[options].T
-            rects = camera.rects[altitude, iy, ix]
-            box = bounding_box(rects)
-            mask = covered_mask(box, mate_rects)
-            if mask is None:
+            rects = grid.edge_index(camera.rects[altitude, iy, ix])  # (K, 4) cut indices
+            box = (int(rects[:, 0].min()), int(rects[:, 1].max()), int(rects[:, 2].min()),
+                   int(rects[:, 3].max()))
+            mask = grid.covered(mate_rects, box)
+            if not mask.any():
                 continue
-            values = self._cell_values(view, altitude, box)
-            values[~mask] = 0.0
-            covered[options] = footprint_sums_in_box(values, box, rects)
+            values = np.where(mask, self._segment_values(view, altitude, box), 0.0)
+            for option, (q0, q1, s0, s1) in zip(options.tolist(), rects.tolist(), strict=True):
+                covered[option] = values[q0 - box[0]:q1 - box[0], s0 - box[2]:s1 - box[2]].sum()
         return covered / self._normaliser
 
-    def _cell_values(self, view: AgentView, altitude: int, box: Rect) -> np.ndarray:
-        """(h, w) float32 the planes' per-cell objective of a reading at ``altitude`` over
-        ``box`` of ``view``'s local map."""
-        cells = (slice(box[0], box[1]), slice(box[2], box[3]))
-        logodds = view.local_logodds[cells]
-        column = f"altitude_{altitude}"
-        # Intern first: indices() may grow the table and replace its columns.
-        index = self._table.indices(logodds)
-        values = self._table.column(column)[index]
-        if self.objective != "interesting":
-            return values
-        interest = block_window(self._interest[view.index], self._block, *cells)
-        values = values * interest
-        features = self.features
-        if self._checking is not None and false_positive_term_applies(
-                view.budget - view.step, features.gain_false_positive_steps):
-            # Intern first: indices() may grow the table and replace its columns.
-            index = self._checking.indices(logodds)
-            checking = self._checking.column(column)[index]
-            values += (np.float32(features.gain_false_positive)
-                       * (np.float32(1.0) - interest) * checking)
-        return values
+    def _rects_of(self, targets: np.ndarray) -> np.ndarray:
+        """(K, 4) the footprints of (K, 3) int waypoints."""
+        targets = np.asarray(targets, dtype=np.int64).reshape(-1, 3)
+        return self.camera.rects[targets[:, 2], targets[:, 1], targets[:, 0]]
 
+    def _segment_values(self, view: AgentView, altitude: int, box: SegmentBox) -> np.ndarray:
+        """(i1 - i0, j1 - j0) float64 the planes' per-cell objective of a reading at
+        ``altitude`` summed over each segment of ``box`` of ``view``'s local map (the
+        tables' kept segment sums, :func:`~ipp_toolkit.planners.segments.
+        objective_segment_values`)."""
+        i0, i1, j0, j1 = box
+        sums = self._kept_sums(view)[..., i0:i1, j0:j1]
+        if self.objective != "interesting":
+            return objective_segment_values(sums, altitude, None)
+        weight = 0.0
+        if self._checking is not None and false_positive_term_applies(
+                view.budget - view.step, self.features.gain_false_positive_steps):
+            weight = self.features.gain_false_positive
+        return objective_segment_values(
+            sums, altitude, self._segments.block_weights(self._interest[view.index], box),
+            weight)

@@ -82,20 +82,23 @@ class SegmentGrid:
         return np.asarray(blocks, dtype=np.float64)[layout.row_block[i0:i1, None],
                                                     layout.col_block[None, j0:j1]]
 
+    def covered(self, rects: np.ndarray, box: SegmentBox | None = None) -> np.ndarray:
+        """(i1 - i0, j1 - j0) bool the segments of ``box`` (default: all) inside any of
+        (K, 4) footprints."""
+        i0, i1, j0, j1 = box if box is not None else (0, self.shape[0], 0, self.shape[1])
+        mask = np.zeros((i1 - i0, j1 - j0), dtype=bool)
+        for q0, q1, s0, s1 in self.edge_index(np.asarray(rects).reshape(-1, 4)).tolist():
+            mask[max(q0 - i0, 0):max(q1 - i0, 0), max(s0 - j0, 0):max(s1 - j0, 0)] = True
+        return mask
+
     def discount(self, values: np.ndarray, rects: np.ndarray, factor: float,
                  box: SegmentBox | None = None) -> None:
         """Scale, in place, the values of ``box``'s segments (default: all) inside any of
         (K, 4) ``rects`` (decided teammates' next footprints) by ``factor``: once per
         segment, however many cover it (:func:`~ipp_toolkit.planners.discount.
         discount_covered`, by segments)."""
-        if len(rects) == 0 or factor == 1.0:
-            return
-        i0, _, j0, _ = box if box is not None else (0, 0, 0, 0)
-        h, w = values.shape
-        covered = np.zeros((h, w), dtype=bool)
-        for q0, q1, s0, s1 in self.edge_index(np.asarray(rects).reshape(-1, 4)).tolist():
-            covered[max(q0 - i0, 0):max(q1 - i0, 0), max(s0 - j0, 0):max(s1 - j0, 0)] = True
-        values[covered] *= factor
+        if len(rects) and factor != 1.0:
+            values[self.covered(rects, box)] *= factor
 
     def constant_sums(self, value: float) -> np.ndarray:
         """(R, C) float64 the segment sums of a map whose every cell holds float32
