@@ -174,3 +174,27 @@ def test_kept_segment_sums_equal_sums_from_scratch():
 
         fly_missions([state], policy)
         assert len(checked) == config.team.budget
+
+
+def test_kept_path_terms_give_the_same_values_and_stay_bounded(monkeypatch):
+    """A waypoint's path rectangles are kept per grid: asked again, the same values; the
+    oldest are dropped past the bound."""
+    from ipp_toolkit.planners import lookahead
+
+    monkeypatch.setattr(lookahead, "PATH_TERMS_KEPT", 3)
+    planner = SpatialGainPlanner()
+    views = _views_after(planner, _config(), steps=3)
+    view, grid = views[0], planner.segment_grid
+    allowed = view.mask.astype(bool)
+
+    def values(position):
+        return continuation_values(planner.camera.rects, position[None, :] + ACTION_DELTAS,
+                                   allowed, 3, 0.5,
+                                   lambda z, box: planner.segment_values(view, z, box), grid)
+
+    first = values(view.position)
+    for dx in range(1, 5):  # four other waypoints push the first out
+        values(view.position + np.array([dx, 0, 0]))
+    assert len(lookahead._PATH_TERMS[grid]) == 3
+    np.testing.assert_array_equal(values(view.position), first)  # computed again
+    np.testing.assert_array_equal(values(view.position), first)  # kept

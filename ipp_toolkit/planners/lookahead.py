@@ -26,14 +26,19 @@ kept per UAV and summed again only where its map changed
 
 Cost per UAV and step: the segment sums where the map changed (its own and the heard
 readings), one product per segment of each altitude's box (about 100 x 100 segments at
-r_M = 0.1 m, d = 3) and its summed-area table, and 6^(d-1) paths per move.
+r_M = 0.1 m, d = 3) and its summed-area table, and four look-ups per rectangle of the
+6^(d-1) paths per move; the rectangles themselves depend on the waypoint alone and are kept
+for the last waypoints asked for.
 """
 
 from __future__ import annotations
 
 import functools
 import itertools
+import weakref
+from collections import OrderedDict
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -138,6 +143,71 @@ def _segment_tables(later: np.ndarray, iz: np.ndarray, valid: np.ndarray,
     return sums
 
 
+class _PathTerms(NamedTuple):
+    """The rectangles the lookahead sums for the paths from one waypoint's six first moves,
+    as cut indices of a :class:`~ipp_toolkit.planners.segments.SegmentGrid` (see
+    :func:`_path_terms`)."""
+
+    valid: np.ndarray  # (6, S) bool: the path stays on the grid of waypoints
+    altitudes: np.ndarray  # (6, S, T) int altitude of each later footprint (0 off the grid)
+    later: np.ndarray  # (6, S, T, 4) int the later footprints (0 off the grid)
+    terms: list[list[tuple[float, np.ndarray]]]  # per later step t: (sign, (6, S, 4) part)
+
+
+#: Per segment grid, the :class:`_PathTerms` of the last waypoints and depths asked for.
+_PATH_TERMS: weakref.WeakKeyDictionary[SegmentGrid, OrderedDict[tuple[bytes, int], _PathTerms]]
+_PATH_TERMS = weakref.WeakKeyDictionary()
+#: How many waypoints and depths each grid keeps (about 50 kB each at d = 3).
+PATH_TERMS_KEPT = 256
+
+
+def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
+                steps: int) -> _PathTerms:
+    """The footprints of every path of ``steps`` moves whose first move leads to one of
+    ``first_targets`` (6, 3), and the rectangles of each later footprint's
+    inclusion-exclusion over the earlier ones: a function of the waypoint and ``steps``
+    alone, kept per grid for the last :data:`PATH_TERMS_KEPT` of them.
+
+    Rectangles are the indices of their edges among the grid's cuts: the cuts are ordered,
+    so intersections (minima and maxima of edges) are taken on the indices alike. A path
+    off the grid of waypoints reads an empty rectangle at the origin (a sum of 0).
+    """
+    first_targets = np.asarray(first_targets, dtype=np.int64)
+    key = (first_targets.tobytes(), steps)
+    kept = _PATH_TERMS.setdefault(grid, OrderedDict())
+    found = kept.get(key)
+    if found is not None:
+        kept.move_to_end(key)
+        return found
+    n_z, n_y, n_x = rects.shape[:3]
+    top = np.array([n_x - 1, n_y - 1, n_z - 1])
+    starts = np.clip(first_targets, 0, top)  # (6, 3); a start off the grid has no path
+    paths = first_targets[:, None, None, :] + _continuations(steps - 1)[None]  # (6, S, T, 3)
+    valid = (((paths >= 0) & (paths <= top)).all(axis=(2, 3))
+             & ((first_targets >= 0) & (first_targets <= top)).all(axis=1)[:, None])
+    ix, iy, iz = np.moveaxis(np.clip(paths, 0, top), -1, 0)
+    later = np.where(valid[:, :, None, None], grid.edge_index(rects[iz, iy, ix]), 0)
+    iz = np.where(valid[:, :, None], iz, 0)
+    first_rects = grid.edge_index(rects[starts[:, 2], starts[:, 1], starts[:, 0]])  # (6, 4)
+    earlier = [np.broadcast_to(first_rects[:, None, :], later.shape[:2] + (4,))]
+    terms = []
+    for t in range(steps - 1):
+        rect = later[:, :, t]
+        step_terms = []
+        for chosen in itertools.product((False, True), repeat=len(earlier)):
+            part = rect
+            for inside, other in zip(chosen, earlier, strict=True):
+                if inside:
+                    part = _intersect(part, other)
+            step_terms.append(((-1.0) ** sum(chosen), part))
+        terms.append(step_terms)
+        earlier.append(rect)
+    found = kept[key] = _PathTerms(valid, iz, later, terms)
+    if len(kept) > PATH_TERMS_KEPT:
+        kept.popitem(last=False)
+    return found
+
+
 def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: np.ndarray,
                         steps: int, discount: float,
                         segment_values: Callable[[int, SegmentBox], np.ndarray],
@@ -157,38 +227,21 @@ def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: n
             j0, j1) of ``grid`` (:mod:`ipp_toolkit.planners.segments`).
         grid: the segments: cut by every footprint edge of ``rects``.
     """
-    n_z, n_y, n_x = rects.shape[:3]
     first = np.flatnonzero(allowed)
     values = np.zeros(N_ACTIONS, dtype=np.float64)
     if steps < 2 or len(first) == 0:
         return values
-    top = np.array([n_x - 1, n_y - 1, n_z - 1])
-    starts = np.asarray(first_targets, dtype=np.int64)[first]  # (A, 3)
-    paths = starts[:, None, None, :] + _continuations(steps - 1)[None]  # (A, S, T, 3)
-    valid = ((paths >= 0) & (paths <= top)).all(axis=(2, 3))  # (A, S)
-    ix, iy, iz = np.moveaxis(np.clip(paths, 0, top), -1, 0)
-    # Rectangles as the indices of their edges among the grid's cuts: the cuts are ordered, so
-    # intersections (minima and maxima of edges) are taken on the indices alike.
-    later = grid.edge_index(rects[iz, iy, ix])  # (A, S, T, 4)
-    first_rects = grid.edge_index(rects[starts[:, 2], starts[:, 1], starts[:, 0]])  # (A, 4)
-    sums = _segment_tables(later, iz, valid, segment_values, grid.shape)
-    # A path off the grid reads nothing: an empty rectangle (all zero).
-    iz = np.where(valid[:, :, None], iz, 0)
-    later = np.where(valid[:, :, None, None], later, 0)
-    earlier = [np.broadcast_to(first_rects[:, None, :], later.shape[:2] + (4,))]
+    paths = _path_terms(grid, rects, first_targets, steps)
+    valid, iz = paths.valid[first], paths.altitudes[first]
+    sums = _segment_tables(paths.later[first], iz, valid, segment_values, grid.shape)
     total = np.zeros(valid.shape, dtype=np.float64)
-    for t in range(steps - 1):
-        rect, altitude = later[:, :, t], iz[:, :, t]
+    for t, terms in enumerate(paths.terms):
+        altitude = iz[:, :, t]
         new = np.zeros(valid.shape, dtype=np.float64)
         # inclusion-exclusion: footprint t minus the union of the earlier ones
-        for chosen in itertools.product((False, True), repeat=len(earlier)):
-            part = rect
-            for inside, other in zip(chosen, earlier, strict=True):
-                if inside:
-                    part = _intersect(part, other)
-            new += (-1.0) ** sum(chosen) * sums(part, altitude)
+        for sign, part in terms:
+            new += sign * sums(part[first], altitude)
         total += discount ** t * new
-        earlier.append(rect)
     best = np.where(valid, total, -np.inf).max(axis=1)
     values[first] = np.where(np.isfinite(best), best, 0.0)  # no path on a one-waypoint grid
     return values
