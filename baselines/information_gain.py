@@ -131,7 +131,6 @@ class InformationGainPlanner(Planner):
         self._gains: ValueTable | None = None
         self._segments: SegmentGrid | None = None
         self._kept_sums: SegmentSums | None = None  # built on the lookahead's first use
-        self._view_sums: tuple[AgentView, np.ndarray] | None = None
 
     def reset(self, config: EnvConfig, seed: int) -> None:
         """Build the camera geometry and gain table for ``config`` (kept while it is unchanged)."""
@@ -143,7 +142,6 @@ class InformationGainPlanner(Planner):
             self._segments = SegmentGrid(camera.rects, world.map_cells,
                                          square_cells(world.map_cells, world.resolution))
             self._kept_sums = None
-        self._view_sums = None
         self._lookahead = mission_lookahead(self.lookahead_steps, self.lookahead_silent,
                                             config.team.comm_range)
 
@@ -262,17 +260,14 @@ class InformationGainPlanner(Planner):
         return [self._gains]
 
     def _table_sums(self, view: AgentView) -> np.ndarray:
-        """(T, Z, R, C) the segment sums of :meth:`_segment_tables` on ``view``'s map (one
-        refresh per view)."""
-        if self._view_sums is None or self._view_sums[0] is not view:
-            if self._kept_sums is None:
-                assert self._config is not None
-                self._kept_sums = SegmentSums(self.segment_grid, self._segment_tables(),
-                                              [f"altitude_{z}" for z in
-                                               range(len(self.camera.accuracy))],
-                                              logit(self._config.world.prior))
-            self._view_sums = (view, self._kept_sums(view))
-        return self._view_sums[1]
+        """(T, Z, R, C) the segment sums of :meth:`_segment_tables` on ``view``'s map."""
+        if self._kept_sums is None:
+            assert self._config is not None
+            self._kept_sums = SegmentSums(self.segment_grid, self._segment_tables(),
+                                          [f"altitude_{z}" for z in
+                                           range(len(self.camera.accuracy))],
+                                          logit(self._config.world.prior))
+        return self._kept_sums(view)
 
     def cell_gains(self, view: AgentView, altitude: int,
                    cells: tuple[slice, slice]) -> np.ndarray:
