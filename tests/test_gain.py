@@ -278,6 +278,24 @@ def test_block_means_are_numpys_means_to_the_bit(block):
         np.testing.assert_array_equal(block_means(prob, block), expected)
 
 
+@pytest.mark.parametrize("block", [1, 2, 4, 5, 7, 8])
+def test_block_sums_are_numpys_sums_to_the_bit(block):
+    from ipp_toolkit.belief.interest import block_sums
+
+    rng = np.random.default_rng(block)
+    for shape in [(4, 25 * block, 25 * block), (3, 4 * block, 2 * block), (1, block, block)]:
+        values = (rng.standard_normal(shape) * 10.0 ** rng.uniform(-3, 3, shape)
+                  ).astype(np.float32)
+        n, rows, cols = shape[0], shape[1] // block, shape[2] // block
+        expected = values.reshape(n, rows * block, cols, block).sum(axis=3).reshape(
+            n, rows, block, cols).sum(axis=2)
+        np.testing.assert_array_equal(block_sums(values, block), expected)
+        wide = block_sums(values.astype(np.float64), block)  # other dtypes: NumPy's own sums
+        assert wide.dtype == np.float64
+        np.testing.assert_array_equal(wide, values.astype(np.float64).reshape(
+            n, rows * block, cols, block).sum(axis=3).reshape(n, rows, block, cols).sum(axis=2))
+
+
 def test_block_means_take_the_ordered_sums_on_the_default_maps():
     import ipp_toolkit.belief.interest as interest
 
@@ -285,7 +303,7 @@ def test_block_means_take_the_ordered_sums_on_the_default_maps():
     block_means(prob, 5)
     # This NumPy adds a block's cells in the order the whole-array sums copy (else they fall
     # back to its mean: the same numbers, five times slower).
-    assert interest._ORDER_CHECKED[((4, 500, 500), 5)]
+    assert interest._ORDER_CHECKED[((4, 500, 500), 5, False)]
 
 
 def test_box_layout_on_a_hand_sized_map():
@@ -420,7 +438,7 @@ def test_block_mean_cache_takes_the_whole_maps_where_the_order_is_unchecked(monk
 
     config = EnvConfig().replace(world={"resolution": 0.5})
     state = reset_mission(config, seed=0)
-    monkeypatch.setattr(interest, "_ORDER_CHECKED", {((4, 100, 100), 1): False})
+    monkeypatch.setattr(interest, "_ORDER_CHECKED", {((4, 100, 100), 1, False): False})
     cache = BlockMeanCache(state.maps, 4, 1)
     assert not cache.incremental
     np.testing.assert_array_equal(cache.means(), state.maps.prob[:4])

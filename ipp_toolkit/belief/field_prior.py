@@ -44,7 +44,7 @@ import numpy as np
 
 from ..config.schema import GAIN_INTEREST_LEARNED
 from ..io import CheckpointError, load_torch, save_torch
-from .interest import block_means, square_cells
+from .interest import block_means, block_sums, square_cells
 
 __all__ = ["BLOCK_METRES", "FORMAT", "INPUT_PLANES", "SHIPPED_PRIOR", "FieldPrior",
            "PriorNetConfig", "block_average", "block_cells", "block_labels", "build_network",
@@ -87,12 +87,16 @@ def _block_sums(values: np.ndarray, b: int) -> np.ndarray:
         padded = np.zeros((n, h * b, w * b), dtype=np.float32)
         padded[:, :rows, :cols] = values
         values = padded
-    # the contiguous axis first: two cheap reductions instead of one strided one
-    return values.reshape(n, h * b, w, b).sum(axis=3).reshape(n, h, b, w).sum(axis=2)
+    return block_sums(np.ascontiguousarray(values), b)
 
 
+@functools.lru_cache(maxsize=16)
 def _inside_share(rows: int, cols: int, b: int) -> np.ndarray:
-    return _block_sums(np.ones((1, rows, cols), dtype=np.float32), b)[0] / np.float32(b * b)
+    """(h, w) float32 share of each b x b block's cells inside a rows x cols area (read-only,
+    kept per shape: every planning step asks for the same one)."""
+    share = _block_sums(np.ones((1, rows, cols), dtype=np.float32), b)[0] / np.float32(b * b)
+    share.flags.writeable = False
+    return share
 
 
 def _inside_count(inside: np.ndarray, b: int) -> np.ndarray:
