@@ -79,8 +79,8 @@ class SegmentGrid:
         from (size / block, size / block) per-block weights."""
         i0, i1, j0, j1 = box if box is not None else (0, self.shape[0], 0, self.shape[1])
         layout = self.layout
-        return np.asarray(blocks, dtype=np.float64)[layout.row_block[i0:i1, None],
-                                                    layout.col_block[None, j0:j1]]
+        rows = np.asarray(blocks).take(layout.row_block[i0:i1], axis=0)
+        return rows.take(layout.col_block[j0:j1], axis=1).astype(np.float64)
 
     def covered(self, rects: np.ndarray, box: SegmentBox | None = None) -> np.ndarray:
         """(i1 - i0, j1 - j0) bool the segments of ``box`` (default: all) inside any of
