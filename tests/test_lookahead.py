@@ -169,6 +169,9 @@ def test_kept_segment_sums_equal_sums_from_scratch():
                 fresh = SegmentSums(planner.segment_grid, planner._segment_tables(), columns,
                                     float(view.step))  # any start: the sums of the map
                 np.testing.assert_array_equal(kept(view), fresh(view))
+                box = (7, 90, 3, 41)  # a box's sums from its cells alone are the same
+                np.testing.assert_array_equal(kept.box_sums(view, box, [2, 0]),
+                                              kept(view)[:, [2, 0], 7:90, 3:41])
             checked.append(1)
             return [planner.act(views)]
 

@@ -152,6 +152,22 @@ def test_the_covered_part_of_each_option_is_the_cell_by_cell_sum_under_a_neighbo
                                                 abs=1e-12)
 
 
+def test_the_greedy_discount_keeps_no_per_agent_sums_for_missions_flown_in_lock_step():
+    """COMA's validation flies several missions through one discount: without a lookahead
+    its covered parts come from each box's cells, so no agent's map is kept (a kept map
+    would be summed again almost whole at every call, one mission after another)."""
+    config = _config(SPATIAL, agents=2)
+    discount = TeammateDiscount(config, config.features)
+    local = type("LocalMaps", (), {"needs_observations": False})()
+    states = [reset_mission(config, seed=1, mission=m, namespace="validation") for m in (0, 1)]
+    for state in states * 2:
+        views = planner_views(state, local)
+        discount.start_step(views)
+        mate = (views[1].position + ACTION_DELTAS[2])[None, :]
+        assert discount.covered_gains(views[1], mate).any()
+    assert discount._kept_sums._maps == {}
+
+
 @pytest.mark.parametrize("value", [-0.1, 1.5, math.nan])
 def test_a_discount_outside_zero_to_one_is_refused_naming_it(value):
     from coma.planner import COMAPlanner

@@ -263,7 +263,10 @@ class TeammateDiscount:
             mask = grid.covered(mate_rects, box)
             if not mask.any():
                 continue
-            values = np.where(mask, self._segment_values(view, altitude, box), 0.0)
+            # From the box's cells, not the kept sums: the greedy COMA validation flies
+            # several missions in lock-step through one discount.
+            sums = self._kept_sums.box_sums(view, box, [altitude])
+            values = np.where(mask, self._objective_values(view, sums, 0, box), 0.0)
             for option, (q0, q1, s0, s1) in zip(options.tolist(), rects.tolist(), strict=True):
                 covered[option] = values[q0 - box[0]:q1 - box[0], s0 - box[2]:s1 - box[2]].sum()
         return covered / self._normaliser
@@ -275,11 +278,17 @@ class TeammateDiscount:
 
     def _segment_values(self, view: AgentView, altitude: int, box: SegmentBox) -> np.ndarray:
         """(i1 - i0, j1 - j0) float64 the planes' per-cell objective of a reading at
-        ``altitude`` summed over each segment of ``box`` of ``view``'s local map (the
-        tables' kept segment sums, :func:`~ipp_toolkit.planners.segments.
-        objective_segment_values`)."""
+        ``altitude`` summed over each segment of ``box`` of ``view``'s local map, from the
+        tables' kept segment sums (:class:`~ipp_toolkit.planners.segments.SegmentSums`)."""
         i0, i1, j0, j1 = box
-        sums = self._kept_sums(view)[..., i0:i1, j0:j1]
+        return self._objective_values(view, self._kept_sums(view)[..., i0:i1, j0:j1],
+                                      altitude, box)
+
+    def _objective_values(self, view: AgentView, sums: np.ndarray, altitude: int,
+                          box: SegmentBox) -> np.ndarray:
+        """:func:`~ipp_toolkit.planners.segments.objective_segment_values` of (T, Z, h, w)
+        table ``sums`` over ``box`` at altitude slot ``altitude``, with the planes' probability
+        of interest and clean-up term."""
         if self.objective != "interesting":
             return objective_segment_values(sums, altitude, None)
         weight = 0.0

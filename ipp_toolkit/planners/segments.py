@@ -122,6 +122,8 @@ class SegmentSums:
     segments of the rows and columns where the map differs from the one of that agent's last
     call, or at a mission's first step from a map at ``start`` (any map works: what differs
     is summed again); asked again for the same view at the same step, it answers at once.
+    Missions flown in lock-step through one instance would each find the other's map kept:
+    for them, :meth:`box_sums` sums a few boxes from their cells.
     """
 
     def __init__(self, grid: SegmentGrid, tables: Sequence[ValueTable],
@@ -134,35 +136,61 @@ class SegmentSums:
         self._sums: dict[int, np.ndarray] = {}
         self._seen: dict[int, tuple[AgentView, int]] = {}  # the view each agent was last summed for
         self._cells = np.zeros((grid.size, grid.size), dtype=np.float32)  # scratch
+        self._scratch = np.zeros(grid.shape)  # scratch segment sums
 
     def __call__(self, view: AgentView) -> np.ndarray:
-        logodds = view.local_logodds
-        size = self.grid.size
-        if logodds.shape != (size, size) or logodds.dtype != np.float32:
-            raise ValueError(f"the view's local map is {logodds.dtype} of shape "
-                             f"{logodds.shape}; the segments were cut for {size} x {size} "
-                             "float32 cells")
+        logodds = self._checked_map(view)
         seen = self._seen.get(view.index)
         if seen is not None and seen[0] is view and seen[1] == view.step:
             return self._sums[view.index]  # this view's map, summed by the last call
         if view.index not in self._maps or view.step == 0:
             self._restart(view.index)
         kept, sums = self._maps[view.index], self._sums[view.index]
-        layout = self.grid.layout
-        r, c = layout.row_edges, layout.col_edges
-        for i0, i1, j0, j1 in self._changed_boxes(kept, logodds):
+        r, c = self.grid.layout.row_edges, self.grid.layout.col_edges
+        for box in self._changed_boxes(kept, logodds):
+            i0, i1, j0, j1 = box
+            self._sum_box(logodds, box, range(len(self.columns)), sums[..., i0:i1, j0:j1])
             cells = (slice(r[i0], r[i1]), slice(c[j0], c[j1]))
-            part = logodds[cells]
-            region = (int(r[i0]), int(r[i1]), int(c[j0]), int(c[j1]))
-            for t, table in enumerate(self.tables):
-                # Intern first: indices() may grow the table and replace its columns.
-                index = table.indices(part)
-                for z, name in enumerate(self.columns):
-                    self._cells[cells] = table.column(name)[index]
-                    layout.segment_sums(self._cells, out=sums[t, z], region=region)
-            kept[cells] = part
+            kept[cells] = logodds[cells]
         self._seen[view.index] = (view, view.step)
         return sums
+
+    def box_sums(self, view: AgentView, box: SegmentBox, altitudes: Sequence[int]
+                 ) -> np.ndarray:
+        """(T, len(altitudes), i1 - i0, j1 - j0) float64 the tables' columns of
+        ``altitudes`` summed over the segments of ``box`` of the view's map, from its cells
+        (nothing kept or reused: for a few boxes of a map, as one of several missions flown in
+        lock-step sees them)."""
+        out = np.empty((len(self.tables), len(altitudes), box[1] - box[0], box[3] - box[2]))
+        self._sum_box(self._checked_map(view), box, altitudes, out)
+        return out
+
+    def _checked_map(self, view: AgentView) -> np.ndarray:
+        logodds = view.local_logodds
+        size = self.grid.size
+        if logodds.shape != (size, size) or logodds.dtype != np.float32:
+            raise ValueError(f"the view's local map is {logodds.dtype} of shape "
+                             f"{logodds.shape}; the segments were cut for {size} x {size} "
+                             "float32 cells")
+        return logodds
+
+    def _sum_box(self, logodds: np.ndarray, box: SegmentBox, altitudes: Sequence[int],
+                 out: np.ndarray) -> None:
+        """Write the tables' columns of ``altitudes`` summed over ``box``'s segments of
+        ``logodds`` into (T, len(altitudes), i1 - i0, j1 - j0) ``out``."""
+        layout = self.grid.layout
+        r, c = layout.row_edges, layout.col_edges
+        i0, i1, j0, j1 = box
+        cells = (slice(r[i0], r[i1]), slice(c[j0], c[j1]))
+        part = logodds[cells]
+        region = (int(r[i0]), int(r[i1]), int(c[j0]), int(c[j1]))
+        for t, table in enumerate(self.tables):
+            # Intern first: indices() may grow the table and replace its columns.
+            index = table.indices(part)
+            for slot, z in enumerate(altitudes):
+                self._cells[cells] = table.column(self.columns[z])[index]
+                out[t, slot] = layout.segment_sums(self._cells, out=self._scratch,
+                                                   region=region)[i0:i1, j0:j1]
 
     def _restart(self, agent: int) -> None:
         """Agent ``agent``'s kept map and sums: a map at :attr:`start` everywhere."""
