@@ -17,8 +17,10 @@ checks, the workers' start), the missions (until the last one is stored) and the
 workers' exit, the tables, the curves, the process's exit).
 
 Measure on an otherwise idle machine: a second job on a 2-core machine takes the core one
-evaluation worker needs. ``PYTHONPATH=OTHER_TREE python benchmarks/compare_wall.py`` times
-another tree (e.g. a ``git archive`` of an older commit) with the same virtual environment.
+evaluation worker needs. Where the machine's speed drifts (shared virtual machines), time
+against a fixed reference in the same minutes: ``--reference TREE`` alternates every run
+with the same run of another source tree's code (e.g. ``git worktree add /tmp/ref e7668be``,
+the last five-planner default) in the same virtual environment and prints the ratio.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import argparse
 import os
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -55,14 +58,20 @@ def phases(out: Path, start: float, end: float) -> tuple[float, float, float]:
     return first, last - first, end - start - last
 
 
-def timed(args: list[str], show_phases: bool = False) -> tuple[float, float, str]:
-    """(wall, CPU, phases text) of one ipp-compare run with ``args`` into a fresh folder."""
+def timed(args: list[str], show_phases: bool = False, tree: Path | None = None
+          ) -> tuple[float, float, str]:
+    """(wall, CPU, phases text) of one ipp-compare run with ``args`` into a fresh folder;
+    with ``tree``, of that source tree's code (first on ``PYTHONPATH``)."""
     out = Path(tempfile.mkdtemp(prefix="compare-wall-"))
     try:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start_epoch, start = time.time(), time.perf_counter()
+        env = None
+        if tree is not None:
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+                [str(tree), *filter(None, [os.environ.get("PYTHONPATH")])]))
         subprocess.run([*command(), *args, "--out", str(out), "--no-progress"],
-                       check=True, stdout=subprocess.DEVNULL)
+                       check=True, stdout=subprocess.DEVNULL, env=env)
         wall = time.perf_counter() - start
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -81,14 +90,31 @@ def main() -> None:
     parser.add_argument("--runs", default="bare,pinned", help="comma-separated: bare, pinned")
     parser.add_argument("--phases", action="store_true",
                         help="also split each run into start-up, missions and end")
+    parser.add_argument("--reference", type=Path, default=None, metavar="TREE",
+                        help="another source tree (e.g. a git worktree of an older commit): "
+                             "every run alternates with the same run of its code, and the "
+                             "ratio of the medians is printed")
     args = parser.parse_args()
+    if args.reference is not None and not (args.reference / "reports" / "cli.py").is_file():
+        parser.error(f"--reference {args.reference}: not a source tree of the toolkit "
+                     "(no reports/cli.py)")
     print(f"ipp-compare on {os.cpu_count()} CPUs; wall and CPU seconds (all processes)")
+    trees: list[tuple[str, Path | None]] = [("", None)]
+    if args.reference is not None:
+        trees.append((" (reference)", args.reference.resolve()))
     for name in args.runs.split(","):
+        walls: dict[str, list[float]] = {label: [] for label, _ in trees}
         for _ in range(args.repeat):
-            load = os.getloadavg()[0]
-            wall, cpu, text = timed(RUNS[name], args.phases)
-            print(f"{name:7s} wall {wall:6.1f} s   CPU {cpu:6.1f} s   (load before {load:.2f})"
-                  + text, flush=True)
+            for label, tree in trees:
+                load = os.getloadavg()[0]
+                wall, cpu, text = timed(RUNS[name], args.phases, tree)
+                walls[label].append(wall)
+                print(f"{name + label:19s} wall {wall:6.1f} s   CPU {cpu:6.1f} s   "
+                      f"(load before {load:.2f})" + text, flush=True)
+        if args.reference is not None:
+            ratio = statistics.median(walls[""]) / statistics.median(walls[" (reference)"])
+            print(f"{name}: this tree takes {ratio:.2f} times the reference's wall time "
+                  "(medians)", flush=True)
 
 
 if __name__ == "__main__":
