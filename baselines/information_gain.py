@@ -234,8 +234,8 @@ class InformationGainPlanner(Planner):
 
         The built-in objectives keep their tables' segment sums per agent across steps
         (:class:`~ipp_toolkit.planners.segments.SegmentSums`); a subclass that overrides
-        :meth:`cell_gains` alone gets its values summed from :meth:`cell_gains` over the
-        whole map (the same values, slower).
+        :meth:`cell_gains` alone gets its values summed from :meth:`cell_gains` over the box
+        at every step (the same values, slower).
         """
         if type(self).cell_gains is not InformationGainPlanner.cell_gains:
             return self._summed_cell_gains(view, altitude, box)

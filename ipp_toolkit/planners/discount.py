@@ -18,10 +18,11 @@ options does (:mod:`ipp_toolkit.planners.lookahead`).
 Cost without a lookahead: nothing while no decided teammate is heard; otherwise the team's
 probability of interest (a learned prior answers from the gain planes' call of the same
 step, see :meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and the
-objective's sums over the segments of the options' footprints
-(:mod:`ipp_toolkit.planners.segments`: the tables' segment sums are kept per agent and summed
-again where its map changed). A lookahead adds, for every agent and step, the probability
-of interest and the continuation's summed-area tables over those segments.
+objective's sums over the segments (:mod:`ipp_toolkit.planners.segments`) of the boxes of
+the options whose footprints a teammate's overlaps, from their cells. A lookahead adds, for
+every agent and step, the probability of interest and the continuation's summed-area tables
+over the segments, from the tables' segment sums kept per agent and summed again where its
+map changed.
 """
 
 from __future__ import annotations
