@@ -184,7 +184,6 @@ def test_kept_path_terms_give_the_same_values_and_stay_bounded(monkeypatch):
     oldest are dropped past the bound."""
     from ipp_toolkit.planners import lookahead
 
-    monkeypatch.setattr(lookahead, "PATH_TERMS_KEPT", 3)
     planner = SpatialGainPlanner()
     views = _views_after(planner, _config(), steps=3)
     view, grid = views[0], planner.segment_grid
@@ -196,8 +195,11 @@ def test_kept_path_terms_give_the_same_values_and_stay_bounded(monkeypatch):
                                    lambda z, box: planner.segment_values(view, z, box), grid)
 
     first = values(view.position)
+    kept = lookahead._PATH_TERMS[grid]
+    size = kept.entries[next(reversed(kept.entries))].nbytes
+    monkeypatch.setattr(lookahead, "PATH_TERMS_BYTES", 3 * size)  # room for three
     for dx in range(1, 5):  # four other waypoints push the first out
         values(view.position + np.array([dx, 0, 0]))
-    assert len(lookahead._PATH_TERMS[grid]) == 3
+    assert len(kept.entries) == 3 and kept.nbytes <= 3 * size
     np.testing.assert_array_equal(values(view.position), first)  # computed again
     np.testing.assert_array_equal(values(view.position), first)  # kept

@@ -154,11 +154,26 @@ class _PathTerms(NamedTuple):
     terms: list[list[tuple[float, np.ndarray]]]  # per later step t: (sign, (6, S, 4) part)
 
 
-#: Per segment grid, the :class:`_PathTerms` of the last waypoints and depths asked for.
-_PATH_TERMS: weakref.WeakKeyDictionary[SegmentGrid, OrderedDict[tuple[bytes, int], _PathTerms]]
-_PATH_TERMS = weakref.WeakKeyDictionary()
-#: How many waypoints and depths each grid keeps (about 50 kB each at d = 3).
-PATH_TERMS_KEPT = 256
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays (views counted as copies: an upper bound)."""
+        arrays = [self.valid, self.altitudes, self.later]
+        arrays += [part for terms in self.terms for _, part in terms]
+        return sum(array.nbytes for array in arrays)
+
+
+class _KeptPaths:
+    """The :class:`_PathTerms` of the last waypoints and depths asked for, oldest first."""
+
+    def __init__(self) -> None:
+        self.entries: OrderedDict[tuple[bytes, int], _PathTerms] = OrderedDict()
+        self.nbytes = 0
+
+
+#: Per segment grid, its kept path terms.
+_PATH_TERMS: weakref.WeakKeyDictionary[SegmentGrid, _KeptPaths] = weakref.WeakKeyDictionary()
+#: Bytes of path terms each grid keeps (at most 60 kB per waypoint at d = 3, 0.75 MB at d = 4).
+PATH_TERMS_BYTES = 16 * 2 ** 20
 
 
 def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
@@ -166,7 +181,7 @@ def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
     """The footprints of every path of ``steps`` moves whose first move leads to one of
     ``first_targets`` (6, 3), and the rectangles of each later footprint's
     inclusion-exclusion over the earlier ones: a function of the waypoint and ``steps``
-    alone, kept per grid for the last :data:`PATH_TERMS_KEPT` of them.
+    alone, kept per grid for the last ones asked for, up to :data:`PATH_TERMS_BYTES`.
 
     Rectangles are the indices of their edges among the grid's cuts: the cuts are ordered,
     so intersections (minima and maxima of edges) are taken on the indices alike. A path
@@ -174,10 +189,10 @@ def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
     """
     first_targets = np.asarray(first_targets, dtype=np.int64)
     key = (first_targets.tobytes(), steps)
-    kept = _PATH_TERMS.setdefault(grid, OrderedDict())
-    found = kept.get(key)
+    kept = _PATH_TERMS.setdefault(grid, _KeptPaths())
+    found = kept.entries.get(key)
     if found is not None:
-        kept.move_to_end(key)
+        kept.entries.move_to_end(key)
         return found
     n_z, n_y, n_x = rects.shape[:3]
     top = np.array([n_x - 1, n_y - 1, n_z - 1])
@@ -202,9 +217,10 @@ def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
             step_terms.append(((-1.0) ** sum(chosen), part))
         terms.append(step_terms)
         earlier.append(rect)
-    found = kept[key] = _PathTerms(valid, iz, later, terms)
-    if len(kept) > PATH_TERMS_KEPT:
-        kept.popitem(last=False)
+    found = kept.entries[key] = _PathTerms(valid, iz, later, terms)
+    kept.nbytes += found.nbytes
+    while kept.nbytes > PATH_TERMS_BYTES and len(kept.entries) > 1:
+        kept.nbytes -= kept.entries.popitem(last=False)[1].nbytes
     return found
 
 
