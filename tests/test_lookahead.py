@@ -180,8 +180,8 @@ def test_kept_segment_sums_equal_sums_from_scratch():
 
 
 def test_kept_path_terms_give_the_same_values_and_stay_bounded(monkeypatch):
-    """A waypoint's path rectangles are kept per grid: asked again, the same values; the
-    oldest are dropped past the bound."""
+    """A waypoint's path rectangles are kept: asked again, the same values; the oldest are
+    dropped past the bound in bytes."""
     from ipp_toolkit.planners import lookahead
 
     planner = SpatialGainPlanner()
@@ -194,8 +194,9 @@ def test_kept_path_terms_give_the_same_values_and_stay_bounded(monkeypatch):
                                    allowed, 3, 0.5,
                                    lambda z, box: planner.segment_values(view, z, box), grid)
 
+    kept = lookahead._KeptPaths()
+    monkeypatch.setattr(lookahead, "_KEPT_PATHS", kept)
     first = values(view.position)
-    kept = lookahead._PATH_TERMS[grid]
     size = kept.entries[next(reversed(kept.entries))].nbytes
     monkeypatch.setattr(lookahead, "PATH_TERMS_BYTES", 3 * size)  # room for three
     for dx in range(1, 5):  # four other waypoints push the first out

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import functools
 import itertools
-import weakref
 from collections import OrderedDict
 from collections.abc import Callable
 from typing import NamedTuple
@@ -153,7 +152,6 @@ class _PathTerms(NamedTuple):
     later: np.ndarray  # (6, S, T, 4) int the later footprints (0 off the grid)
     terms: list[list[tuple[float, np.ndarray]]]  # per later step t: (sign, (6, S, 4) part)
 
-
     @property
     def nbytes(self) -> int:
         """Bytes of its arrays (views counted as copies: an upper bound)."""
@@ -163,36 +161,48 @@ class _PathTerms(NamedTuple):
 
 
 class _KeptPaths:
-    """The :class:`_PathTerms` of the last waypoints and depths asked for, oldest first."""
+    """The :class:`_PathTerms` of the last grids, waypoints and depths asked for, oldest
+    first, up to :data:`PATH_TERMS_BYTES` in all."""
 
     def __init__(self) -> None:
-        self.entries: OrderedDict[tuple[bytes, int], _PathTerms] = OrderedDict()
+        self.entries: OrderedDict[tuple[object, bytes, int], _PathTerms] = OrderedDict()
         self.nbytes = 0
 
+    def get(self, key: tuple[object, bytes, int]) -> _PathTerms | None:
+        found = self.entries.get(key)
+        if found is not None:
+            self.entries.move_to_end(key)
+        return found
 
-#: Per segment grid, its kept path terms.
-_PATH_TERMS: weakref.WeakKeyDictionary[SegmentGrid, _KeptPaths] = weakref.WeakKeyDictionary()
-#: Bytes of path terms each grid keeps (at most 60 kB per waypoint at d = 3, 0.75 MB at d = 4).
-PATH_TERMS_BYTES = 16 * 2 ** 20
+    def add(self, key: tuple[object, bytes, int], terms: _PathTerms) -> None:
+        self.entries[key] = terms
+        self.nbytes += terms.nbytes
+        while self.nbytes > PATH_TERMS_BYTES and len(self.entries) > 1:
+            self.nbytes -= self.entries.popitem(last=False)[1].nbytes
+
+
+#: Bytes of path terms the process keeps (at most 60 kB per waypoint at d = 3, 0.75 MB at
+#: d = 4): shared by every planner of the same footprints and grid.
+PATH_TERMS_BYTES = 32 * 2 ** 20
+_KEPT_PATHS = _KeptPaths()
 
 
 def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
                 steps: int) -> _PathTerms:
     """The footprints of every path of ``steps`` moves whose first move leads to one of
     ``first_targets`` (6, 3), and the rectangles of each later footprint's
-    inclusion-exclusion over the earlier ones: a function of the waypoint and ``steps``
-    alone, kept per grid for the last ones asked for, up to :data:`PATH_TERMS_BYTES`.
+    inclusion-exclusion over the earlier ones: a function of the grid (and the footprints
+    ``rects`` it was cut from), the waypoint and ``steps`` alone, kept for the last ones
+    asked for (:data:`PATH_TERMS_BYTES`).
 
     Rectangles are the indices of their edges among the grid's cuts: the cuts are ordered,
     so intersections (minima and maxima of edges) are taken on the indices alike. A path
     off the grid of waypoints reads an empty rectangle at the origin (a sum of 0).
     """
     first_targets = np.asarray(first_targets, dtype=np.int64)
-    key = (first_targets.tobytes(), steps)
-    kept = _PATH_TERMS.setdefault(grid, _KeptPaths())
-    found = kept.entries.get(key)
+    key = (grid.key, first_targets.tobytes(), steps)
+    found = _KEPT_PATHS.get(key)
     if found is not None:
-        kept.entries.move_to_end(key)
         return found
     n_z, n_y, n_x = rects.shape[:3]
     top = np.array([n_x - 1, n_y - 1, n_z - 1])
@@ -217,10 +227,8 @@ def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
             step_terms.append(((-1.0) ** sum(chosen), part))
         terms.append(step_terms)
         earlier.append(rect)
-    found = kept.entries[key] = _PathTerms(valid, iz, later, terms)
-    kept.nbytes += found.nbytes
-    while kept.nbytes > PATH_TERMS_BYTES and len(kept.entries) > 1:
-        kept.nbytes -= kept.entries.popitem(last=False)[1].nbytes
+    found = _PathTerms(valid, iz, later, terms)
+    _KEPT_PATHS.add(key, found)
     return found
 
 

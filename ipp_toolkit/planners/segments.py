@@ -49,11 +49,14 @@ class SegmentGrid:
         layout: the segments' :class:`~ipp_toolkit.belief.box_sums.BoxLayout` (its
             ``row_edges``, ``col_edges`` and ``segment_sums``).
         shape: (R, C), rows and columns of segments.
+        key: hashable, equal for grids cut from the same footprints, size and block.
     """
 
     def __init__(self, rects: np.ndarray, size: int, block: int) -> None:
         rects = np.asarray(rects, dtype=np.int64)
         self.size, self.block = int(size), int(block)
+        #: What the segments are a function of: equal keys, equal grids.
+        self.key = (self.size, self.block, rects.shape, rects.tobytes())
         self.layout = BoxLayout(rects[..., 0:2].reshape(-1, 2), rects[..., 2:4].reshape(-1, 2),
                                 self.size, self.block)
         self.shape = self.layout.shape
