@@ -24,11 +24,13 @@ from ipp_toolkit.runs.process_pool import (
     retain_freed_memory,
 )
 from ipp_toolkit.sim.mission import MissionGeometry
+from reports.compare import DEFAULT_PLANNERS
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--planners", default="ig,coverage,random,coma,ppo")
+    parser.add_argument("--planners", default=",".join(DEFAULT_PLANNERS),
+                        help="comma-separated registered planners (default: ipp-compare's)")
     parser.add_argument("--missions", type=int, default=20)
     args = parser.parse_args()
     limit_blas_threads()
