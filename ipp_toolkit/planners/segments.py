@@ -5,9 +5,9 @@ footprints and over the intersections of footprints. Every edge of such a rectan
 edge of some footprint, and the probability of interest that the ``interesting`` objective
 weights cells by is constant over ~0.5 m blocks (:func:`~ipp_toolkit.belief.interest.
 square_cells`). So :class:`SegmentGrid` cuts the map by every footprint edge (all altitudes)
-and every block edge into segments (about 170 x 170 at r_M = 0.1 m, against 500 x 500
-cells), and a sum over any such rectangle of per-cell values times a per-block weight is a
-sum over whole segments of weight x the segment's sum.
+and every block edge into segments (156 x 156 on the default 50 m area at r_M = 0.1 m,
+against 500 x 500 cells), and a sum over any such rectangle of per-cell values times a
+per-block weight is a sum over whole segments of weight x the segment's sum.
 
 A per-cell value of the ``ig`` family is a column of a table looked up by the cell's
 log-odds (:class:`~ipp_toolkit.belief.value_table.ValueTable`), so its segment sums depend
