@@ -246,13 +246,11 @@ class InformationGainPlanner(Planner):
     def _summed_cell_gains(self, view: AgentView, altitude: int, box: SegmentBox
                            ) -> np.ndarray:
         """(i1 - i0, j1 - j0) float64 :meth:`cell_gains` over ``box``, summed per segment."""
-        layout = self.segment_grid.layout
+        grid = self.segment_grid
+        r, c = grid.layout.row_edges, grid.layout.col_edges
         i0, i1, j0, j1 = box
-        r, c = layout.row_edges, layout.col_edges
-        cells = np.zeros((self.segment_grid.size,) * 2, dtype=np.float32)
-        cells[r[i0]:r[i1], c[j0]:c[j1]] = self.cell_gains(
-            view, altitude, (slice(r[i0], r[i1]), slice(c[j0], c[j1])))
-        return layout.segment_sums(cells, region=(r[i0], r[i1], c[j0], c[j1]))[i0:i1, j0:j1]
+        cells = self.cell_gains(view, altitude, (slice(r[i0], r[i1]), slice(c[j0], c[j1])))
+        return grid.segment_sums(cells, box)
 
     def _segment_tables(self) -> list[ValueTable]:
         """The tables whose segment sums :meth:`segment_values` reads: the gain table."""

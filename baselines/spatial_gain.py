@@ -130,12 +130,9 @@ class SpatialGainPlanner(InformationGainPlanner):
         false-positive term when ``false_positive_weight`` > 0 (in the last
         ``false_positive_steps`` steps); see
         :meth:`InformationGainPlanner.cell_gains`."""
-        # One estimate per agent and decision: the up, down and level boxes share it.
-        if self._interest is None or self._interest[0] is not view:
-            self._interest = (view, self.interest_blocks(view))
         assert self._smoother is not None
         gain = super().cell_gains(view, altitude, cells)
-        interest = self._smoother.window(self._interest[1], *cells)
+        interest = self._smoother.window(self._view_interest(view), *cells)
         gain *= interest
         if self.false_positive_weight > 0 and false_positive_term_applies(
                 view.budget - view.step, self.false_positive_steps):
@@ -154,14 +151,20 @@ class SpatialGainPlanner(InformationGainPlanner):
         :meth:`InformationGainPlanner.segment_values`)."""
         if type(self).cell_gains is not SpatialGainPlanner.cell_gains:
             return self._summed_cell_gains(view, altitude, box)
-        if self._interest is None or self._interest[0] is not view:
-            self._interest = (view, self.interest_blocks(view))
         weight = self.false_positive_weight if false_positive_term_applies(
             view.budget - view.step, self.false_positive_steps) else 0.0
         i0, i1, j0, j1 = box
         return objective_segment_values(self._table_sums(view)[..., i0:i1, j0:j1], altitude,
-                                        self.segment_grid.block_weights(self._interest[1], box),
+                                        self.segment_grid.block_weights(
+                                            self._view_interest(view), box),
                                         weight)
+
+    def _view_interest(self, view: AgentView) -> np.ndarray:
+        """:meth:`interest_blocks` of ``view``, estimated once per agent and decision: the
+        up, down and level boxes and the lookahead share it."""
+        if self._interest is None or self._interest[0] is not view:
+            self._interest = (view, self.interest_blocks(view))
+        return self._interest[1]
 
     def _segment_tables(self) -> list[ValueTable]:
         """The gain table and, with the false-positive term, its table."""

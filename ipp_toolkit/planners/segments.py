@@ -67,6 +67,8 @@ class SegmentGrid:
         self._col_at[self.layout.col_edges] = np.arange(len(self.layout.col_edges))
         self._areas = np.outer(np.diff(self.layout.row_edges),
                                np.diff(self.layout.col_edges)).astype(np.float64)
+        self._cells: np.ndarray | None = None
+        self._sums: np.ndarray | None = None
 
     def edge_index(self, rects: np.ndarray) -> np.ndarray:
         """(..., 4) int the cut indices of the edges of (..., 4) rectangles (row0, row1,
@@ -103,6 +105,21 @@ class SegmentGrid:
         if len(rects) and factor != 1.0:
             values[self.covered(rects, box)] *= factor
 
+    def segment_sums(self, cells: np.ndarray, box: SegmentBox) -> np.ndarray:
+        """(i1 - i0, j1 - j0) float64 sums over the segments of ``box`` of (h, w) float32
+        per-cell values of the box's cells, in
+        :meth:`~ipp_toolkit.belief.box_sums.BoxLayout.segment_sums`' order."""
+        r, c = self.layout.row_edges, self.layout.col_edges
+        i0, i1, j0, j1 = box
+        if self._cells is None:  # scratch: the layout sums cells at their map positions
+            self._cells = np.zeros((self.size, self.size), dtype=np.float32)
+            self._sums = np.zeros(self.shape)
+        assert self._sums is not None
+        self._cells[r[i0]:r[i1], c[j0]:c[j1]] = cells
+        region = (int(r[i0]), int(r[i1]), int(c[j0]), int(c[j1]))
+        return self.layout.segment_sums(self._cells, out=self._sums,
+                                        region=region)[i0:i1, j0:j1].copy()
+
     def constant_sums(self, value: float) -> np.ndarray:
         """(R, C) float64 the segment sums of a map whose every cell holds float32
         ``value``: what :meth:`~ipp_toolkit.belief.box_sums.BoxLayout.segment_sums` gives,
@@ -138,8 +155,6 @@ class SegmentSums:
         self._maps: dict[int, np.ndarray] = {}
         self._sums: dict[int, np.ndarray] = {}
         self._seen: dict[int, tuple[AgentView, int]] = {}  # the view each agent was last summed for
-        self._cells = np.zeros((grid.size, grid.size), dtype=np.float32)  # scratch
-        self._scratch = np.zeros(grid.shape)  # scratch segment sums
 
     def __call__(self, view: AgentView) -> np.ndarray:
         logodds = self._checked_map(view)
@@ -181,19 +196,14 @@ class SegmentSums:
                  out: np.ndarray) -> None:
         """Write the tables' columns of ``altitudes`` summed over ``box``'s segments of
         ``logodds`` into (T, len(altitudes), i1 - i0, j1 - j0) ``out``."""
-        layout = self.grid.layout
-        r, c = layout.row_edges, layout.col_edges
+        r, c = self.grid.layout.row_edges, self.grid.layout.col_edges
         i0, i1, j0, j1 = box
-        cells = (slice(r[i0], r[i1]), slice(c[j0], c[j1]))
-        part = logodds[cells]
-        region = (int(r[i0]), int(r[i1]), int(c[j0]), int(c[j1]))
+        part = logodds[r[i0]:r[i1], c[j0]:c[j1]]
         for t, table in enumerate(self.tables):
             # Intern first: indices() may grow the table and replace its columns.
             index = table.indices(part)
             for slot, z in enumerate(altitudes):
-                self._cells[cells] = table.column(self.columns[z])[index]
-                out[t, slot] = layout.segment_sums(self._cells, out=self._scratch,
-                                                   region=region)[i0:i1, j0:j1]
+                out[t, slot] = self.grid.segment_sums(table.column(self.columns[z])[index], box)
 
     def _restart(self, agent: int) -> None:
         """Agent ``agent``'s kept map and sums: a map at :attr:`start` everywhere."""
