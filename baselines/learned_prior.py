@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, prior_file, shared_prior
+from ipp_toolkit.belief.interest import block_means
 from ipp_toolkit.planners import AgentView
 from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
 from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS
@@ -94,9 +95,11 @@ class LearnedPriorPlanner(SpatialGainPlanner):
         """(N,) int64 greedy actions (see ``ig``), after one batched prior prediction."""
         if self._config is None:
             raise RuntimeError("call reset(config, seed) before act()")
-        prob = np.stack([view.local_prob for view in views])
-        self._fine = self.prior.fine_values(prob, self._config.world.resolution,
-                                            self.block_cells)
+        world = self._config.world
+        # The maps' square means map by map (no copy of the team's maps): the prior's
+        # inputs, and its prediction on those squares (the interest blocks' side).
+        squares = np.stack([block_means(view.local_prob, self.block_cells) for view in views])
+        self._fine = self.prior.square_values(squares, world.resolution, world.map_cells)
         return super().act(views)
 
     def interest_blocks(self, view: AgentView) -> np.ndarray:

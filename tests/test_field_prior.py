@@ -129,7 +129,7 @@ def test_the_learned_planner_with_the_gaussian_prior_flies_as_ig_spatial(tmp_pat
     for weight, steps in ((0.0, 1), (0.2, 1), (0.2, 3)):
         learned = LearnedPriorPlanner(tmp_path / "prior.pt", false_positive_weight=weight,
                                       false_positive_steps=None, lookahead_steps=steps)
-        learned.prior.fine_values = lambda prob, resolution, fine: smoother.block_values(prob)
+        learned.prior.square_values = lambda squares, resolution, size: smoother.smooth(squares)
         spatial = SpatialGainPlanner(false_positive_weight=weight, lookahead_steps=steps)
         np.testing.assert_array_equal(_fly(learned, config), _fly(spatial, config))
 

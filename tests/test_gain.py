@@ -371,7 +371,7 @@ def test_weighted_sums_equal_float64_sums_in_a_fixed_order(block):
     # The float64 reference: every product exact, summed by matrix products.
     rows = np.stack([_overlap_matrix(b, 0, size) for b in cache.row_bounds])
     cols = np.stack([_overlap_matrix(b, 0, size).T for b in cache.col_bounds])
-    expected = rows @ (cache.cells.astype(np.float64) * cells[:, None]) @ cols
+    expected = rows @ (cache.cells[cache.owner].astype(np.float64) * cells[:, None]) @ cols
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     # The compiled kernels and their NumPy references add in the same order: the same bits.
     layouts, _ = cache.segments[block]

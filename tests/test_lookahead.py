@@ -10,6 +10,7 @@ import pytest
 from baselines.information_gain import InformationGainPlanner
 from baselines.learned_prior import LearnedPriorPlanner
 from baselines.spatial_gain import SpatialGainPlanner
+from ipp_toolkit._native import kernels
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners import planner_views
 from ipp_toolkit.planners.lookahead import continuation_values
@@ -204,3 +205,44 @@ def test_kept_path_terms_give_the_same_values_and_stay_bounded(monkeypatch):
     assert len(kept.entries) == 3 and kept.nbytes <= 3 * size
     np.testing.assert_array_equal(values(view.position), first)  # computed again
     np.testing.assert_array_equal(values(view.position), first)  # kept
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not importable")
+@pytest.mark.parametrize("depth", [2, 3, 4])
+def test_compiled_path_values_are_the_numpy_references_bit_for_bit(monkeypatch, depth):
+    """The compiled summed-area tables and path sums add in the NumPy code's order: the same
+    continuation values to the last bit, for every agent, with some first moves left out."""
+    planner = LearnedPriorPlanner()
+    views = _views_after(planner, _config(agents=4, resolution=0.5), steps=2)
+    grid, rects = planner.segment_grid, planner.camera.rects
+    rng = np.random.default_rng(depth)
+    for view in views:
+        allowed = view.mask.astype(bool) & (rng.random(N_ACTIONS) < 0.8)
+        mates = rects[0, :2, :2].reshape(-1, 4)[: view.index]  # some discounted footprints
+
+        def segment_values(z, box, view=view, mates=mates):
+            values = planner.segment_values(view, z, box)
+            grid.discount(values, mates, 0.5, box)
+            return values
+
+        targets = view.position[None, :] + ACTION_DELTAS
+        compiled = continuation_values(rects, targets, allowed, depth, 0.7, segment_values,
+                                       grid)
+        monkeypatch.setattr(kernels, "AVAILABLE", False)
+        reference = continuation_values(rects, targets, allowed, depth, 0.7, segment_values,
+                                        grid)
+        monkeypatch.setattr(kernels, "AVAILABLE", True)
+        np.testing.assert_array_equal(compiled, reference)
+        assert (compiled[~allowed] == 0).all() and (compiled[allowed] > 0).any()
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not importable")
+def test_compiled_summed_area_table_is_two_cumsums_bit_for_bit():
+    rng = np.random.default_rng(0)
+    values = rng.standard_normal((7, 9)) * 10.0 ** rng.uniform(-5, 5, (7, 9))
+    table = np.full((12, 12), np.nan)
+    kernels.summed_area(values, table[2:10, 1:11])
+    want = np.zeros((8, 10))
+    want[1:, 1:] = np.cumsum(np.cumsum(values, axis=0), axis=1)
+    np.testing.assert_array_equal(table[2:10, 1:11], want)
+    assert np.isnan(table[:2]).all() and np.isnan(table[:, 0]).all()  # nothing else written

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from baselines.information_gain import InformationGainPlanner
+from ipp_toolkit._native import kernels
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planners.segments import SegmentGrid, SegmentSums, objective_segment_values
 
@@ -65,3 +66,30 @@ def test_a_map_of_another_size_is_refused_naming_it():
     view = SimpleNamespace(index=0, step=0, local_logodds=np.zeros((7, 7), np.float32))
     with pytest.raises(ValueError, match=r"shape \(7, 7\)"):
         kept(view)
+
+
+def test_changed_boxes_cover_every_changed_cell_compiled_or_not(monkeypatch):
+    """The boxes of segments to sum again: one per run of changed segment rows, over the
+    columns that changed in it; the compiled row scan finds the same boxes as NumPy."""
+    grid = _grid()  # row cuts 0, 1, 4, 5, 8; column cuts 0, 2, 3, 4, 6, 8
+    kept = SegmentSums(grid, [], [], 0.0)
+    before = np.zeros((8, 8), dtype=np.float32)
+    after = before.copy()
+    after[2, 5] = 1.0  # row segment 1, column segment 3
+    after[3, 0] = -0.0  # another bit pattern: changed too
+    after[7, 7] = 2.0  # row segment 3, column segment 4
+    want = [(1, 2, 0, 4), (3, 4, 4, 5)]
+    assert kept._changed_boxes(before, after) == want
+    assert kept._changed_boxes(before, before) == []
+    if kernels.AVAILABLE:
+        monkeypatch.setattr(kernels, "AVAILABLE", False)
+        assert kept._changed_boxes(before, after) == want
+        monkeypatch.setattr(kernels, "AVAILABLE", True)
+        rng = np.random.default_rng(1)
+        for _ in range(20):
+            after = before.copy()
+            after[rng.random((8, 8)) < 0.05] = 1.0
+            compiled = kept._changed_boxes(before, after)
+            monkeypatch.setattr(kernels, "AVAILABLE", False)
+            assert kept._changed_boxes(before, after) == compiled
+            monkeypatch.setattr(kernels, "AVAILABLE", True)

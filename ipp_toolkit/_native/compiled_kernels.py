@@ -251,3 +251,101 @@ def weighted_segment_sums(sums, weight, row_block, col_block, row_segments, col_
             part = by_rows[s]
             for x in range(line.shape[0]):
                 line[x] += part[x]
+
+
+@_jit
+def summed_area(values, table):
+    """See :func:`ipp_toolkit._native.kernels.summed_area`."""
+    rows, cols = values.shape
+    for j in range(cols + 1):
+        table[0, j] = 0.0
+    for i in range(rows):
+        table[i + 1, 0] = 0.0
+    # Down the rows first, then along them, each one addition after another: the order
+    # of the two np.cumsum passes.
+    for j in range(cols):
+        table[1, j + 1] = values[0, j]
+    for i in range(1, rows):
+        above, row, out = table[i], values[i], table[i + 1]
+        for j in range(cols):
+            out[j + 1] = above[j + 1] + row[j]
+    for i in range(1, rows + 1):
+        line = table[i]
+        for j in range(1, cols):
+            line[j + 1] = line[j] + line[j + 1]
+
+
+@_jit
+def path_values(tables, altitudes, rects, term_step, term_sign, weights, first, valid, out):
+    """See :func:`ipp_toolkit._native.kernels.path_values`."""
+    n_paths, n_later = valid.shape[1], altitudes.shape[2]
+    n_terms = term_step.shape[0]
+    for f in first:
+        best = -np.inf
+        for s in range(n_paths):
+            if not valid[f, s]:
+                continue
+            total = 0.0
+            k = 0
+            for t in range(n_later):
+                z = altitudes[f, s, t]
+                table = tables[z]
+                new = 0.0
+                while k < n_terms and term_step[k] == t:
+                    q0, q1, s0, s1 = rects[k, f, s, 0], rects[k, f, s, 1], rects[k, f, s, 2], \
+                        rects[k, f, s, 3]
+                    new += term_sign[k] * (table[q1, s1] - table[q0, s1] - table[q1, s0]
+                                           + table[q0, s0])
+                    k += 1
+                total += weights[t] * new
+            if total != total:  # NaN wins the maximum, as in np.max
+                best = total
+                break
+            if total > best:
+                best = total
+        out[f] = best if np.isfinite(best) else 0.0
+
+
+@_jit
+def indexed_segment_sums(index, columns, row_edges, col_edges, s0, s1, t0, t1, out):
+    """See :func:`ipp_toolkit._native.kernels.indexed_segment_sums`."""
+    r0, c0 = row_edges[s0], col_edges[t0]
+    width = col_edges[t1] - c0
+    column_sums = np.empty(width)
+    for z in range(len(columns)):
+        column = columns[z]
+        for s in range(s0, s1):
+            column_sums[:] = 0.0
+            for i in range(row_edges[s], row_edges[s + 1]):
+                ids = index[i - r0]
+                for j in range(width):
+                    column_sums[j] += np.float64(column[ids[j]])
+            sums = out[z, s]
+            for t in range(t0, t1):
+                total = 0.0
+                for j in range(col_edges[t] - c0, col_edges[t + 1] - c0):
+                    total += column_sums[j]
+                sums[t] = total
+
+
+@_jit
+def row_differences(kept, new, first, last):
+    """See :func:`ipp_toolkit._native.kernels.row_differences`."""
+    rows, cols = kept.shape
+    for i in range(rows):
+        a, b = kept[i], new[i]
+        # Most rows are the same: one pass that vectorises tells them apart.
+        differ = np.uint32(0)
+        for j in range(cols):
+            differ |= a[j] ^ b[j]
+        if differ == 0:
+            first[i], last[i] = -1, -1
+            continue
+        j = 0
+        while a[j] == b[j]:
+            j += 1
+        first[i] = j
+        k = cols - 1
+        while a[k] == b[k]:
+            k -= 1
+        last[i] = k

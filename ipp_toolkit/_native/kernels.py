@@ -27,6 +27,13 @@ global map still count it once per footprint, as the reward always did.
 :func:`sensor_noise` draws the step's sensor noise (NumPy's streams, bit for bit;
 :mod:`ipp_toolkit.world.sensor_noise`). The NumPy fallback keeps the per-rectangle code.
 
+The planners' lookahead has four more (:mod:`ipp_toolkit.planners.segments`,
+:mod:`ipp_toolkit.planners.lookahead`): :func:`row_differences` finds where a UAV's map changed
+since its kept copy, :func:`indexed_segment_sums` sums table columns over segments straight from
+the cells' value indices, :func:`summed_area` builds a summed-area table and
+:func:`path_values` sums every path's inclusion-exclusion rectangles from the tables. Each adds
+what its NumPy reference adds, in the same order: the same numbers to the last bit.
+
 Numba is a dependency of the toolkit; where it cannot be imported (an exotic platform, or
 ``IPP_TOOLKIT_NO_NUMBA=1`` in the environment, which the tests use to check both paths) the
 callers fall back to their NumPy code and :data:`AVAILABLE` is False. Compiled functions are
@@ -48,7 +55,8 @@ import numpy as np
 
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
            "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "gain_changes",
-           "gain_lookup", "segment_sums", "weighted_segment_sums", "sensor_noise",
+           "gain_lookup", "segment_sums", "weighted_segment_sums", "summed_area",
+           "path_values", "indexed_segment_sums", "row_differences", "sensor_noise",
            "mission_kernels", "compile_mission_kernels",
            "REGION_STATS", "N_STATS"]
 
@@ -286,6 +294,72 @@ def weighted_segment_sums(sums: np.ndarray, weight: np.ndarray, row_block: np.nd
     """
     _compiled().weighted_segment_sums(sums, weight, row_block, col_block, row_segments,
                                       col_segments, out)
+
+
+def summed_area(values: np.ndarray, table: np.ndarray) -> None:
+    """The summed-area table of ``values``, written into ``table``.
+
+    ``table[0, :]`` and ``table[:, 0]`` are 0, and ``table[1:, 1:]`` is
+    ``np.cumsum(np.cumsum(values, axis=0), axis=1)``, added in that order (so the same
+    float64 numbers to the last bit).
+
+    Args:
+        values: (R, C) float64.
+        table: (R + 1, C + 1) float64 output (any strides).
+    """
+    _compiled().summed_area(values, table)
+
+
+def path_values(*arrays: np.ndarray) -> None:
+    """The best discounted value of each first move's paths, from summed-area tables.
+
+    For every first move f of ``first`` and every path s with ``valid[f, s]``: per later
+    step t, ``new`` adds, in order, ``term_sign[k]`` times the rectangle sum of
+    ``rects[k, f, s]`` (row0, row1, col0, col1 corner indices) read from
+    ``tables[altitudes[f, s, t]]`` (the four corners taken as (q1, s1) - (q0, s1) -
+    (q1, s0) + (q0, s0)) over the terms k with ``term_step[k] == t`` (``term_step`` is
+    sorted), and the path's ``total`` adds ``weights[t] * new``; ``out[f]`` is the largest
+    total, or 0 when none is finite. The same operations in the same order as the NumPy
+    reference (:func:`ipp_toolkit.planners.lookahead.continuation_values`).
+
+    Args, in order: tables (Z, R + 1, C + 1) float64; altitudes (6, S, T) int64;
+    rects (K, 6, S, 4) int64; term_step (K,) int64; term_sign (K,) float64; weights (T,)
+    float64; first (F,) int64; valid (6, S) bool; out (6,) float64, written at ``first``.
+    """
+    _compiled().path_values(*arrays)
+
+
+def indexed_segment_sums(index: np.ndarray, columns: tuple[np.ndarray, ...],
+                         row_edges: np.ndarray, col_edges: np.ndarray, s0: int, s1: int,
+                         t0: int, t1: int, out: np.ndarray) -> None:
+    """:func:`segment_sums` of table columns looked up by value index, for each column.
+
+    ``out[z]`` gets the sums over the segments [s0, s1) x [t0, t1) of ``columns[z][index]``
+    (the cells' values), added in :func:`segment_sums`' order: the same numbers to the last
+    bit, without the looked-up values in memory.
+
+    Args:
+        index: (h, w) intp value index of the cells from map row ``row_edges[s0]`` and
+            column ``col_edges[t0]`` to ``row_edges[s1]`` and ``col_edges[t1]``.
+        columns: Z (n,) float32 table columns.
+        row_edges, col_edges: as in :func:`segment_sums`.
+        s0, s1, t0, t1: the row and column segments to sum.
+        out: (Z, R, C) float64, written in [s0, s1) x [t0, t1) only.
+    """
+    _compiled().indexed_segment_sums(index, columns, row_edges, col_edges, s0, s1, t0, t1,
+                                     out)
+
+
+def row_differences(kept: np.ndarray, new: np.ndarray, first: np.ndarray,
+                    last: np.ndarray) -> None:
+    """Per row, the first and the last column where two maps' bit patterns differ.
+
+    Args:
+        kept, new: (H, W) uint32 (float32 maps viewed as their bit patterns; any strides).
+        first, last: (H,) int64 output: the first and last differing column of each row,
+            -1 where the row is the same.
+    """
+    _compiled().row_differences(kept, new, first, last)
 
 
 def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:

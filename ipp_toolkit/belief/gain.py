@@ -251,9 +251,10 @@ class FootprintGainCache:
         objective: the per-cell gain kept (:data:`OBJECTIVES`).
 
     Attributes:
-        cells: (n_maps, Z, H, W) float32 per-cell expected gain.
+        cells: (n_maps, Z, H, W) float32 per-cell expected gain of the maps that own their
+            arrays (``owner[k] == k``; the others' are unset: read ``cells[owner[k]]``).
         totals: (n_maps, Z, G, G) float64 footprint sums of ``cells``, current while
-            ``keeps_totals``.
+            ``keeps_totals`` (for the owners, as ``cells``).
         keeps_totals: whether ``totals`` is kept current: from the start for the ``"ig"``
             objective, else from the first :meth:`sums` on.
         owner: (n_maps,) int, the map whose arrays map k shares (k itself when not shared).
@@ -280,11 +281,13 @@ class FootprintGainCache:
         prior_entropy = np.full_like(prior, maps.prior_entropy)
         area = ((camera.rects[..., 1] - camera.rects[..., 0])
                 * (camera.rects[..., 3] - camera.rects[..., 2]))  # (Z, G, G)
+        # Map 0 owns the arrays of all until they differ (owner); a map that leaves copies
+        # its group's arrays (_regroup), so only the owner's are filled here.
         for iz in range(self.n_altitudes):
             gain = gain_of(prior, prior_prob, prior_entropy, camera.accuracy[iz],
                            camera.delta_logodds[iz])[0, 0, 0]
-            self.cells[:, iz] = gain
-            self.totals[:, iz] = area[iz] * np.float64(gain)
+            self.cells[0, iz] = gain
+            self.totals[0, iz] = area[iz] * np.float64(gain)
         self.row_bounds, self.col_bounds = _separable_bounds(camera.rects)
         self.owner = np.zeros(n_maps, dtype=np.int64)  # all identical at the prior
         self._overlap_cache = _overlap_cache(camera)

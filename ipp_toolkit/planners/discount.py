@@ -159,11 +159,11 @@ class TeammateDiscount:
             return
         # The whole team, as the gain planes ask the learned prior: the same squares, so
         # the prior answers from its last call instead of a second forward pass.
-        prob = np.stack([view.local_prob for view in views])
-        if prob.shape[-2:] != (self._size, self._size):
+        if any(view.local_prob.shape != (self._size, self._size) for view in views):
             raise ValueError("TeammateDiscount needs the views' local maps (a planner that "
                              "uses it sets needs_local_maps)")
-        means = block_means(prob, self._block)
+        # Map by map (the same means to the bit) rather than a copy of the team's maps.
+        means = np.stack([block_means(view.local_prob, self._block) for view in views])
         if self.features.gain_interest != GAIN_INTEREST_SMOOTHED:
             blocks = shared_prior(self.features.gain_interest).square_values(
                 means, self._resolution, self._size)

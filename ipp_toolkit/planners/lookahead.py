@@ -28,7 +28,9 @@ Cost per UAV and step: the segment sums where the map changed (its own and the h
 readings), one product per segment of each altitude's box (about 100 x 100 segments at
 r_M = 0.1 m, d = 3) and its summed-area table, and four look-ups per rectangle of the
 6^(d-1) paths per move; the rectangles themselves depend on the waypoint alone and are kept
-for the last waypoints asked for.
+for the last waypoints asked for. The tables and the paths' sums are compiled
+(:func:`~ipp_toolkit._native.kernels.summed_area`,
+:func:`~ipp_toolkit._native.kernels.path_values`), adding in the NumPy code's order.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._native import kernels
 from ..sim.team import ACTION_DELTAS, N_ACTIONS
 from . import AgentView
 from .segments import SegmentBox, SegmentGrid
@@ -114,32 +117,54 @@ def _intersect(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def _segment_tables(later: np.ndarray, iz: np.ndarray, valid: np.ndarray,
-                    segment_values: Callable[[int, SegmentBox], np.ndarray],
-                    shape: tuple[int, int]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """``sums(rect, altitude)``: the values at ``altitude`` summed over (..., 4) rectangles of
-    whole segments (cut indices) that lie in the box of the valid ``later`` (A, S, T, 4)
-    footprints (cut indices) at that altitude, from a summed-area table over that box's
-    segments of a grid of ``shape`` segments (:mod:`ipp_toolkit.planners.segments`)."""
-    # One array for every altitude: each altitude's table sits at its box's segments, so a
-    # rectangle's corners index it directly (the rest is never read).
-    tables = np.empty((int(iz.max()) + 1, shape[0] + 1, shape[1] + 1))
+def _reached_boxes(paths: _PathTerms, first: np.ndarray) -> list[tuple[int, SegmentBox]]:
+    """(altitude, box) of every altitude the valid paths of the ``first`` moves read at: the
+    smallest box of whole segments (cut indices i0, i1, j0, j1) holding all their later
+    footprints there; kept on ``paths`` per set of first moves."""
+    key = first.tobytes()
+    found = paths.boxes.get(key)
+    if found is not None:
+        return found
+    later, iz, valid = paths.later[first], paths.altitudes[first], paths.valid[first]
+    found = []
     for altitude in np.unique(iz[valid]).tolist():
         reached = later[valid[:, :, None] & (iz == altitude)]
         i0, j0 = reached[:, [0, 2]].min(axis=0).tolist()
         i1, j1 = reached[:, [1, 3]].max(axis=0).tolist()
+        found.append((int(altitude), (i0, i1, j0, j1)))
+    paths.boxes[key] = found
+    return found
+
+
+def _segment_tables(boxes: list[tuple[int, SegmentBox]],
+                    segment_values: Callable[[int, SegmentBox], np.ndarray],
+                    shape: tuple[int, int]) -> np.ndarray:
+    """(Z, R + 1, C + 1) float64 per altitude of ``boxes`` the summed-area table of the
+    values at that altitude over the segments of its box (a grid of ``shape`` = (R, C)
+    segments; :mod:`ipp_toolkit.planners.segments`), at the box's segments, so that a
+    rectangle's corners index it directly (the rest is never read, but [0, 0, 0] = 0: what
+    the empty rectangle of a path off the grid reads)."""
+    tables = np.empty((max((altitude for altitude, _ in boxes), default=0) + 1, shape[0] + 1,
+                       shape[1] + 1))
+    for altitude, (i0, i1, j0, j1) in boxes:
         table = tables[altitude, i0:i1 + 1, j0:j1 + 1]
-        table[0], table[:, 0] = 0.0, 0.0
-        np.cumsum(segment_values(altitude, (i0, i1, j0, j1)), axis=0, out=table[1:, 1:])
-        np.cumsum(table[1:, 1:], axis=1, out=table[1:, 1:])
-    tables[0, 0, 0] = 0.0  # what the empty rectangle of a path off the grid reads
+        values = segment_values(altitude, (i0, i1, j0, j1))
+        if kernels.AVAILABLE:
+            kernels.summed_area(values, table)
+        else:
+            table[0], table[:, 0] = 0.0, 0.0
+            np.cumsum(values, axis=0, out=table[1:, 1:])
+            np.cumsum(table[1:, 1:], axis=1, out=table[1:, 1:])
+    tables[0, 0, 0] = 0.0
+    return tables
 
-    def sums(rect: np.ndarray, altitude: np.ndarray) -> np.ndarray:
-        q0, q1, s0, s1 = np.moveaxis(rect, -1, 0)
-        return (tables[altitude, q1, s1] - tables[altitude, q0, s1]
-                - tables[altitude, q1, s0] + tables[altitude, q0, s0])
 
-    return sums
+def _rect_sums(tables: np.ndarray, rect: np.ndarray, altitude: np.ndarray) -> np.ndarray:
+    """(...) the sums over (..., 4) rectangles (corner indices) read from ``tables`` at
+    ``altitude`` (...)."""
+    q0, q1, s0, s1 = np.moveaxis(rect, -1, 0)
+    return (tables[altitude, q1, s1] - tables[altitude, q0, s1]
+            - tables[altitude, q1, s0] + tables[altitude, q0, s0])
 
 
 class _PathTerms(NamedTuple):
@@ -148,15 +173,18 @@ class _PathTerms(NamedTuple):
     :func:`_path_terms`)."""
 
     valid: np.ndarray  # (6, S) bool: the path stays on the grid of waypoints
-    altitudes: np.ndarray  # (6, S, T) int altitude of each later footprint (0 off the grid)
-    later: np.ndarray  # (6, S, T, 4) int the later footprints (0 off the grid)
-    terms: list[list[tuple[float, np.ndarray]]]  # per later step t: (sign, (6, S, 4) part)
+    altitudes: np.ndarray  # (6, S, T) int64 altitude of each later footprint (0 off the grid)
+    later: np.ndarray  # (6, S, T, 4) int64 the later footprints (0 off the grid)
+    rects: np.ndarray  # (K, 6, S, 4) int64 every inclusion-exclusion term's rectangle
+    term_step: np.ndarray  # (K,) int64 the later step t of each term, in order
+    term_sign: np.ndarray  # (K,) float64 its sign
+    boxes: dict[bytes, list[tuple[int, SegmentBox]]]  # _reached_boxes, per set of first moves
 
     @property
     def nbytes(self) -> int:
-        """Bytes of its arrays (views counted as copies: an upper bound)."""
-        arrays = [self.valid, self.altitudes, self.later]
-        arrays += [part for terms in self.terms for _, part in terms]
+        """Bytes of its arrays (the boxes are small)."""
+        arrays = [self.valid, self.altitudes, self.later, self.rects, self.term_step,
+                  self.term_sign]
         return sum(array.nbytes for array in arrays)
 
 
@@ -215,19 +243,23 @@ def _path_terms(grid: SegmentGrid, rects: np.ndarray, first_targets: np.ndarray,
     iz = np.where(valid[:, :, None], iz, 0)
     first_rects = grid.edge_index(rects[starts[:, 2], starts[:, 1], starts[:, 0]])  # (6, 4)
     earlier = [np.broadcast_to(first_rects[:, None, :], later.shape[:2] + (4,))]
-    terms = []
+    parts, term_step, term_sign = [], [], []
     for t in range(steps - 1):
         rect = later[:, :, t]
-        step_terms = []
         for chosen in itertools.product((False, True), repeat=len(earlier)):
             part = rect
             for inside, other in zip(chosen, earlier, strict=True):
                 if inside:
                     part = _intersect(part, other)
-            step_terms.append(((-1.0) ** sum(chosen), part))
-        terms.append(step_terms)
+            parts.append(part)
+            term_step.append(t)
+            term_sign.append((-1.0) ** sum(chosen))
         earlier.append(rect)
-    found = _PathTerms(valid, iz, later, terms)
+    found = _PathTerms(valid, np.ascontiguousarray(iz, dtype=np.int64),
+                       np.ascontiguousarray(later, dtype=np.int64),
+                       np.ascontiguousarray(np.stack(parts), dtype=np.int64),
+                       np.array(term_step, dtype=np.int64),
+                       np.array(term_sign, dtype=np.float64), {})
     _KEPT_PATHS.add(key, found)
     return found
 
@@ -256,16 +288,20 @@ def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: n
     if steps < 2 or len(first) == 0:
         return values
     paths = _path_terms(grid, rects, first_targets, steps)
+    tables = _segment_tables(_reached_boxes(paths, first), segment_values, grid.shape)
+    weights = np.array([discount ** t for t in range(steps - 1)])
+    if kernels.AVAILABLE:
+        kernels.path_values(tables, paths.altitudes, paths.rects, paths.term_step,
+                            paths.term_sign, weights, first, paths.valid, values)
+        return values
     valid, iz = paths.valid[first], paths.altitudes[first]
-    sums = _segment_tables(paths.later[first], iz, valid, segment_values, grid.shape)
     total = np.zeros(valid.shape, dtype=np.float64)
-    for t, terms in enumerate(paths.terms):
-        altitude = iz[:, :, t]
+    for t in range(steps - 1):
         new = np.zeros(valid.shape, dtype=np.float64)
         # inclusion-exclusion: footprint t minus the union of the earlier ones
-        for sign, part in terms:
-            new += sign * sums(part[first], altitude)
-        total += discount ** t * new
+        for k in np.flatnonzero(paths.term_step == t).tolist():
+            new += paths.term_sign[k] * _rect_sums(tables, paths.rects[k][first], iz[:, :, t])
+        total += weights[t] * new
     best = np.where(valid, total, -np.inf).max(axis=1)
     values[first] = np.where(np.isfinite(best), best, 0.0)  # no path on a one-waypoint grid
     return values

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._native import kernels
 from ..belief.box_sums import BoxLayout
 from ..belief.value_table import ValueTable
 from . import AgentView
@@ -167,7 +168,10 @@ class SegmentSums:
         r, c = self.grid.layout.row_edges, self.grid.layout.col_edges
         for box in self._changed_boxes(kept, logodds):
             i0, i1, j0, j1 = box
-            self._sum_box(logodds, box, range(len(self.columns)), sums[..., i0:i1, j0:j1])
+            if kernels.AVAILABLE:
+                self._sum_box_into(logodds, box, sums)
+            else:
+                self._sum_box(logodds, box, range(len(self.columns)), sums[..., i0:i1, j0:j1])
             cells = (slice(r[i0], r[i1]), slice(c[j0], c[j1]))
             kept[cells] = logodds[cells]
         self._seen[view.index] = (view, view.step)
@@ -205,6 +209,18 @@ class SegmentSums:
             for slot, z in enumerate(altitudes):
                 out[t, slot] = self.grid.segment_sums(table.column(self.columns[z])[index], box)
 
+    def _sum_box_into(self, logodds: np.ndarray, box: SegmentBox, sums: np.ndarray) -> None:
+        """:meth:`_sum_box` of every altitude, compiled, into the box of (T, Z, R, C)
+        ``sums`` (the same numbers: :func:`~ipp_toolkit._native.kernels.indexed_segment_sums`)."""
+        r, c = self.grid.layout.row_edges, self.grid.layout.col_edges
+        i0, i1, j0, j1 = box
+        part = logodds[r[i0]:r[i1], c[j0]:c[j1]]
+        for t, table in enumerate(self.tables):
+            index = table.indices(part)  # first: it may grow the table and its columns
+            kernels.indexed_segment_sums(index, tuple(table.column(name) for name in
+                                                      self.columns),
+                                         r, c, i0, i1, j0, j1, sums[t])
+
     def _restart(self, agent: int) -> None:
         """Agent ``agent``'s kept map and sums: a map at :attr:`start` everywhere."""
         self._maps[agent] = np.full((self.grid.size,) * 2, self.start, dtype=np.float32)
@@ -220,19 +236,35 @@ class SegmentSums:
         ``kept`` (bit patterns compared): one per run of consecutive changed segment rows,
         over the columns that changed in it."""
         layout = self.grid.layout
-        differs = kept.view(np.uint32) != logodds.view(np.uint32)
-        changed_rows = np.logical_or.reduceat(differs.any(axis=1), layout.row_edges[:-1])
-        rows = np.flatnonzero(changed_rows)
+        r, c = layout.row_edges, layout.col_edges
+        if kernels.AVAILABLE:
+            first = np.empty(len(kept), dtype=np.int64)
+            last = np.empty(len(kept), dtype=np.int64)
+            kernels.row_differences(kept.view(np.uint32), logodds.view(np.uint32), first, last)
+            differs = None
+            row_differs = first >= 0
+        else:
+            differs = kept.view(np.uint32) != logodds.view(np.uint32)
+            row_differs = differs.any(axis=1)
+        rows = np.flatnonzero(np.logical_or.reduceat(row_differs, r[:-1]))
         boxes: list[SegmentBox] = []
         if len(rows) == 0:
             return boxes
         breaks = np.flatnonzero(np.diff(rows) > 1)
-        for first, last in zip(np.r_[rows[0], rows[breaks + 1]], np.r_[rows[breaks], rows[-1]],
-                               strict=True):
-            i0, i1 = int(first), int(last) + 1
-            band = differs[layout.row_edges[i0]:layout.row_edges[i1]].any(axis=0)
-            cols = np.flatnonzero(np.logical_or.reduceat(band, layout.col_edges[:-1]))
-            boxes.append((i0, i1, int(cols[0]), int(cols[-1]) + 1))
+        tops = [rows[0]] + rows[breaks + 1].tolist()
+        bottoms = rows[breaks].tolist() + [rows[-1]]
+        for top, bottom in zip(tops, bottoms, strict=True):
+            i0, i1 = int(top), int(bottom) + 1
+            if differs is None:
+                band = row_differs[r[i0]:r[i1]]
+                # the segments of the band's first and last differing columns
+                j0 = int(np.searchsorted(c, first[r[i0]:r[i1]][band].min(), side="right")) - 1
+                j1 = int(np.searchsorted(c, last[r[i0]:r[i1]][band].max(), side="right"))
+            else:
+                band = differs[r[i0]:r[i1]].any(axis=0)
+                cols = np.flatnonzero(np.logical_or.reduceat(band, c[:-1]))
+                j0, j1 = int(cols[0]), int(cols[-1]) + 1
+            boxes.append((i0, i1, j0, j1))
         return boxes
 
 
