@@ -31,7 +31,7 @@ from ipp_toolkit.planners.discount import (
     TeammateDiscount,
     check_overlap_discount,
 )
-from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, check_lookahead
+from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, lookahead_options
 from ipp_toolkit.sim.features import relative_option_gains
 from ipp_toolkit.sim.team import N_ACTIONS
 
@@ -114,8 +114,8 @@ class SB3Planner(Planner):
         self.transfer_notes: list[str] = []
         self._lstm_states: LSTMStates | None = None
         self.overlap_discount = check_overlap_discount(overlap_discount)
-        self.lookahead = (*check_lookahead(lookahead_steps, lookahead_discount),
-                          bool(lookahead_silent))
+        self.lookahead = lookahead_options(lookahead_steps, lookahead_discount,
+                                           lookahead_silent)
         self._discounts = (self.in_order and (overlap_discount < 1.0 or lookahead_steps > 1)
                            and isinstance(getattr(self.policy, "mlp_extractor", None),
                                           GainPriorMlpExtractor))
@@ -145,8 +145,8 @@ class SB3Planner(Planner):
         self._lstm_states = None
         if self._discounts:
             features = self.observation_features or config.features
-            self._discount = TeammateDiscount(config, features, self.overlap_discount,
-                                              *self.lookahead)
+            self._discount = TeammateDiscount.for_mission(self._discount, config, features,
+                                                          self.overlap_discount, *self.lookahead)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks."""

@@ -23,7 +23,7 @@ from ipp_toolkit.planners.discount import (
     TeammateDiscount,
     check_overlap_discount,
 )
-from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, check_lookahead
+from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, lookahead_options
 from ipp_toolkit.sim.features import relative_option_gains
 
 from .config import mission_settings
@@ -94,8 +94,8 @@ class COMAPlanner(Planner):
         self.trained_settings = mission_settings(networks.coma_config, networks.env_config)
         self.transfer_notes: list[str] = []
         self.overlap_discount = check_overlap_discount(overlap_discount)
-        self.lookahead = (*check_lookahead(lookahead_steps, lookahead_discount),
-                          bool(lookahead_silent))
+        self.lookahead = lookahead_options(lookahead_steps, lookahead_discount,
+                                           lookahead_silent)
         # The discount and the lookahead read each UAV's own local map.
         self.needs_local_maps = _decides_with_discount(self.actor, self.overlap_discount,
                                                        self.lookahead[0])
@@ -111,7 +111,8 @@ class COMAPlanner(Planner):
         trained = min(self.trained_settings, key=mismatches)
         self.transfer_notes = check_transfer(trained, config, self.checkpoint)
         self._discount = teammate_discount(self.actor, config, self.observation_features,
-                                           self.overlap_discount, *self.lookahead)
+                                           self.overlap_discount, *self.lookahead,
+                                           kept=self._discount)
 
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) int64: each agent's likeliest valid action, chosen in agent order, avoiding
@@ -127,14 +128,16 @@ class COMAPlanner(Planner):
 def teammate_discount(actor: torch.nn.Module, config: EnvConfig, features: FeatureConfig,
                       overlap_discount: float = OVERLAP_DISCOUNT, lookahead_steps: int = 1,
                       lookahead_discount: float = LOOKAHEAD_DISCOUNT,
-                      lookahead_silent: bool = False) -> TeammateDiscount | None:
+                      lookahead_silent: bool = False, kept: TeammateDiscount | None = None
+                      ) -> TeammateDiscount | None:
     """The same-step discount (and lookahead) a greedy ``actor`` decides with on missions of
-    ``config``: a gain-prior actor's over the planes of its ``features``; None for other
+    ``config``: a gain-prior actor's over the planes of its ``features`` (``kept``, the one
+    of the last mission, where it fits: :meth:`TeammateDiscount.for_mission`); None for other
     actors, or ``overlap_discount`` 1 without a lookahead."""
     if not _decides_with_discount(actor, overlap_discount, lookahead_steps):
         return None
-    return TeammateDiscount(config, features, overlap_discount, lookahead_steps,
-                            lookahead_discount, lookahead_silent)
+    return TeammateDiscount.for_mission(kept, config, features, overlap_discount,
+                                        lookahead_steps, lookahead_discount, lookahead_silent)
 
 
 def _decides_with_discount(actor: torch.nn.Module, overlap_discount: float,

@@ -282,3 +282,19 @@ def test_an_untrained_gain_prior_ppo_flies_the_ig_planner_of_its_planes(tmp_path
     ahead = PPOPlanner(path)  # the default: three steps with communication
     assert _fly_beside(SpatialGainPlanner(lookahead_steps=3), ahead, planner, config,
                        missions=(4,)) > 0
+
+
+def test_a_discount_is_kept_for_the_next_mission_of_the_same_setting_only():
+    """A planner's next mission of the same configuration and options keeps its discount
+    (tables and segments built once; the kept sums restart with the mission); any other
+    argument builds a new one."""
+    config = _config({"gain": True, "gain_smoothing": 5.0}, comm=25.0)
+    features = config.features
+    first = TeammateDiscount.for_mission(None, config, features, 0.5, 3)
+    assert TeammateDiscount.for_mission(first, config, features, 0.5, 3) is first
+    other_team = config.replace(team={"comm_range": 0.0})
+    for changed in [(other_team, features, 0.5, 3), (config, features, 0.4, 3),
+                    (config, features, 0.5, 2),
+                    (config, features.__class__(**{**features.__dict__, "gain_smoothing": 4.0}),
+                     0.5, 3)]:
+        assert TeammateDiscount.for_mission(first, *changed) is not first

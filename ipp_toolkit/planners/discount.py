@@ -122,6 +122,9 @@ class TeammateDiscount:
                  overlap_discount: float = OVERLAP_DISCOUNT, lookahead_steps: int = 1,
                  lookahead_discount: float = LOOKAHEAD_DISCOUNT,
                  lookahead_silent: bool = False) -> None:
+        #: the arguments it was built with (:meth:`for_mission` keeps it while they hold)
+        self.built_for = (config, features, overlap_discount, lookahead_steps,
+                          lookahead_discount, bool(lookahead_silent))
         self.overlap_discount = check_overlap_discount(overlap_discount)
         steps, self.lookahead_discount = check_lookahead(lookahead_steps, lookahead_discount)
         #: the steps looked at on these missions
@@ -146,6 +149,20 @@ class TeammateDiscount:
         self._kept_sums = SegmentSums(self._segments, tables,
                                       [f"altitude_{z}" for z in range(len(self.camera.accuracy))],
                                       logit(world.prior))
+
+    @classmethod
+    def for_mission(cls, kept: TeammateDiscount | None, config: EnvConfig,
+                    features: FeatureConfig, overlap_discount: float = OVERLAP_DISCOUNT,
+                    lookahead_steps: int = 1, lookahead_discount: float = LOOKAHEAD_DISCOUNT,
+                    lookahead_silent: bool = False) -> TeammateDiscount:
+        """``kept`` where it was built with these arguments, else a new discount: a planner's
+        next mission of the same configuration reuses the tables and segments (its kept
+        segment sums restart at the mission's first step)."""
+        arguments = (config, features, overlap_discount, lookahead_steps, lookahead_discount,
+                     bool(lookahead_silent))
+        if kept is not None and kept.built_for == arguments:
+            return kept
+        return cls(*arguments)
 
     def start_step(self, views: Sequence[AgentView]) -> None:
         """Estimate, in one batch, every agent's probability of interest when one of them

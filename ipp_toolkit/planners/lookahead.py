@@ -49,7 +49,7 @@ from . import AgentView
 from .segments import SegmentBox, SegmentGrid
 
 __all__ = ["LOOKAHEAD_DISCOUNT", "LOOKAHEAD_STEPS", "MAX_LOOKAHEAD_STEPS", "check_lookahead",
-           "continuation_values", "mission_lookahead", "steps_left"]
+           "continuation_values", "lookahead_options", "mission_lookahead", "steps_left"]
 
 #: Most moves a path may look at (6^(d-1) continuations per first move).
 MAX_LOOKAHEAD_STEPS = 4
@@ -93,6 +93,12 @@ def check_lookahead(steps: int, discount: float) -> tuple[int, float]:
             0.0 <= discount <= 1.0):
         raise ValueError(f"lookahead_discount must be a number in [0, 1], got {discount!r}")
     return int(steps), float(discount)
+
+
+def lookahead_options(steps: int, discount: float, silent: bool) -> tuple[int, float, bool]:
+    """``(steps, discount, silent)`` checked (:func:`check_lookahead`), as a planner that
+    hands them to :class:`~ipp_toolkit.planners.discount.TeammateDiscount` keeps them."""
+    return (*check_lookahead(steps, discount), bool(silent))
 
 
 @functools.lru_cache(maxsize=MAX_LOOKAHEAD_STEPS)
