@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -150,10 +151,12 @@ def test_bad_lookahead_options_are_refused_naming_them(options, message):
         SpatialGainPlanner(**options)
 
 
-def test_kept_segment_sums_equal_sums_from_scratch():
+@pytest.mark.parametrize("comm", [25.0, math.inf])
+def test_kept_segment_sums_equal_sums_from_scratch(comm):
     """The sums kept across steps (refreshed where the maps changed) are the sums of the
-    current maps, bit for bit, for every agent, at every step, on two missions in a row."""
-    config = _config(agents=4, resolution=0.25).replace(team={"comm_range": 25.0})
+    current maps, bit for bit, for every agent, at every step, on two missions in a row;
+    UAVs whose maps are the same (every one at D = inf) share one refresh."""
+    config = _config(agents=4, resolution=0.25).replace(team={"comm_range": comm})
     planner = LearnedPriorPlanner()
     columns = [f"altitude_{z}" for z in range(3)]
     kept = None
@@ -173,6 +176,8 @@ def test_kept_segment_sums_equal_sums_from_scratch():
                 box = (7, 90, 3, 41)  # a box's sums from its cells alone are the same
                 np.testing.assert_array_equal(kept.box_sums(view, box, [2, 0]),
                                               kept(view)[:, [2, 0], 7:90, 3:41])
+            shared = all(kept._sums[view.index] is kept._sums[0] for view in views)
+            assert shared == (comm == math.inf)
             checked.append(1)
             return [planner.act(views)]
 

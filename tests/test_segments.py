@@ -93,3 +93,13 @@ def test_changed_boxes_cover_every_changed_cell_compiled_or_not(monkeypatch):
             monkeypatch.setattr(kernels, "AVAILABLE", False)
             assert kept._changed_boxes(before, after) == compiled
             monkeypatch.setattr(kernels, "AVAILABLE", True)
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not importable")
+def test_same_bits_tells_maps_apart_by_their_bit_patterns():
+    a = np.zeros((5, 7), dtype=np.float32)
+    b = a.copy()
+    assert kernels.same_bits(a.view(np.uint32), b.view(np.uint32))
+    b[4, 6] = -0.0  # equal as numbers, not as bits
+    assert not kernels.same_bits(a.view(np.uint32), b.view(np.uint32))
+    assert not kernels.same_bits(b.view(np.uint32)[::-1], b.view(np.uint32))  # any strides

@@ -329,16 +329,21 @@ def indexed_segment_sums(index, columns, row_edges, col_edges, s0, s1, t0, t1, o
 
 
 @_jit
+def _rows_differ(a, b):
+    """Whether two 1-D uint32 rows differ: one pass that vectorises (no early exit)."""
+    differ = np.uint32(0)
+    for j in range(a.shape[0]):
+        differ |= a[j] ^ b[j]
+    return differ != 0
+
+
+@_jit
 def row_differences(kept, new, first, last):
     """See :func:`ipp_toolkit._native.kernels.row_differences`."""
     rows, cols = kept.shape
     for i in range(rows):
         a, b = kept[i], new[i]
-        # Most rows are the same: one pass that vectorises tells them apart.
-        differ = np.uint32(0)
-        for j in range(cols):
-            differ |= a[j] ^ b[j]
-        if differ == 0:
+        if not _rows_differ(a, b):  # most rows are the same
             first[i], last[i] = -1, -1
             continue
         j = 0
@@ -349,3 +354,12 @@ def row_differences(kept, new, first, last):
         while a[k] == b[k]:
             k -= 1
         last[i] = k
+
+
+@_jit
+def same_bits(a, b):
+    """See :func:`ipp_toolkit._native.kernels.same_bits`."""
+    for i in range(a.shape[0]):
+        if _rows_differ(a[i], b[i]):
+            return False
+    return True

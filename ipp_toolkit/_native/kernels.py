@@ -27,11 +27,12 @@ global map still count it once per footprint, as the reward always did.
 :func:`sensor_noise` draws the step's sensor noise (NumPy's streams, bit for bit;
 :mod:`ipp_toolkit.world.sensor_noise`). The NumPy fallback keeps the per-rectangle code.
 
-The planners' lookahead has four more (:mod:`ipp_toolkit.planners.segments`,
+The planners' lookahead has five more (:mod:`ipp_toolkit.planners.segments`,
 :mod:`ipp_toolkit.planners.lookahead`): :func:`row_differences` finds where a UAV's map changed
-since its kept copy, :func:`indexed_segment_sums` sums table columns over segments straight from
-the cells' value indices, :func:`summed_area` builds a summed-area table and
-:func:`path_values` sums every path's inclusion-exclusion rectangles from the tables. Each adds
+since its kept copy (:func:`same_bits`: whether a teammate's map is the same),
+:func:`indexed_segment_sums` sums table columns over segments straight from the cells' value
+indices, :func:`summed_area` builds a summed-area table and :func:`path_values` sums every
+path's inclusion-exclusion rectangles from the tables. Each adds
 what its NumPy reference adds, in the same order: the same numbers to the last bit.
 
 Numba is a dependency of the toolkit; where it cannot be imported (an exotic platform, or
@@ -56,7 +57,8 @@ import numpy as np
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
            "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "gain_changes",
            "gain_lookup", "segment_sums", "weighted_segment_sums", "summed_area",
-           "path_values", "indexed_segment_sums", "row_differences", "sensor_noise",
+           "path_values", "indexed_segment_sums", "row_differences", "same_bits",
+           "sensor_noise",
            "mission_kernels", "compile_mission_kernels",
            "REGION_STATS", "N_STATS"]
 
@@ -360,6 +362,12 @@ def row_differences(kept: np.ndarray, new: np.ndarray, first: np.ndarray,
             -1 where the row is the same.
     """
     _compiled().row_differences(kept, new, first, last)
+
+
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two (H, W) uint32 arrays (float32 maps viewed as their bit patterns; any
+    strides) are equal, stopping at the first row that differs."""
+    return bool(_compiled().same_bits(a, b))
 
 
 def sensor_noise(words: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:

@@ -143,6 +143,8 @@ class SegmentSums:
     segments of the rows and columns where the map differs from the one of that agent's last
     call, or at a mission's first step from a map at ``start`` (any map works: what differs
     is summed again); asked again for the same view at the same step, it answers at once.
+    A UAV whose map is, bit for bit, that of the first heard teammate summed at the same step
+    (every UAV's at D = inf) shares that teammate's kept arrays instead of summing its own.
     Missions flown in lock-step through one instance would each find the other's map kept:
     for them, :meth:`box_sums` sums a few boxes from their cells.
     """
@@ -164,9 +166,13 @@ class SegmentSums:
             return self._sums[view.index]  # this view's map, summed by the last call
         if view.index not in self._maps or view.step == 0:
             self._restart(view.index)
+        if self._share(view, logodds):
+            return self._sums[view.index]
         kept, sums = self._maps[view.index], self._sums[view.index]
         r, c = self.grid.layout.row_edges, self.grid.layout.col_edges
-        for box in self._changed_boxes(kept, logodds):
+        for n, box in enumerate(self._changed_boxes(kept, logodds)):
+            if n == 0:
+                kept, sums = self._own(view)
             i0, i1, j0, j1 = box
             if kernels.AVAILABLE:
                 self._sum_box_into(logodds, box, sums)
@@ -176,6 +182,38 @@ class SegmentSums:
             kept[cells] = logodds[cells]
         self._seen[view.index] = (view, view.step)
         return sums
+
+    def _share(self, view: AgentView, logodds: np.ndarray) -> bool:
+        """Take the kept map and sums of the first heard teammate summed at this step, if its
+        map is this view's bit for bit (every UAV's map at D = inf): one refresh for the
+        team instead of one per UAV. The arrays are shared until someone changes them
+        (:meth:`_own`)."""
+        heard = np.asarray(view.teammates)
+        for other, (_, step) in self._seen.items():
+            if other != view.index and step == view.step:
+                if other not in heard:
+                    return False
+                kept = self._maps[other]
+                same = (kernels.same_bits(kept.view(np.uint32), logodds.view(np.uint32))
+                        if kernels.AVAILABLE else np.array_equal(kept.view(np.uint32),
+                                                                 logodds.view(np.uint32)))
+                if same:
+                    self._maps[view.index], self._sums[view.index] = kept, self._sums[other]
+                    self._seen[view.index] = (view, view.step)
+                return same
+        return False
+
+    def _own(self, view: AgentView) -> tuple[np.ndarray, np.ndarray]:
+        """The view's agent's kept map and sums, to change in place: copies first where
+        another agent summed at this step shares them (its answer must stay); an agent
+        whose last call was earlier keeps a map and its sums either way."""
+        agent = view.index
+        kept = self._maps[agent]
+        if any(other != agent and self._maps[other] is kept and step == view.step
+               for other, (_, step) in self._seen.items()):
+            self._maps[agent] = kept.copy()
+            self._sums[agent] = self._sums[agent].copy()
+        return self._maps[agent], self._sums[agent]
 
     def box_sums(self, view: AgentView, box: SegmentBox, altitudes: Sequence[int]
                  ) -> np.ndarray:
