@@ -397,17 +397,21 @@ def _compiled_noise() -> Any:
 
 
 def mission_kernels() -> list[tuple[Any, tuple[Any, ...]]]:
-    """(compiled kernel, argument types) of the kernels every mission flies, slowest to
-    compile first (measured: 2.8 s for ``fuse_evidence`` down to 0.1 s; 7.3 s in all).
+    """(compiled kernel, argument types) of the kernels every mission of ``ipp-compare``'s
+    default planners flies, the simulator's slowest to compile first (measured: 2.8 s for
+    ``fuse_evidence`` down to 0.1 s; 7.3 s in all), then the lookahead's.
 
-    These are the types the simulator passes (a test flies missions and checks that they are
-    all here, and no other). Kernels that only some paths call (the per-rectangle
-    :func:`apply_values`) compile when first called, as every kernel used to.
+    These are the types the simulator and those planners pass (a test flies ``ipp-compare``'s
+    defaults and checks that they are all here, and no other). Kernels that only some paths
+    call (the per-rectangle :func:`apply_values`) compile when first called.
     """
     from numba import types
 
     def array(dtype: Any, ndim: int = 1) -> Any:
         return types.Array(dtype, ndim, "C")
+
+    def read_only(dtype: Any, ndim: int = 1) -> Any:
+        return types.Array(dtype, ndim, "C", readonly=True)
 
     u32, i32, i64 = types.uint32, types.int32, types.int64
     f32, f64, flag = types.float32, types.float64, types.boolean
@@ -437,6 +441,14 @@ def mission_kernels() -> list[tuple[Any, tuple[Any, ...]]]:
         (table.gain_lookup, (array(f32, 2), array(u32, 2), array(f32, 3), i64, i64, i64, i64)),
         (table.find_or_add, (array(u32, 2), *table_args)),
         (table.find_or_add, (types.Array(u32, 2, "A", readonly=True), *table_args)),
+        # the lookahead of the learned-prior planners (ig_learned, coma, ppo)
+        (table.indexed_segment_sums, (array(i64, 2), types.UniTuple(array(f32), 3), array(i64),
+                                      array(i64), i64, i64, i64, i64, array(f64, 3))),
+        (table.path_values, (array(f64, 3), array(i64, 3), array(i64, 4), array(i64),
+                             array(f64), array(f64), array(i64), array(flag, 2), array(f64))),
+        (table.summed_area, (array(f64, 2), types.Array(f64, 2, "A"))),
+        (table.row_differences, (array(u32, 2), read_only(u32, 2), array(i64), array(i64))),
+        (table.same_bits, (array(u32, 2), read_only(u32, 2))),
     ]
 
 
