@@ -103,3 +103,38 @@ def test_same_bits_tells_maps_apart_by_their_bit_patterns():
     b[4, 6] = -0.0  # equal as numbers, not as bits
     assert not kernels.same_bits(a.view(np.uint32), b.view(np.uint32))
     assert not kernels.same_bits(b.view(np.uint32)[::-1], b.view(np.uint32))  # any strides
+
+
+def test_teammates_with_the_same_map_share_sums_and_every_answer_stays_right():
+    """Two UAVs with the same map share one refresh; when one's map moves on, the other's
+    answers (this step's and an earlier view's) stay the sums of its own map."""
+    planner = InformationGainPlanner()
+    planner.reset(EnvConfig().replace(world={"resolution": 1.0}), seed=0)
+    columns = ["altitude_0", "altitude_2"]
+    kept = SegmentSums(planner.segment_grid, planner._segment_tables(), columns, 0.0)
+
+    def fresh(view):  # the sums of the view's map from scratch
+        return SegmentSums(planner.segment_grid, planner._segment_tables(), columns,
+                           0.0)(SimpleNamespace(**{**view.__dict__, "index": 0}))
+
+    def view(index, step, logodds, heard):
+        return SimpleNamespace(index=index, step=step, local_logodds=logodds,
+                               teammates=np.array(heard))
+
+    rng = np.random.default_rng(0)
+    size = planner.segment_grid.size
+    first = np.zeros((size, size), np.float32)
+    first[3:9, 4:12] = rng.standard_normal((6, 8)).astype(np.float32)
+    a0, b0 = view(0, 1, first, [1]), view(1, 1, first.copy(), [0])
+    np.testing.assert_array_equal(kept(a0), fresh(a0))
+    assert kept(b0) is kept(a0)  # shared: one refresh for both
+    second = first.copy()
+    second[20:25, 30:40] = 1.5  # agent 1 alone reads more at the next step
+    b1 = view(1, 2, second, [])
+    np.testing.assert_array_equal(kept(b1), fresh(b1))
+    np.testing.assert_array_equal(kept(a0), fresh(a0))  # asked again: its own map's sums
+    a1 = view(0, 2, first, [])
+    np.testing.assert_array_equal(kept(a1), fresh(a1))
+    assert kept(a1) is not kept(b1)
+    for old in (a0, b0):  # views of the step before: the sums of their maps, not others'
+        np.testing.assert_array_equal(kept(old), fresh(old))

@@ -205,14 +205,18 @@ class SegmentSums:
 
     def _own(self, view: AgentView) -> tuple[np.ndarray, np.ndarray]:
         """The view's agent's kept map and sums, to change in place: copies first where
-        another agent summed at this step shares them (its answer must stay); an agent
-        whose last call was earlier keeps a map and its sums either way."""
+        another agent summed at this step shares them (its answer must stay). One whose
+        last call was earlier keeps a map and its sums either way (the changed ones), and
+        forgets its last answer."""
         agent = view.index
         kept = self._maps[agent]
-        if any(other != agent and self._maps[other] is kept and step == view.step
-               for other, (_, step) in self._seen.items()):
+        sharing = [other for other in self._maps if other != agent and self._maps[other] is kept]
+        if any(self._seen[other][1] == view.step for other in sharing if other in self._seen):
             self._maps[agent] = kept.copy()
             self._sums[agent] = self._sums[agent].copy()
+        else:
+            for other in sharing:
+                self._seen.pop(other, None)
         return self._maps[agent], self._sums[agent]
 
     def box_sums(self, view: AgentView, box: SegmentBox, altitudes: Sequence[int]
