@@ -173,11 +173,8 @@ class SegmentSums:
         for n, box in enumerate(self._changed_boxes(kept, logodds)):
             if n == 0:
                 kept, sums = self._own(view)
+            self._sum_box_into(logodds, box, sums)
             i0, i1, j0, j1 = box
-            if kernels.AVAILABLE:
-                self._sum_box_into(logodds, box, sums)
-            else:
-                self._sum_box(logodds, box, range(len(self.columns)), sums[..., i0:i1, j0:j1])
             cells = (slice(r[i0], r[i1]), slice(c[j0], c[j1]))
             kept[cells] = logodds[cells]
         self._seen[view.index] = (view, view.step)
@@ -252,10 +249,14 @@ class SegmentSums:
                 out[t, slot] = self.grid.segment_sums(table.column(self.columns[z])[index], box)
 
     def _sum_box_into(self, logodds: np.ndarray, box: SegmentBox, sums: np.ndarray) -> None:
-        """:meth:`_sum_box` of every altitude, compiled, into the box of (T, Z, R, C)
-        ``sums`` (the same numbers: :func:`~ipp_toolkit._native.kernels.indexed_segment_sums`)."""
+        """:meth:`_sum_box` of every altitude into the box of (T, Z, R, C) ``sums``, compiled
+        where Numba is (the same numbers:
+        :func:`~ipp_toolkit._native.kernels.indexed_segment_sums`)."""
         r, c = self.grid.layout.row_edges, self.grid.layout.col_edges
         i0, i1, j0, j1 = box
+        if not kernels.AVAILABLE:
+            self._sum_box(logodds, box, range(len(self.columns)), sums[..., i0:i1, j0:j1])
+            return
         part = logodds[r[i0]:r[i1], c[j0]:c[j1]]
         for t, table in enumerate(self.tables):
             index = table.indices(part)  # first: it may grow the table and its columns
@@ -279,15 +280,8 @@ class SegmentSums:
         over the columns that changed in it."""
         layout = self.grid.layout
         r, c = layout.row_edges, layout.col_edges
-        if kernels.AVAILABLE:
-            first = np.empty(len(kept), dtype=np.int64)
-            last = np.empty(len(kept), dtype=np.int64)
-            kernels.row_differences(kept.view(np.uint32), logodds.view(np.uint32), first, last)
-            differs = None
-            row_differs = first >= 0
-        else:
-            differs = kept.view(np.uint32) != logodds.view(np.uint32)
-            row_differs = differs.any(axis=1)
+        first, last = _row_differences(kept, logodds)
+        row_differs = first >= 0
         rows = np.flatnonzero(np.logical_or.reduceat(row_differs, r[:-1]))
         boxes: list[SegmentBox] = []
         if len(rows) == 0:
@@ -297,17 +291,29 @@ class SegmentSums:
         bottoms = rows[breaks].tolist() + [rows[-1]]
         for top, bottom in zip(tops, bottoms, strict=True):
             i0, i1 = int(top), int(bottom) + 1
-            if differs is None:
-                band = row_differs[r[i0]:r[i1]]
-                # the segments of the band's first and last differing columns
-                j0 = int(np.searchsorted(c, first[r[i0]:r[i1]][band].min(), side="right")) - 1
-                j1 = int(np.searchsorted(c, last[r[i0]:r[i1]][band].max(), side="right"))
-            else:
-                band = differs[r[i0]:r[i1]].any(axis=0)
-                cols = np.flatnonzero(np.logical_or.reduceat(band, c[:-1]))
-                j0, j1 = int(cols[0]), int(cols[-1]) + 1
+            band = row_differs[r[i0]:r[i1]]
+            # the segments of the band's first and last differing columns
+            j0 = int(np.searchsorted(c, first[r[i0]:r[i1]][band].min(), side="right")) - 1
+            j1 = int(np.searchsorted(c, last[r[i0]:r[i1]][band].max(), side="right"))
             boxes.append((i0, i1, j0, j1))
         return boxes
+
+
+def _row_differences(kept: np.ndarray, logodds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H,) int64 each row's first and last column where two float32 maps' bit patterns
+    differ, -1 where the row is the same (:func:`~ipp_toolkit._native.kernels.row_differences`,
+    or NumPy)."""
+    a, b = kept.view(np.uint32), logodds.view(np.uint32)
+    first = np.empty(len(a), dtype=np.int64)
+    last = np.empty(len(a), dtype=np.int64)
+    if kernels.AVAILABLE:
+        kernels.row_differences(a, b, first, last)
+    else:
+        differs = a != b
+        found = differs.any(axis=1)
+        first[:] = np.where(found, differs.argmax(axis=1), -1)
+        last[:] = np.where(found, differs.shape[1] - 1 - differs[:, ::-1].argmax(axis=1), -1)
+    return first, last
 
 
 def objective_segment_values(sums: np.ndarray, altitude: int, interest: np.ndarray | None,
