@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from ipp_toolkit.belief.gain import footprint_sums_in_box, objective_table
-from ipp_toolkit.belief.interest import square_cells
 from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig
@@ -29,7 +28,6 @@ from ipp_toolkit.planners.segments import (
     SegmentSums,
     objective_segment_values,
 )
-from ipp_toolkit.probability import logit
 from ipp_toolkit.sim.team import ACTION_DELTAS, ACTION_NAMES, N_ACTIONS, unclaimed_options
 from ipp_toolkit.world.sensor import Camera
 
@@ -138,9 +136,7 @@ class InformationGainPlanner(Planner):
             camera = Camera(config.world, config.sensor)
             self._gains = gain_table(config, camera, self.objective, self.outcome_weighting)
             self._camera, self._config = camera, config
-            world = config.world
-            self._segments = SegmentGrid(camera.rects, world.map_cells,
-                                         square_cells(world.map_cells, world.resolution))
+            self._segments = SegmentGrid.for_world(camera.rects, config.world)
             self._kept_sums = None
         self._lookahead = mission_lookahead(self.lookahead_steps, self.lookahead_silent,
                                             config.team.comm_range)
@@ -261,10 +257,8 @@ class InformationGainPlanner(Planner):
         """(T, Z, R, C) the segment sums of :meth:`_segment_tables` on ``view``'s map."""
         if self._kept_sums is None:
             assert self._config is not None
-            self._kept_sums = SegmentSums(self.segment_grid, self._segment_tables(),
-                                          [f"altitude_{z}" for z in
-                                           range(len(self.camera.accuracy))],
-                                          logit(self._config.world.prior))
+            self._kept_sums = SegmentSums.of_tables(self.segment_grid, self._segment_tables(),
+                                                    self._config.world.prior)
         return self._kept_sums(view)
 
     def cell_gains(self, view: AgentView, altitude: int,

@@ -59,6 +59,20 @@ def test_objective_values_weight_the_gain_and_the_clean_up_term():
                                [[5.0, 3.5, 2.0]])
 
 
+def test_a_missions_grid_and_kept_sums_come_from_its_world_and_tables():
+    """``for_world`` cuts by the world's ~0.5 m squares; ``of_tables`` keeps every altitude
+    column of the tables, starting from the log-odds of the world's prior."""
+    world = EnvConfig().replace(world={"resolution": 0.25, "prior": 0.3}).world
+    planner = InformationGainPlanner()
+    planner.reset(EnvConfig().replace(world={"resolution": 0.25, "prior": 0.3}), seed=0)
+    grid = SegmentGrid.for_world(planner.camera.rects, world)
+    assert grid.block == 2 and grid.size == world.map_cells  # 0.5 m: two cells of 0.25 m
+    assert grid.key == planner.segment_grid.key
+    kept = SegmentSums.of_tables(grid, planner._segment_tables(), world.prior)
+    assert kept.columns == ["altitude_0", "altitude_1", "altitude_2"]
+    assert kept.start == np.float32(np.log(0.3 / 0.7))
+
+
 def test_a_map_of_another_size_is_refused_naming_it():
     planner = InformationGainPlanner()
     planner.reset(EnvConfig().replace(world={"resolution": 1.0}), seed=0)

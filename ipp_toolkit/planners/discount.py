@@ -37,7 +37,6 @@ from ..belief.gain import objective_table
 from ..belief.interest import block_means, interest_smoother, square_cells
 from ..belief.mapping import false_positive_term_applies
 from ..config.schema import GAIN_INTEREST_SMOOTHED, EnvConfig, FeatureConfig
-from ..probability import logit
 from ..sim.features import gain_normaliser, plane_objective
 from ..sim.team import ACTION_DELTAS, N_ACTIONS
 from ..world.sensor import Camera
@@ -144,11 +143,9 @@ class TeammateDiscount:
         self._block = square_cells(world.map_cells, world.resolution)
         self._interest: dict[int, np.ndarray] = {}
         # The lookahead's segment sums of the objective's tables, kept per agent.
-        self._segments = SegmentGrid(self.camera.rects, self._size, self._block)
+        self._segments = SegmentGrid.for_world(self.camera.rects, world)
         tables = [self._table] + ([self._checking] if self._checking is not None else [])
-        self._kept_sums = SegmentSums(self._segments, tables,
-                                      [f"altitude_{z}" for z in range(len(self.camera.accuracy))],
-                                      logit(world.prior))
+        self._kept_sums = SegmentSums.of_tables(self._segments, tables, world.prior)
 
     @classmethod
     def for_mission(cls, kept: TeammateDiscount | None, config: EnvConfig,

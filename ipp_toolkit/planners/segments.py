@@ -25,7 +25,10 @@ import numpy as np
 
 from .._native import kernels
 from ..belief.box_sums import BoxLayout
+from ..belief.interest import square_cells
 from ..belief.value_table import ValueTable
+from ..config.schema import WorldConfig
+from ..probability import logit
 from . import AgentView
 
 __all__ = ["SegmentBox", "SegmentGrid", "SegmentSums", "objective_segment_values"]
@@ -70,6 +73,13 @@ class SegmentGrid:
                                np.diff(self.layout.col_edges)).astype(np.float64)
         self._cells: np.ndarray | None = None
         self._sums: np.ndarray | None = None
+
+    @classmethod
+    def for_world(cls, rects: np.ndarray, world: WorldConfig) -> SegmentGrid:
+        """The grid of a mission's footprints ``rects`` (``Camera.rects``) and of the
+        ~0.5 m squares of its ``world`` (:func:`~ipp_toolkit.belief.interest.square_cells`),
+        on which the ``interesting`` objective's probability of interest is given."""
+        return cls(rects, world.map_cells, square_cells(world.map_cells, world.resolution))
 
     def edge_index(self, rects: np.ndarray) -> np.ndarray:
         """(..., 4) int the cut indices of the edges of (..., 4) rectangles (row0, row1,
@@ -158,6 +168,14 @@ class SegmentSums:
         self._maps: dict[int, np.ndarray] = {}
         self._sums: dict[int, np.ndarray] = {}
         self._seen: dict[int, tuple[AgentView, int]] = {}  # the view each agent was last summed for
+
+    @classmethod
+    def of_tables(cls, grid: SegmentGrid, tables: Sequence[ValueTable],
+                  prior: float) -> SegmentSums:
+        """The kept sums of every column of ``tables`` (the objective tables' ``altitude_z``,
+        in the first table's order) for missions whose maps start at the probability
+        ``prior``."""
+        return cls(grid, tables, tables[0].names if tables else (), float(logit(prior)))
 
     def __call__(self, view: AgentView) -> np.ndarray:
         logodds = self._checked_map(view)
