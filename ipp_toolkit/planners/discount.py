@@ -34,7 +34,7 @@ import numpy as np
 
 from ..belief.field_prior import shared_prior
 from ..belief.gain import objective_table
-from ..belief.interest import block_means, interest_smoother, square_cells
+from ..belief.interest import block_means, interest_smoother
 from ..belief.mapping import false_positive_term_applies
 from ..config.schema import GAIN_INTEREST_SMOOTHED, EnvConfig, FeatureConfig
 from ..sim.features import gain_normaliser, plane_objective
@@ -140,10 +140,11 @@ class TeammateDiscount:
         self._normaliser = gain_normaliser(config.reward, self.camera, self.objective)
         world = config.world
         self._size, self._resolution = world.map_cells, world.resolution
-        self._block = square_cells(world.map_cells, world.resolution)
         self._interest: dict[int, np.ndarray] = {}
-        # The lookahead's segment sums of the objective's tables, kept per agent.
+        # The lookahead's segment sums of the objective's tables, kept per agent; the grid's
+        # squares are those the probability of interest is taken on.
         self._segments = SegmentGrid.for_world(self.camera.rects, world)
+        self._block = self._segments.block
         tables = [self._table] + ([self._checking] if self._checking is not None else [])
         self._kept_sums = SegmentSums.of_tables(self._segments, tables, world.prior)
 
