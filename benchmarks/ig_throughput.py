@@ -25,7 +25,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from ipp_toolkit.config.schema import EnvConfig  # noqa: E402
-from ipp_toolkit.planners import Planner, make_planner, planner_views  # noqa: E402
+from ipp_toolkit.planning import Planner, make_planner, planner_views  # noqa: E402
 from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission  # noqa: E402
 
 

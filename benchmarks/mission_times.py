@@ -16,7 +16,7 @@ import argparse
 import time
 
 from ipp_toolkit.config.settings import build_env_config
-from ipp_toolkit.planners import make_planner
+from ipp_toolkit.planning import make_planner
 from ipp_toolkit.runs.evaluation import run_mission
 from ipp_toolkit.runs.process_pool import (
     limit_blas_threads,

@@ -22,8 +22,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from baselines.ppo import PPOTrainConfig  # noqa: E402
-from baselines.ppo_training import train_ppo, training_env_config  # noqa: E402
+from baselines.sb3.ppo import PPOTrainConfig  # noqa: E402
+from baselines.sb3.ppo_training import train_ppo, training_env_config  # noqa: E402
 from ipp_toolkit.config.schema import EnvConfig  # noqa: E402
 from ipp_toolkit.env import IPPEnv  # noqa: E402
 from ipp_toolkit.vec import make_sb3_vec_env  # noqa: E402

@@ -15,11 +15,11 @@ import time
 import numpy as np
 import torch
 
-from baselines.learned_prior import DEFAULT_PRIOR, LearnedPriorPlanner
-from baselines.spatial_gain import SpatialGainPlanner
+from baselines.field_prior.planner import DEFAULT_PRIOR, LearnedPriorPlanner
+from baselines.heuristics.spatial_gain import SpatialGainPlanner
 from ipp_toolkit import EnvConfig
 from ipp_toolkit.belief.interest import interest_smoother
-from ipp_toolkit.planners import planner_views
+from ipp_toolkit.planning import planner_views
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 
 

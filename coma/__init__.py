@@ -2,10 +2,10 @@
 
 Importing this package (not its modules: no torch) declares the names of COMA planners and
 policies that were removed, so that asking for one says what to use instead
-(:func:`ipp_toolkit.planners.removed_name` imports it for that).
+(:func:`ipp_toolkit.planning.removed_name` imports it for that).
 """
 
-from ipp_toolkit.planners import register_removed_name
+from ipp_toolkit.planning import register_removed_name
 
 _MIXED_GONE = ("removed 2026-12-01: dominated by the default coma on validation missions, "
                "see docs/generalisation.md; use coma (its default policy)")

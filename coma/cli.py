@@ -35,7 +35,7 @@ from ipp_toolkit.config.settings import (
     setting_line,
 )
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import removed_name
+from ipp_toolkit.planning import removed_name
 from ipp_toolkit.runs.cli_flags import (
     add_compute_flags,
     add_progress_flag,
@@ -266,7 +266,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             # An invalid team, range or validation terrain fails here, before any writing.
             validation_settings(coma_config, mission_settings(coma_config, env_config))
             if coma_config.warm_start.enabled:
-                from ipp_toolkit.planners import planner_factory
+                from ipp_toolkit.planning import planner_factory
 
                 planner_factory(coma_config.warm_start.planner)  # an unknown name fails here
         _check_compute(args)

@@ -26,8 +26,8 @@ from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.limits import check_parameters
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch
-from ipp_toolkit.planners import check_policy_transfer as check_transfer
-from ipp_toolkit.planners import resolve_shipped
+from ipp_toolkit.planning import check_policy_transfer as check_transfer
+from ipp_toolkit.planning import resolve_shipped
 from ipp_toolkit.sim.features import actor_plane_names, gain_plane_channels
 from ipp_toolkit.sim.team import N_ACTIONS
 
@@ -53,7 +53,7 @@ SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 #: (``features.gain_interest = learned``: the learned field prior in the gain planes).
 #: ``learned-cleanup``: ``learned-mixture``'s recipe on planes that also value re-measuring
 #: likely false positives in the last steps (``features.gain_false_positive``).
-#: Removed names (``mixed``) are refused with a hint: ``ipp_toolkit.planners.REMOVED_NAMES``.
+#: Removed names (``mixed``) are refused with a hint: ``ipp_toolkit.planning.REMOVED_NAMES``.
 SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
                     "prior-mixture": "coma_prior_mixture_4agents_d25.pt",
                     "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt",

@@ -17,13 +17,13 @@ import numpy as np
 import torch
 
 from ipp_toolkit.config.schema import EnvConfig, FeatureConfig
-from ipp_toolkit.planners import AgentView, Planner, choose_for_views, policy_inputs
-from ipp_toolkit.planners.discount import (
+from ipp_toolkit.planning import AgentView, Planner, choose_for_views, policy_inputs
+from ipp_toolkit.planning.discount import (
     OVERLAP_DISCOUNT,
     TeammateDiscount,
     check_overlap_discount,
 )
-from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, lookahead_options
+from ipp_toolkit.planning.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, lookahead_options
 from ipp_toolkit.sim.features import relative_option_gains
 
 from .config import mission_settings
@@ -44,7 +44,7 @@ class COMAPlanner(Planner):
     A gain-prior actor (:class:`~coma.networks.GainPriorActor`, whose logits add a learned
     residual to the ``gain`` planes' values) decides with ``ig``'s discount of the cells
     under heard, decided teammates' next footprints
-    (:class:`~ipp_toolkit.planners.discount.TeammateDiscount`): its untrained start then
+    (:class:`~ipp_toolkit.planning.discount.TeammateDiscount`): its untrained start then
     chooses exactly what the ``ig`` planner of its planes' objective chooses.
 
     Args:
@@ -56,7 +56,7 @@ class COMAPlanner(Planner):
             planes' values as they are, the choice before this rule); other actors ignore it.
         lookahead_steps, lookahead_discount: a gain-prior actor's prior term also values
             each option's best continuation along the agent's own path, as the ``ig``
-            planners with these options do (:mod:`ipp_toolkit.planners.lookahead`); 1 step:
+            planners with these options do (:mod:`ipp_toolkit.planning.lookahead`); 1 step:
             the planes' one-step values; by default three steps, greedy without
             communication unless ``lookahead_silent`` (docs/lookahead.md). Other actors
             ignore them.

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import Planner, planner_views
+from ipp_toolkit.planning import Planner, planner_views
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.sim.features import actor_observations
 from ipp_toolkit.sim.mission import MissionGeometry, MissionState

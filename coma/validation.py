@@ -19,7 +19,7 @@ import numpy as np
 from torch import nn
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import agent_views
+from ipp_toolkit.planning import agent_views
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.sim.features import actor_observations
 from ipp_toolkit.sim.mission import MissionGeometry, MissionState

@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import make_planner
+from ipp_toolkit.planning import make_planner
 from ipp_toolkit.runs.progress import progress_bar
 from ipp_toolkit.sim.mission import MissionGeometry
 

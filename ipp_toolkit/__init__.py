@@ -11,15 +11,16 @@ subpackages are its layers, and imports flow down this list only:
 - :mod:`ipp_toolkit.env`, :mod:`ipp_toolkit.vec` and :mod:`ipp_toolkit.team_env`: the
   PettingZoo view, its SB3 view and the team as one Gymnasium agent (registered on import as
   ``ipp_toolkit/UAVTeam-v0``);
-- :mod:`ipp_toolkit.planners`: the planner interface, the per-UAV view and the registry;
+- :mod:`ipp_toolkit.planning`: the planner interface, the per-UAV view and the registry;
 - :mod:`ipp_toolkit.runs`: the evaluation runner, result store, process pool and Ray backend.
 
 ``ipp_toolkit._native`` holds the compiled (Numba) inner loops, ``ipp_toolkit.io`` the files
 that must never be half-written, ``ipp_toolkit.probability`` the log-odds and entropy of
 one cell and ``ipp_toolkit.extras`` the import of an optional package (Ray, RLlib, TorchRL)
-with its install command; they are used at every layer. One import still goes up the list,
-lazily: the config checks terrain names against the world's terrain registry when a config
-is built.
+with its install command; they are used at every layer (``ipp_toolkit.io`` imports nothing
+of the toolkit). One import still goes up the list, lazily: the config checks terrain names
+against the world's terrain registry (:mod:`ipp_toolkit.world.registry`, which imports nothing
+of the toolkit, so no import circle) when a config is built.
 """
 
 from .config.files import load_config, save_config

@@ -154,21 +154,27 @@ def _no_anchors(loader: _StrictLoader, parent: Any, index: Any) -> Any:
 _StrictLoader.compose_node = _no_anchors  # type: ignore[method-assign]
 
 
-def read_yaml(path: str | os.PathLike[str], what: str = "file") -> Any:
+def read_yaml(path: str | os.PathLike[str], what: str = "file",
+              check_size: Callable[[int, str], None] | None = None) -> Any:
     """Parse a YAML file safely, refusing a key written twice in one mapping.
+
+    Args:
+        path: the file.
+        what: what the file is, for messages (``config file``).
+        check_size: called as ``check_size(size_in_bytes, label)`` before the file is read
+            (``label`` names ``what`` and the file); it raises to refuse a file too large
+            (the config's size limit, :func:`ipp_toolkit.config.files.read_config_file`).
 
     Raises:
         ValueError: the file cannot be read, is not text or is not valid YAML (the message
             names ``what`` and the file).
     """
-    from .config.limits import check_limit
-
     path = Path(path)
     try:
         if path.is_dir():
             raise IsADirectoryError(21, "is a folder, not a file")
-        check_limit("config_bytes", path.stat().st_size, f"{what} {str(path)!r}",
-                    estimate=False)
+        if check_size is not None:
+            check_size(path.stat().st_size, f"{what} {str(path)!r}")
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
         why = err.strerror if isinstance(err, OSError) else "not a UTF-8 text file"

@@ -10,7 +10,7 @@ from PIL import Image
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import atomic_write
-from ipp_toolkit.planners import Planner
+from ipp_toolkit.planning import Planner
 from ipp_toolkit.runs.evaluation import run_mission
 from ipp_toolkit.sim.mission import MissionState
 from ipp_toolkit.sim.rendering import render_state

@@ -42,11 +42,10 @@ from ipp_toolkit.runs.cli_flags import (
     positive_int,
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
-from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
 from ipp_toolkit.runs.run_folder import check_out_path
 
-from .compare import DEFAULT_PLANNERS
+from .compare import DEFAULT_PLANNERS, interrupted
 
 
 def _simulate_parser() -> argparse.ArgumentParser:
@@ -278,17 +277,9 @@ def compare_main(argv: list[str] | None = None) -> int:
 
 
 
-def interrupted(tool: str, out_dir: Path) -> int:
-    """Ctrl-C: one line saying how to continue (exit code 130, as a shell reports SIGINT).
-
-    Every mission is stored atomically as it ends, so the same command flies only the rest.
-    """
-    return report_interrupt(tool, f"the missions already flown are kept in {str(out_dir)!r}: "
-                            "run the same command again to continue")
-
-
-TRAINERS = {"coma": "coma.cli", "ppo": "baselines.ppo_training", "sb3": "baselines.sb3_training",
-            "prior": "baselines.prior_training", "rllib": "baselines.rllib_training"}
+TRAINERS = {"coma": "coma.cli", "ppo": "baselines.sb3.ppo_training",
+            "sb3": "baselines.sb3.training", "prior": "baselines.field_prior.training",
+            "rllib": "baselines.rllib.training"}
 
 
 def train_main(argv: list[str] | None = None) -> int:

@@ -30,7 +30,7 @@ from ipp_toolkit.config.limits import check_mission, check_result_rows
 from ipp_toolkit.config.schema import EnvConfig, check_int
 from ipp_toolkit.config.settings import build_env_config, format_comm, safe_name
 from ipp_toolkit.io import write_json
-from ipp_toolkit.planners import (
+from ipp_toolkit.planning import (
     FEATURES_NOTE,
     Planner,
     available_planners,
@@ -41,6 +41,7 @@ from ipp_toolkit.planners import (
     planners_in_process,
 )
 from ipp_toolkit.runs.process_pool import WorkerPool
+from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.runs.ray_backend import check_backend
 from ipp_toolkit.runs.result_store import shard_path, trajectory_path
 from ipp_toolkit.runs.run_folder import EVALUATION_COMMAND, claim
@@ -48,7 +49,7 @@ from ipp_toolkit.runs.run_folder import EVALUATION_COMMAND, claim
 from .tables import Summary, flown_references, summarise, to_markdown, write_tables
 
 if TYPE_CHECKING:
-    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.planning.specs import PlannerSpec
     from ipp_toolkit.runs.evaluation import EvaluationResult
 
 __all__ = [
@@ -156,6 +157,15 @@ DEFAULT_PLANNERS = ("ig", "ig_spatial", "ig_learned", "coverage", "random", "com
 """What ``ipp-compare`` flies without ``--planners``."""
 
 
+def interrupted(tool: str, out_dir: Path) -> int:
+    """Ctrl-C: one line saying how to continue (exit code 130, as a shell reports SIGINT).
+
+    Every mission is stored atomically as it ends, so the same command flies only the rest.
+    """
+    return report_interrupt(tool, f"the missions already flown are kept in {str(out_dir)!r}: "
+                            "run the same command again to continue")
+
+
 def default_planners(note: Callable[[str], None] | None = None,
                      names: Sequence[str] = DEFAULT_PLANNERS) -> list[str]:
     """The planners of ``names`` that can be built with their default options.
@@ -241,7 +251,7 @@ def _listed_items(planners: str | Sequence[str | PlannerSpec]) -> list[str | Pla
 
 def _built_planners(planners: str | Sequence[str | PlannerSpec] | None,
                     note: Callable[[str], None] | None) -> list[tuple[PlannerSpec, Planner]]:
-    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.planning.specs import PlannerSpec
 
     keyword = _planner_keyword(planners)
     if keyword is not None:
@@ -540,7 +550,7 @@ def _write_outputs(comparison: Comparison, out: Path, drawn: set[tuple[str, int]
 def _requested_specs(planners: str | Sequence[str | PlannerSpec] | None) -> list[PlannerSpec]:
     """The planners ``planners`` asks for, as far as they parse, unbuilt (to warm the workers
     and to see what is stored already; a keyword's planners as if all were available)."""
-    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.planning.specs import PlannerSpec
 
     keyword = _planner_keyword(planners)
     if keyword is not None:

@@ -32,7 +32,7 @@ import numpy as np
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import comm_label, format_comm
-from ipp_toolkit.planners.specs import PlannerSpec, as_specs
+from ipp_toolkit.planning.specs import PlannerSpec, as_specs
 from ipp_toolkit.runs.ray_backend import check_backend
 from ipp_toolkit.world.families import real_raster_names
 
@@ -196,7 +196,7 @@ def generalisation_study(planners: str | Sequence[str | PlannerSpec]
 
     Args:
         planners: comma-separated names, or a sequence of names and
-            :class:`~ipp_toolkit.planners.specs.PlannerSpec` (planners with options); must
+            :class:`~ipp_toolkit.planning.specs.PlannerSpec` (planners with options); must
             include a reference.
         cells: the grid (default :func:`study_cells`).
         trials: test missions per cell (each ``real`` mission a different map).

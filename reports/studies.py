@@ -372,7 +372,7 @@ def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str,
 
     With several training ``seeds``, the text starts with :func:`seed_table` over ``runs``.
     """
-    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.planning.specs import PlannerSpec
 
     specs = [PlannerSpec("coma", {"checkpoint": str(path)}, label=label)
              for label, path in policies.items()]

@@ -25,8 +25,7 @@ from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
 from ipp_toolkit.runs.run_folder import claim
 
-from .cli import interrupted
-from .compare import DEFAULT_PLANNERS
+from .compare import DEFAULT_PLANNERS, interrupted
 
 __all__ = ["main"]
 

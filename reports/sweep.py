@@ -246,7 +246,7 @@ def _check_training(config: Any, env: EnvConfig) -> None:
 
     validation_settings(config, mission_settings(config, env))
     if config.warm_start.enabled:
-        from ipp_toolkit.planners import planner_factory
+        from ipp_toolkit.planning import planner_factory
 
         planner_factory(config.warm_start.planner)
     if config.init_policy and not Path(config.init_policy).is_file():
@@ -551,7 +551,7 @@ def _validate_runs(runs: list[SweepRun], trials: int, seed: int, workers: int, o
                    validation: EnvConfig, progress: bool, backend: str,
                    address: str | None) -> Comparison:
     """IG and every run with a ``best.pt``, flown on the same validation missions."""
-    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.planning.specs import PlannerSpec
 
     flown = [r for r in runs if (r.folder / "best.pt").is_file()]
     specs = [PlannerSpec("ig", label="ig")] + [

@@ -82,7 +82,7 @@ def test_unknown_shipped_policy_is_named(tmp_path, capsys):
 ])
 def test_removed_coma_mixed_is_refused_with_what_to_use_instead(tmp_path, capsys, main, argv,
                                                                 named):
-    from ipp_toolkit.planners import available_planners
+    from ipp_toolkit.planning import available_planners
 
     out = tmp_path / "out"
     assert main([*argv, "--out", str(out)]) == 2
@@ -280,7 +280,7 @@ def test_a_bad_item_of_a_list_flag_is_named_with_exit_2(tmp_path, capsys, comman
     ("study", "--seeds", "0,1,2", [[0, 1, 2]]),
 ])
 def test_good_lists_still_parse(command, flag, text, values):
-    from baselines.prior_training import _parser as prior_parser
+    from baselines.field_prior.training import _parser as prior_parser
     from coma.cli import build_parser
     from reports.study_cli import _study_parser
 
@@ -293,8 +293,8 @@ def test_good_lists_still_parse(command, flag, text, values):
 
 
 def test_list_flag_defaults_are_read_as_lists():
-    from baselines.prior_training import PriorTrainingConfig
-    from baselines.prior_training import _parser as prior_parser
+    from baselines.field_prior.training import PriorTrainingConfig
+    from baselines.field_prior.training import _parser as prior_parser
 
     args = prior_parser().parse_args(["--out", "x"])
     assert tuple(args.team_sizes) == PriorTrainingConfig().team_sizes
@@ -431,7 +431,7 @@ def test_ctrl_c_in_ipp_compare_exits_130_with_one_line_and_keeps_the_missions(tm
     """In this process (the test below sends the signal to a real run and its workers): a
     KeyboardInterrupt while missions fly ends ipp-compare with exit 130 and one line saying
     how to continue; the missions already flown stay stored."""
-    from baselines.random_planner import RandomPlanner
+    from baselines.heuristics.random_planner import RandomPlanner
     from ipp_toolkit.world.seeding import planner_seed
 
     reset = RandomPlanner.reset
@@ -566,7 +566,7 @@ def test_bad_config_files_name_the_key_and_the_file(tmp_path, text, message):
 def test_python_api_bad_input_raises_value_error_naming_it(call, message):
     from ipp_toolkit.config.schema import EnvConfig  # noqa: F401 - used by the calls
     from ipp_toolkit.env import IPPEnv  # noqa: F401
-    from ipp_toolkit.planners import make_planner  # noqa: F401
+    from ipp_toolkit.planning import make_planner  # noqa: F401
     from ipp_toolkit.runs.evaluation import evaluate  # noqa: F401
     from ipp_toolkit.vec import make_sb3_vec_env  # noqa: F401
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ipp_toolkit.config.settings import named_terrain_kinds
-from ipp_toolkit.planners import available_planners
+from ipp_toolkit.planning import available_planners
 from reports import compare as compare_function
 from reports.cli import compare_main
 
@@ -33,7 +33,7 @@ def _have(module: str) -> bool:
 needs_evaluation = pytest.mark.skipif(not _have("ipp_toolkit.runs.evaluation"),
                                       reason="ipp_toolkit.runs.evaluation is not written yet")
 needs_baselines = pytest.mark.skipif(
-    not (_have("baselines.random_planner") and _have("baselines.coverage")),
+    not (_have("baselines.heuristics.random_planner") and _have("baselines.heuristics.coverage")),
     reason="the baseline planners random and coverage are not written yet")
 
 
@@ -132,7 +132,7 @@ def test_unknown_planner_exits_2_and_lists_registered(capsys, tmp_path):
 @needs_evaluation
 def test_an_unknown_planner_is_refused_before_workers_start_listing_this_process_planners(
         capsys, tmp_path, monkeypatch):
-    import ipp_toolkit.planners as planners_module
+    import ipp_toolkit.planning as planners_module
     from ipp_toolkit.runs import process_pool
 
     def no_pool(*args, **kwargs):

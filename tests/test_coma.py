@@ -318,7 +318,7 @@ def test_warm_start_settings_come_from_the_coma_config(tmp_path):
 
 @pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))
 def test_shipped_policies_load_by_name_and_fly(name):
-    from ipp_toolkit.planners import make_planner
+    from ipp_toolkit.planning import make_planner
 
     planner = make_planner("coma", checkpoint=f"shipped:{name}")
     assert Path(planner.checkpoint).stat().st_size < 2_000_000
@@ -451,7 +451,7 @@ def test_residual_penalty_keeps_the_gain_prior_actor_near_its_prior(tmp_path):
 def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
     from coma.cli import build_parser, configs_from_args
     from coma.persistence import DEFAULT_SHIPPED, SHIPPED_POLICIES, resolve_policy, shipped_policy
-    from ipp_toolkit.planners import make_planner
+    from ipp_toolkit.planning import make_planner
 
     assert resolve_policy("shipped:prior") == shipped_policy(SHIPPED_POLICIES["prior"])
     assert resolve_policy("runs/x/best.pt") == Path("runs/x/best.pt")

@@ -124,7 +124,7 @@ def test_the_generalisation_tables_pair_with_ig_and_ig_spatial_by_default(tmp_pa
 
 def test_the_generalisation_study_flies_planners_with_options(tmp_path):
     """Specs with options and labels are flown under their labels, and the options act."""
-    from ipp_toolkit.planners.specs import PlannerSpec
+    from ipp_toolkit.planning.specs import PlannerSpec
     from reports.generalisation import Cell, generalisation_study
 
     wide = PlannerSpec("ig_spatial", {"sigma": 20.0}, label="wide")

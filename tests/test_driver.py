@@ -21,7 +21,7 @@ from coma.persistence import build_networks
 from coma.rollout import Rollout, collect_rollout
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.env import IPPEnv
-from ipp_toolkit.planners import make_planner
+from ipp_toolkit.planning import make_planner
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.sim.mission import MissionGeometry, reset_mission, step_mission
 

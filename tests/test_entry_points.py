@@ -22,7 +22,7 @@ import os
 
 import numpy as np
 
-from ipp_toolkit.planners import Planner
+from ipp_toolkit.planning import Planner
 
 
 def _mark(kind):

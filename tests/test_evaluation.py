@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from helpers import page_faults_of_reallocation, small_config
 
-from ipp_toolkit.planners import Planner, available_planners, planner_modules, register_planner
-from ipp_toolkit.planners.specs import PlannerSpec
+from ipp_toolkit.planning import Planner, available_planners, planner_modules, register_planner
+from ipp_toolkit.planning.specs import PlannerSpec
 from ipp_toolkit.runs.evaluation import (
     RESULT_COLUMNS,
     EvaluationError,
@@ -187,7 +187,7 @@ def children_gone(timeout: float = 20.0) -> bool:
 
 
 def test_a_pool_started_ahead_flies_the_same_missions_and_is_shut_down():
-    assert planner_modules(["random", "no-such-planner"]) == ["baselines.random_planner"]
+    assert planner_modules(["random", "no-such-planner"]) == ["baselines.heuristics.random_planner"]
     config = tiny_config()
     serial = evaluate(config, ["random"], missions=3, seed=1, workers=1, progress=False)
     pool = WorkerPool(2, planner_modules(["random"]))
@@ -260,7 +260,7 @@ def test_compare_starts_no_workers_when_every_mission_is_stored(tmp_path, starte
 _WORKER_CHECK_SCRIPT = """
 import sys
 from pathlib import Path
-from ipp_toolkit.planners import check_planner_name
+from ipp_toolkit.planning import check_planner_name
 from reports.compare import compare
 
 out = Path(sys.argv[1])
@@ -541,7 +541,7 @@ def test_a_worker_freezes_what_its_first_mission_with_a_planner_loaded():
 import gc, sys
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.runs.evaluation import _Entry, _Runner
-from ipp_toolkit.planners.specs import PlannerSpec
+from ipp_toolkit.planning.specs import PlannerSpec
 config = EnvConfig().replace(world={"resolution": 0.5}, team={"budget": 3})
 entries = {name: _Entry(PlannerSpec.parse(name)) for name in ("random", "coverage")}
 runner = _Runner(config, 0, "test", entries, frozenset(), single_thread=sys.argv[1] == "worker")
@@ -565,7 +565,7 @@ def test_a_worker_reuses_freed_memory_without_new_page_faults():
 import resource, sys
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.runs.evaluation import run_mission
-from ipp_toolkit.planners import make_planner
+from ipp_toolkit.planning import make_planner
 from ipp_toolkit.runs.process_pool import retain_freed_memory
 if sys.argv[1] == "retain":
     assert retain_freed_memory()

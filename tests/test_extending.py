@@ -30,7 +30,7 @@ def test_a_recipe_runs(index, tmp_path):
 def test_the_package_recipe_names_the_groups_the_toolkit_reads():
     """The pyproject.toml of the entry-point recipes installs as written (a build system, a
     project) and names the groups that ipp-compare and the terrain registry read."""
-    from ipp_toolkit.planners import ENTRY_POINT_GROUP as PLANNER_GROUP
+    from ipp_toolkit.planning import ENTRY_POINT_GROUP as PLANNER_GROUP
     from ipp_toolkit.world.terrain import ENTRY_POINT_GROUP as TERRAIN_GROUP
 
     files = [tomllib.loads(block) for block in TOML_BLOCKS]

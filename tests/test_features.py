@@ -88,8 +88,8 @@ def test_gain_planes_are_centred_on_the_agent_at_its_level_and_its_neighbours(ga
 
 def test_gain_planes_rank_moves_like_the_ig_planner(gain_config):
     """Without teammates to discount, ig's choice is the best move by the planes' gain."""
-    from baselines.information_gain import InformationGainPlanner
-    from ipp_toolkit.planners import agent_views
+    from baselines.heuristics.information_gain import InformationGainPlanner
+    from ipp_toolkit.planning import agent_views
     from ipp_toolkit.sim.team import ACTION_DELTAS
 
     planner = InformationGainPlanner()

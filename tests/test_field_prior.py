@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.learned_prior import LearnedPriorPlanner
-from baselines.spatial_gain import SpatialGainPlanner
+from baselines.field_prior.planner import LearnedPriorPlanner
+from baselines.heuristics.spatial_gain import SpatialGainPlanner
 from ipp_toolkit import EnvConfig
 from ipp_toolkit.belief.field_prior import (
     INPUT_PLANES,
@@ -24,7 +24,7 @@ from ipp_toolkit.belief.field_prior import (
 )
 from ipp_toolkit.belief.interest import interest_smoother
 from ipp_toolkit.io import CheckpointError, save_torch
-from ipp_toolkit.planners import planner_views
+from ipp_toolkit.planning import planner_views
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 
 
@@ -176,7 +176,7 @@ def test_ipp_train_prior_trains_resumes_and_refuses(tmp_path, capsys):
 
 def test_ipp_train_prior_repeats_itself_and_continues_after_an_interruption(tmp_path,
                                                                             monkeypatch):
-    import baselines.prior_training as training
+    import baselines.field_prior.training as training
     from reports.cli import train_main
 
     whole, cut = tmp_path / "whole", tmp_path / "cut"
@@ -234,8 +234,8 @@ def test_ipp_train_prior_refuses_another_command_s_folder(tmp_path, capsys):
 
 
 def test_ipp_train_prior_cleanup_flies_the_deployed_objective_in_later_rounds(tmp_path):
-    import baselines.prior_training as training
-    from baselines.learned_prior import CLEANUP_WEIGHT
+    import baselines.field_prior.training as training
+    from baselines.field_prior.planner import CLEANUP_WEIGHT
     from reports.cli import train_main
 
     out = tmp_path / "run"

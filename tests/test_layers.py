@@ -17,7 +17,7 @@ LAYERS = {
     "belief": 3,
     "sim": 4,
     "env": 5, "vec": 5, "team_env": 5, "torchrl_env": 5,
-    "planners": 6,
+    "planning": 6,
     "runs": 7,
     "data": 0,
 }

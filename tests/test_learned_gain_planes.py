@@ -116,8 +116,8 @@ def test_the_first_agents_best_learned_option_is_ig_learneds_choice(false_positi
     """Agent 0 hears no lower-index teammate, so ``ig_learned`` flies the argmax of its
     planes: the planes hold that planner's objective, with or without the false-positive
     term, at every step or in the last ``steps``."""
-    from baselines.learned_prior import LearnedPriorPlanner
-    from ipp_toolkit.planners import planner_views
+    from baselines.field_prior.planner import LearnedPriorPlanner
+    from ipp_toolkit.planning import planner_views
     from ipp_toolkit.sim.features import option_gain_cells
 
     config = EnvConfig().replace(world={"resolution": 0.5},
@@ -247,8 +247,8 @@ def test_the_default_ig_learned_and_coma_clean_up_in_the_same_last_steps():
     learned prior with the false-positive term in the last 10 steps; the prior alone stays one
     option away, and the default ``coma`` flies ``ig_learned``'s planes' argmax for agent 0
     (its residual is the untrained one its recipe selected)."""
-    from baselines.learned_prior import LearnedPriorPlanner
-    from ipp_toolkit.planners import make_planner, planner_views
+    from baselines.field_prior.planner import LearnedPriorPlanner
+    from ipp_toolkit.planning import make_planner, planner_views
 
     default = LearnedPriorPlanner()
     assert (default.false_positive_weight, default.false_positive_steps) == (0.5, 10)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.ppo import resolve_policy as resolve_ppo_policy
+from baselines.sb3.ppo import resolve_policy as resolve_ppo_policy
 from coma.persistence import resolve_policy
 from ipp_toolkit.config.limits import LimitError, check_mission, limit_value
 from ipp_toolkit.config.schema import EnvConfig

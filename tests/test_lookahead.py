@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from baselines.information_gain import InformationGainPlanner
-from baselines.learned_prior import LearnedPriorPlanner
-from baselines.spatial_gain import SpatialGainPlanner
+from baselines.field_prior.planner import LearnedPriorPlanner
+from baselines.heuristics.information_gain import InformationGainPlanner
+from baselines.heuristics.spatial_gain import SpatialGainPlanner
 from ipp_toolkit._native import kernels
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import planner_views
-from ipp_toolkit.planners.lookahead import continuation_values
-from ipp_toolkit.planners.segments import SegmentSums
+from ipp_toolkit.planning import planner_views
+from ipp_toolkit.planning.lookahead import continuation_values
+from ipp_toolkit.planning.segments import SegmentSums
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.sim.team import ACTION_DELTAS, N_ACTIONS
 
@@ -188,7 +188,7 @@ def test_kept_segment_sums_equal_sums_from_scratch(comm):
 def test_kept_path_terms_give_the_same_values_and_stay_bounded(monkeypatch):
     """A waypoint's path rectangles are kept: asked again, the same values; the oldest are
     dropped past the bound in bytes."""
-    from ipp_toolkit.planners import lookahead
+    from ipp_toolkit.planning import lookahead
 
     planner = SpatialGainPlanner()
     views = _views_after(planner, _config(), steps=3)

@@ -9,10 +9,17 @@ import pytest
 from helpers import small_config
 from test_planners import fly, hand_built_state
 
-from baselines.coverage import CoveragePlanner, PaperCoveragePlanner, paper_lawnmower_paths
-from baselines.information_gain import InformationGainPlanner, PaperInformationGainPlanner
+from baselines.heuristics.coverage import (
+    CoveragePlanner,
+    PaperCoveragePlanner,
+    paper_lawnmower_paths,
+)
+from baselines.heuristics.information_gain import (
+    InformationGainPlanner,
+    PaperInformationGainPlanner,
+)
 from ipp_toolkit.belief.mapping import LOGODDS_CLIP, entropy_from_logodds, expected_gain
-from ipp_toolkit.planners import agent_views, make_planner
+from ipp_toolkit.planning import agent_views, make_planner
 from ipp_toolkit.sim.mission import MissionState, reset_mission
 from ipp_toolkit.sim.team import ACTION_NAMES
 from ipp_toolkit.world.sensor import Camera

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from helpers import small_config
 
-from ipp_toolkit.planners import (
+from ipp_toolkit.planning import (
     Planner,
     agent_views,
     available_planners,
@@ -113,9 +113,9 @@ def test_registry_errors():
 INFERENCE_ONLY = {
     "coma.planner": ("coma.learner", "coma.warm_start", "coma.rollout", "coma.run_files",
                      "coma.cli"),
-    "baselines.ppo": ("baselines.ppo_training", "ipp_toolkit.vec"),
-    "baselines.sb3_planner": ("baselines.sb3_training", "baselines.sb3_runner",
-                              "baselines.ppo_training", "ipp_toolkit.vec"),
+    "baselines.sb3.ppo": ("baselines.sb3.ppo_training", "ipp_toolkit.vec"),
+    "baselines.sb3.planner": ("baselines.sb3.training", "baselines.sb3.runner",
+                              "baselines.sb3.ppo_training", "ipp_toolkit.vec"),
 }
 
 

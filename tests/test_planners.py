@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from helpers import small_config
 
-from baselines.coverage import CoveragePlanner, boustrophedon
-from baselines.information_gain import InformationGainPlanner, expected_gain
-from baselines.random_planner import RandomPlanner
+from baselines.heuristics.coverage import CoveragePlanner, boustrophedon
+from baselines.heuristics.information_gain import InformationGainPlanner, expected_gain
+from baselines.heuristics.random_planner import RandomPlanner
 from ipp_toolkit.belief.mapping import LOGODDS_CLIP, binary_entropy, class_weights
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import Planner, agent_views, available_planners, make_planner
+from ipp_toolkit.planning import Planner, agent_views, available_planners, make_planner
 from ipp_toolkit.sim.mission import MissionState, reset_mission, step_mission
 from ipp_toolkit.sim.team import ACTION_NAMES
 from ipp_toolkit.world.sensor import Camera
@@ -295,7 +295,7 @@ def test_learned_planners_avoid_targets_heard_teammates_chose(name):
     ``in_order=False`` gives each agent its own masked argmax instead."""
     import math
 
-    from ipp_toolkit.planners import planner_views
+    from ipp_toolkit.planning import planner_views
     from ipp_toolkit.sim.team import ACTION_DELTAS, unclaimed_options
 
     planner = make_planner(name)

@@ -14,18 +14,18 @@ from helpers import page_faults_of_reallocation, small_config
 from sb3_contrib import MaskablePPO
 from stable_baselines3.common.vec_env import VecMonitor
 
-import baselines.ppo as ppo
-from baselines.ppo import (
+import baselines.sb3.ppo as ppo
+from baselines.sb3.planner import PPOPlanner
+from baselines.sb3.ppo import (
     PPOTrainConfig,
     load_policy,
     masked_greedy_actions,
     save_policy,
 )
-from baselines.ppo_training import main, train_ppo, training_env_config
-from baselines.sb3_planner import PPOPlanner
+from baselines.sb3.ppo_training import main, train_ppo, training_env_config
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, save_torch
-from ipp_toolkit.planners import agent_views
+from ipp_toolkit.planning import agent_views
 from ipp_toolkit.runs.evaluation import run_mission
 from ipp_toolkit.sim.features import gain_plane_channels, option_gain_cells
 from ipp_toolkit.sim.mission import reset_mission
@@ -214,7 +214,7 @@ def test_every_shipped_policy_loads_by_name_and_flies(name):
 
 
 def test_default_ppo_is_the_default_shipped_policy_and_names_resolve_for_sb3_too():
-    from baselines.sb3_planner import SB3Planner
+    from baselines.sb3.planner import SB3Planner
 
     assert PPOPlanner().checkpoint == ppo.resolve_policy(f"shipped:{ppo.DEFAULT_SHIPPED}")
     assert SB3Planner("shipped:split").checkpoint == ppo.CHECKPOINTS / "ppo_4agents_d25.pt"
@@ -229,7 +229,7 @@ def test_default_ppo_is_the_default_shipped_policy_and_names_resolve_for_sb3_too
                                          ("learned-mixture", "learned-mixture"),
                                          ("learned-cleanup", "learned-cleanup")])
 def test_ppo_preset_gives_the_shipped_runs_flags(preset, name):
-    from baselines.ppo_training import _parser, run_config_from_args
+    from baselines.sb3.ppo_training import _parser, run_config_from_args
 
     path = ppo.CHECKPOINTS / ppo.SHIPPED_POLICIES[name]
     record = json.loads(path.with_suffix(".json").read_text())
@@ -248,7 +248,7 @@ def test_ppo_preset_gives_the_shipped_runs_flags(preset, name):
 
 
 def test_ppo_parallelism_flag_is_workers_with_the_old_name_kept():
-    from baselines.ppo_training import _parser
+    from baselines.sb3.ppo_training import _parser
 
     assert _parser().parse_args(["--workers", "2"]).num_cpus == 2
     assert _parser().parse_args(["--num-cpus", "3"]).num_cpus == 3
@@ -354,7 +354,7 @@ def test_a_loaded_policy_acts_without_an_optimiser_or_torch_dynamo():
     import subprocess
     import sys
 
-    code = ("import sys; from ipp_toolkit.planners import make_planner; "
+    code = ("import sys; from ipp_toolkit.planning import make_planner; "
             "planner = make_planner('ppo'); "
             "print(type(planner.policy.optimizer).__name__, 'torch._dynamo' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -374,8 +374,8 @@ def test_a_loaded_policy_acts_without_an_optimiser_or_torch_dynamo():
 def test_the_trainer_process_keeps_freed_memory_for_reuse(tmp_path):
     # After train_ppo(), allocating again what was just freed costs no new pages.
     setup = f"""
-from baselines.ppo import PPOTrainConfig
-from baselines.ppo_training import train_ppo
+from baselines.sb3.ppo import PPOTrainConfig
+from baselines.sb3.ppo_training import train_ppo
 from ipp_toolkit.config.schema import EnvConfig
 config = PPOTrainConfig(total_timesteps=128, **{TINY!r})
 train_ppo(config, EnvConfig(), {str(tmp_path / "run")!r}, progress=False)

@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import Planner, register_planner
-from ipp_toolkit.planners.specs import PlannerSpec
+from ipp_toolkit.planning import Planner, register_planner
+from ipp_toolkit.planning.specs import PlannerSpec
 from ipp_toolkit.runs import ray_backend
 from ipp_toolkit.runs.evaluation import evaluate, load_results
 from ipp_toolkit.runs.ray_backend import RayCluster, RayUnavailableError, probe, start_local
@@ -145,7 +145,7 @@ def test_missing_ray_is_one_line_with_the_install_command(tmp_path, monkeypatch,
 def test_optional_imports_share_one_message_form(monkeypatch):
     """require_ray, require_rllib and make_torchrl_env import through require_extra: one line
     naming what needs the package, why it failed and the install command."""
-    from baselines.rllib_training import RLlibUnavailableError, require_rllib
+    from baselines.rllib.training import RLlibUnavailableError, require_rllib
     from ipp_toolkit.extras import install_command, require_extra
     from ipp_toolkit.torchrl_env import make_torchrl_env
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ipp_toolkit import EnvConfig, reset_mission, step_mission
-from ipp_toolkit.planners import Planner, available_planners, make_planner, planner_views
+from ipp_toolkit.planning import Planner, available_planners, make_planner, planner_views
 
 #: A tiny mission: 2 UAVs, 1 m cells (a 50 x 50 map), 3 steps.
 CONFIG = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 2, "budget": 3})
@@ -60,9 +60,9 @@ def test_a_registered_planner_flies_valid_repeatable_missions(name):
 
 
 def test_a_removed_name_is_refused_with_the_note_its_package_declared(monkeypatch):
-    from ipp_toolkit.planners import REMOVED_NAMES, register_removed_name
+    from ipp_toolkit.planning import REMOVED_NAMES, register_removed_name
 
-    monkeypatch.setattr("ipp_toolkit.planners.REMOVED_NAMES", dict(REMOVED_NAMES))
+    monkeypatch.setattr("ipp_toolkit.planning.REMOVED_NAMES", dict(REMOVED_NAMES))
     register_removed_name("old-greedy", "removed 2030-01-01: use ig")
     with pytest.raises(ValueError, match="planner 'old-greedy' was removed 2030-01-01: use ig"):
         make_planner("old-greedy")

@@ -317,7 +317,7 @@ def test_build_config_terrain_file(tmp_path):
 
 
 @pytest.mark.skipif(importlib.util.find_spec("ipp_toolkit.runs.evaluation") is None
-                    or importlib.util.find_spec("baselines.random_planner") is None,
+                    or importlib.util.find_spec("baselines.heuristics.random_planner") is None,
                     reason="needs ipp_toolkit.runs.evaluation and the random baseline")
 def test_compare_in_memory_then_plot(tmp_path):
     from reports import compare

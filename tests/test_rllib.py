@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.rllib_planner import RLlibPlanner
-from baselines.rllib_policy import (
+from baselines.rllib.planner import RLlibPlanner
+from baselines.rllib.policy import (
     MaskedConvPolicy,
     RLlibArchitecture,
     RLlibPolicyFile,
     save_rllib_policy,
 )
-from baselines.rllib_training import RLlibTrainConfig
+from baselines.rllib.training import RLlibTrainConfig
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.evaluation import evaluate
@@ -79,7 +79,7 @@ def test_config_round_trips_and_refuses_unknown_keys() -> None:
 
 
 def test_default_imports_leave_ray_alone() -> None:
-    code = ("import sys, baselines.rllib_planner, baselines.rllib_training, reports.cli; "
+    code = ("import sys, baselines.rllib.planner, baselines.rllib.training, reports.cli; "
             "loaded = [m for m in sys.modules if m == 'ray' or m.startswith('ray.')]; "
             "assert not loaded, loaded")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
@@ -90,7 +90,7 @@ def test_an_iteration_is_one_train_batch_for_every_algorithm(algo: str) -> None:
     # APPO and IMPALA default to iterations of at least 10 s (min_time_s_per_iteration):
     # --iterations would count time, not --train-batch team steps as it does for PPO.
     pytest.importorskip("ray.rllib.algorithms.appo")
-    from baselines.rllib_run import algorithm_config
+    from baselines.rllib.run import algorithm_config
 
     config = RLlibTrainConfig(algo=algo, train_batch=96, num_env_runners=2)
     rl_config = algorithm_config(config, EnvConfig(), base_seed=0)

@@ -14,14 +14,14 @@ import torch
 from helpers import small_config
 from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
 
-from baselines.sb3_planner import SB3Planner
-from baselines.sb3_policies import (
+from baselines.sb3.loading import load_sb3_policy
+from baselines.sb3.planner import SB3Planner
+from baselines.sb3.policies import (
     ALGORITHMS,
     SB3_POLICY_KIND,
     greedy_actions,
-    load_sb3_policy,
 )
-from baselines.sb3_training import (
+from baselines.sb3.training import (
     SB3TrainConfig,
     make_sb3_model,
     save_sb3_policy,
@@ -30,7 +30,7 @@ from baselines.sb3_training import (
 )
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, save_torch
-from ipp_toolkit.planners import agent_views
+from ipp_toolkit.planning import agent_views
 from ipp_toolkit.runs.evaluation import run_mission
 from ipp_toolkit.sim.mission import reset_mission
 from ipp_toolkit.vec import make_sb3_vec_env

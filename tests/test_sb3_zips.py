@@ -13,9 +13,9 @@ from helpers import small_config
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env import VecMonitor
 
-from baselines.sb3_planner import SB3Planner
-from baselines.sb3_policies import greedy_actions
-from baselines.sb3_training import SB3TrainConfig, save_sb3_policy
+from baselines.sb3.planner import SB3Planner
+from baselines.sb3.policies import greedy_actions
+from baselines.sb3.training import SB3TrainConfig, save_sb3_policy
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.evaluation import run_mission
 from ipp_toolkit.vec import make_sb3_vec_env

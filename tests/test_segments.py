@@ -7,10 +7,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from baselines.information_gain import InformationGainPlanner
+from baselines.heuristics.information_gain import InformationGainPlanner
 from ipp_toolkit._native import kernels
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners.segments import SegmentGrid, SegmentSums, objective_segment_values
+from ipp_toolkit.planning.segments import SegmentGrid, SegmentSums, objective_segment_values
 
 
 def _grid() -> SegmentGrid:

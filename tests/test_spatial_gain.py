@@ -9,7 +9,7 @@ import pytest
 
 from ipp_toolkit.belief.mapping import entropy_from_logodds
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import AgentView, make_planner
+from ipp_toolkit.planning import AgentView, make_planner
 from ipp_toolkit.runs.evaluation import evaluate, run_mission
 from ipp_toolkit.sim.team import ACTION_NAMES
 from ipp_toolkit.world.sensor import Camera
@@ -68,7 +68,7 @@ def test_ig_spatial_flies_valid_deterministic_missions_and_refuses_bad_sigma():
 
 
 def test_the_false_positive_term_changes_choices_and_is_validated():
-    from baselines.spatial_gain import SpatialGainPlanner
+    from baselines.heuristics.spatial_gain import SpatialGainPlanner
 
     """w > 0 draws UAVs to check cells held above 0.5 that the smoothing doubts; w = 0 is the
     plain objective, and a bad w is refused naming it."""
@@ -93,7 +93,7 @@ def test_false_positive_steps_applies_the_term_only_in_the_last_steps():
     of the term at every step; a bad k is refused naming it."""
     from dataclasses import replace
 
-    from baselines.spatial_gain import SpatialGainPlanner
+    from baselines.heuristics.spatial_gain import SpatialGainPlanner
 
     camera = Camera(CONFIG.world, CONFIG.sensor)
     box = camera.rects[1, 5, 5]

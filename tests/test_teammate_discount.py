@@ -1,5 +1,5 @@
 """``ig``'s discount of decided teammates' footprints for planners that read the gain planes
-(:class:`ipp_toolkit.planners.discount.TeammateDiscount`), and the gain-prior actors' use of
+(:class:`ipp_toolkit.planning.discount.TeammateDiscount`), and the gain-prior actors' use of
 it and of the planes' relative gains."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import pytest
 import torch
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import choose_for_views, planner_views
-from ipp_toolkit.planners.discount import TeammateDiscount
+from ipp_toolkit.planning import choose_for_views, planner_views
+from ipp_toolkit.planning.discount import TeammateDiscount
 from ipp_toolkit.sim.features import gain_planes, option_gain_cells
 from ipp_toolkit.sim.mission import reset_mission, step_mission
 from ipp_toolkit.sim.team import ACTION_DELTAS
@@ -37,9 +37,9 @@ def _plane_option_gains(state) -> np.ndarray:
 
 
 def _ig_planner(name: str):
-    from baselines.information_gain import InformationGainPlanner
-    from baselines.learned_prior import LearnedPriorPlanner
-    from baselines.spatial_gain import SpatialGainPlanner
+    from baselines.field_prior.planner import LearnedPriorPlanner
+    from baselines.heuristics.information_gain import InformationGainPlanner
+    from baselines.heuristics.spatial_gain import SpatialGainPlanner
 
     # one step: the planes' values are one-step values (the lookahead is tested below)
     return {"ig": InformationGainPlanner, "ig_spatial": SpatialGainPlanner,
@@ -177,7 +177,7 @@ def test_a_discount_outside_zero_to_one_is_refused_naming_it(value):
         TeammateDiscount(config, config.features, value)
     with pytest.raises(ValueError, match=f"overlap_discount must lie in \\[0, 1\\], got {value}"):
         COMAPlanner(overlap_discount=value)
-    from baselines.sb3_planner import PPOPlanner
+    from baselines.sb3.planner import PPOPlanner
 
     with pytest.raises(ValueError, match=f"overlap_discount must lie in \\[0, 1\\], got {value}"):
         PPOPlanner(overlap_discount=value)
@@ -187,8 +187,8 @@ def test_the_default_coma_flies_ig_learneds_choices_for_every_agent():
     """The default ``coma`` (its residual the untrained start its recipe selected), greedy,
     chooses what a greedy ``ig_learned`` chooses for every UAV at every step, teammates
     heard; with ``overlap_discount=1`` (the planes' values as they are) it does not."""
-    from baselines.learned_prior import LearnedPriorPlanner
-    from ipp_toolkit.planners import make_planner
+    from baselines.field_prior.planner import LearnedPriorPlanner
+    from ipp_toolkit.planning import make_planner
 
     ig_learned = LearnedPriorPlanner(lookahead_steps=1)
     coma = make_planner("coma", lookahead_steps=1)
@@ -208,8 +208,8 @@ def test_coma_looking_ahead_flies_ig_learneds_choices_with_the_same_lookahead(op
     each option's continuation as ``ig_learned`` with the same options does, and so flies
     its choices (a greedy ``coma`` does not, on these missions); so do the defaults of both.
     """
-    from baselines.learned_prior import LearnedPriorPlanner
-    from ipp_toolkit.planners import make_planner
+    from baselines.field_prior.planner import LearnedPriorPlanner
+    from ipp_toolkit.planning import make_planner
 
     ig_learned = LearnedPriorPlanner(**options)
     coma = make_planner("coma", **options)
@@ -237,7 +237,7 @@ def test_relative_option_gains_keep_the_gains_order_when_every_gain_is_negative(
 def test_ppos_gain_prior_reads_negative_gains_in_their_order():
     from gymnasium import spaces
 
-    from baselines.ppo import GainPriorExtractor
+    from baselines.sb3.ppo import GainPriorExtractor
 
     grid = 11
     space = spaces.Box(-1.0, 1.0, (3, grid, grid), dtype=np.float32)
@@ -260,10 +260,10 @@ def test_an_untrained_gain_prior_ppo_flies_the_ig_planner_of_its_planes(tmp_path
 
     from gymnasium import spaces
 
-    from baselines import ppo
-    from baselines.ppo_training import training_env_config
-    from baselines.sb3_planner import PPOPlanner
-    from baselines.spatial_gain import SpatialGainPlanner
+    from baselines.heuristics.spatial_gain import SpatialGainPlanner
+    from baselines.sb3 import ppo
+    from baselines.sb3.planner import PPOPlanner
+    from baselines.sb3.ppo_training import training_env_config
 
     train = ppo.PPOTrainConfig(gain_prior=20.0, n_envs=1, n_steps=64, batch_size=128)
     env_config = training_env_config(train, _config(SPATIAL))

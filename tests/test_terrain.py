@@ -12,7 +12,7 @@ from PIL import Image
 
 from ipp_toolkit.config.schema import EnvConfig, TerrainConfig, WorldConfig, terrain_kinds
 from ipp_toolkit.sim.mission import reset_mission
-from ipp_toolkit.world import terrain
+from ipp_toolkit.world import registry
 from ipp_toolkit.world.terrain import (
     TERRAIN_GENERATORS,
     generate_terrain,
@@ -100,7 +100,7 @@ def test_registry_holds_the_builtins():
 
 
 def test_register_terrain_and_dispatch(monkeypatch):
-    monkeypatch.setattr(terrain, "TERRAIN_GENERATORS", dict(TERRAIN_GENERATORS))
+    monkeypatch.setattr(registry, "TERRAIN_GENERATORS", dict(TERRAIN_GENERATORS))
 
     @register_terrain("stripes")
     def stripes(config, world, rng, raster):
@@ -108,7 +108,7 @@ def test_register_terrain_and_dispatch(monkeypatch):
         truth[:, ::2] = True
         return truth
 
-    assert terrain.TERRAIN_GENERATORS["stripes"] is stripes
+    assert registry.TERRAIN_GENERATORS["stripes"] is stripes
     with pytest.raises(ValueError, match="'stripes' is already registered"):
         register_terrain("stripes")(stripes)
     register_terrain("stripes", replace=True)(stripes)

@@ -9,7 +9,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from .kernels import N_STATS
+from .region_stats import N_STATS
 
 _jit = numba.njit(cache=True, nogil=True, boundscheck=False)
 

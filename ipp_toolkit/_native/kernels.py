@@ -27,8 +27,8 @@ global map still count it once per footprint, as the reward always did.
 :func:`sensor_noise` draws the step's sensor noise (NumPy's streams, bit for bit;
 :mod:`ipp_toolkit.world.sensor_noise`). The NumPy fallback keeps the per-rectangle code.
 
-The planners' lookahead has five more (:mod:`ipp_toolkit.planners.segments`,
-:mod:`ipp_toolkit.planners.lookahead`): :func:`row_differences` finds where a UAV's map changed
+The planners' lookahead has five more (:mod:`ipp_toolkit.planning.segments`,
+:mod:`ipp_toolkit.planning.lookahead`): :func:`row_differences` finds where a UAV's map changed
 since its kept copy (:func:`same_bits`: whether a teammate's map is the same),
 :func:`indexed_segment_sums` sums table columns over segments straight from the cells' value
 indices, :func:`summed_area` builds a summed-area table and :func:`path_values` sums every
@@ -54,6 +54,8 @@ from typing import Any
 
 import numpy as np
 
+from .region_stats import N_STATS, REGION_STATS
+
 __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats",
            "read_cells", "fuse_evidence", "apply_targets", "gather_caches", "gain_changes",
            "gain_lookup", "segment_sums", "weighted_segment_sums", "summed_area",
@@ -61,17 +63,6 @@ __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats"
            "sensor_noise",
            "mission_kernels", "compile_mission_kernels",
            "REGION_STATS", "N_STATS"]
-
-REGION_STATS = ("entropy_interesting", "squared_error_interesting", "true_positive",
-                "predicted_positive", "new_weights_old_entropy", "old_weighted_entropy",
-                "new_weighted_entropy")
-"""The statistics vector of :func:`apply_values_with_stats` (and of
-:meth:`ipp_toolkit.belief.mapping.BeliefMaps.refresh_with_stats`), in order: the changes inside the
-region of the sum of H over interesting cells, of the sum of (1 - p)^2 over them, of the true
-and of the predicted positives (p > 0.5), then the sums of W' H (posterior weights, prior
-entropies), of W H before and of W' H' after."""
-
-N_STATS = len(REGION_STATS)
 
 AVAILABLE = (os.environ.get("IPP_TOOLKIT_NO_NUMBA", "") in ("", "0")
              and importlib.util.find_spec("numba") is not None)
@@ -322,7 +313,7 @@ def path_values(*arrays: np.ndarray) -> None:
     (q1, s0) + (q0, s0)) over the terms k with ``term_step[k] == t`` (``term_step`` is
     sorted), and the path's ``total`` adds ``weights[t] * new``; ``out[f]`` is the largest
     total, or 0 when none is finite. The same operations in the same order as the NumPy
-    reference (:func:`ipp_toolkit.planners.lookahead.continuation_values`).
+    reference (:func:`ipp_toolkit.planning.lookahead.continuation_values`).
 
     Args, in order: tables (Z, R + 1, C + 1) float64; altitudes (6, S, T) int64;
     rects (K, 6, S, 4) int64; term_step (K,) int64; term_sign (K,) float64; weights (T,)

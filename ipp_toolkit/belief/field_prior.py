@@ -10,7 +10,7 @@ predicts
 
 for every block of about :data:`BLOCK_METRES` metres, from what the UAV itself knows (its
 local map, which holds its own readings and those it heard). It is trained by supervised
-learning on simulator ground truth (``ipp-train prior``, :mod:`baselines.prior_training`);
+learning on simulator ground truth (``ipp-train prior``, :mod:`baselines.field_prior.training`);
 this module owns only what inference needs: the input planes, the network, the file format
 and the prediction, so a planner that flies a prior never imports the trainer.
 

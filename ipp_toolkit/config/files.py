@@ -19,10 +19,16 @@ from typing import Any
 import yaml
 
 from ..io import atomic_write, read_yaml
+from .limits import check_limit
 from .schema import _SECTIONS, EnvConfig, _build
 
 __all__ = ["read_config_file", "load_config", "save_config", "config_from_dict",
            "config_to_dict"]
+
+
+def _check_config_size(size: int, label: str) -> None:
+    """LimitError when a config file of ``size`` bytes is over the ``config_bytes`` limit."""
+    check_limit("config_bytes", size, label, estimate=False)
 
 
 def _check_keys(values: Mapping[str, Any]) -> None:
@@ -72,7 +78,7 @@ def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
             of sections, or has an unknown section or key (the message names the file).
     """
     path = Path(path)
-    values = read_yaml(path, "config file")
+    values = read_yaml(path, "config file", check_size=_check_config_size)
     if values is None:
         return {}
     if not isinstance(values, Mapping):

@@ -126,13 +126,13 @@ class SensorConfig:
 
 def terrain_kinds() -> tuple[str, ...]:
     """Every terrain kind: the names of the terrain registry
-    (:data:`ipp_toolkit.world.terrain.TERRAIN_GENERATORS`, the one owner of them; the
+    (:data:`ipp_toolkit.world.registry.TERRAIN_GENERATORS`, the one owner of them; the
     built-in kinds, every kind added with ``register_terrain`` and those of installed packages'
     entry points, ``ipp_toolkit.terrains``)."""
-    from ..world import terrain  # terrain imports this module: look up lazily
+    from ..world import registry  # imports the world package, which registers the kinds
 
-    terrain.load_entry_point_terrains()
-    return tuple(terrain.TERRAIN_GENERATORS)
+    registry.load_entry_point_terrains()
+    return tuple(registry.TERRAIN_GENERATORS)
 
 
 @dataclass(frozen=True)
@@ -213,7 +213,7 @@ class TerrainConfig:
         if self.crop_fraction[0] <= 0.0:
             _fail("terrain", "crop_fraction", self.crop_fraction, "must lie in (0, 1]")
         if self.real_sources not in REAL_SOURCES:
-            from ..world.families import real_raster_names  # imports this module: lazily
+            from ..world.registry import real_raster_names  # imports the world package
 
             if self.real_sources not in real_raster_names():
                 _fail("terrain", "real_sources", self.real_sources,

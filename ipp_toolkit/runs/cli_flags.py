@@ -1,8 +1,8 @@
 """The flags the commands share, one owner for their spelling and their values.
 
 ``ipp-compare``, ``ipp-study``, ``ipp-simulate`` (:mod:`reports.cli`) and the ``ipp-train``
-trainers (:mod:`coma.cli`, :mod:`baselines.ppo_training` for ``ppo``, ``sb3`` and ``rllib``,
-:mod:`baselines.prior_training`) parse some of the same flags. This module owns
+trainers (:mod:`coma.cli`, :mod:`baselines.sb3.ppo_training` for ``ppo``, ``sb3`` and ``rllib``,
+:mod:`baselines.field_prior.training`) parse some of the same flags. This module owns
 
 * the value types of their flags: :func:`positive_int`, :func:`positive_float`,
   :func:`finite_float` and :func:`comm_range`, and the comma lists built on them,

@@ -19,7 +19,7 @@ This module owns one planner's mission (:func:`run_mission`: its views, its time
 its rows), the task runner that flies one (planner label, mission) with cached planners, and
 :func:`evaluate`. Its neighbours own the rest: the mission loop (:mod:`ipp_toolkit.sim.driver`,
 shared with COMA's rollouts), planner specs and their syntax
-(:mod:`ipp_toolkit.planners.specs`), the planner seed
+(:mod:`ipp_toolkit.planning.specs`), the planner seed
 (:func:`ipp_toolkit.world.seeding.planner_seed`),
 the worker processes (:mod:`ipp_toolkit.runs.process_pool`), the backend check and the optional
 Ray backend (:mod:`ipp_toolkit.runs.ray_backend`, which imports Ray only when asked) and the
@@ -44,14 +44,14 @@ from ..config.limits import check_mission, check_result_rows
 from ..config.schema import EnvConfig, check_int
 from ..config.settings import safe_name
 from ..io import write_json
-from ..planners import (
+from ..planning import (
     Planner,
     PlannerFactory,
     check_planner_name,
     make_planner,
     planner_views,
 )
-from ..planners.specs import PlannerSpec, as_specs
+from ..planning.specs import PlannerSpec, as_specs
 from ..sim.driver import fly_missions, start_missions
 from ..sim.mission import MissionGeometry, MissionState
 from ..world.seeding import check_namespace, planner_seed

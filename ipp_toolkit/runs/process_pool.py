@@ -34,13 +34,13 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any, Protocol
 
 from .._native import kernels
-from ..planners import (
+from ..planning import (
     PlannerFactory,
     entry_point_planners,
     planner_factory,
     planners_in_process,
 )
-from ..planners.specs import PlannerSpec
+from ..planning.specs import PlannerSpec
 
 __all__ = ["TaskRunner", "WorkerPool", "children_ignore_sigint", "stop_workers", "guard_worker",
            "limit_blas_threads", "limit_torch_threads", "retain_freed_memory",
@@ -224,7 +224,7 @@ class WorkerPool:
     """Spawned, single-threaded worker processes, started now for tasks to come.
 
     The workers start at once (one pending no-op task each) and import ``modules`` (e.g.
-    :func:`ipp_toolkit.planners.planner_modules`), so a caller can start the pool, do its own
+    :func:`ipp_toolkit.planning.planner_modules`), so a caller can start the pool, do its own
     start-up, then hand the pool to :func:`run_parallel` (through ``evaluate(pool=...)``),
     which shuts it down.
     :meth:`close` stops the workers of a pool that was not used (call it in a ``finally``).

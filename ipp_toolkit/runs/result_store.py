@@ -34,7 +34,7 @@ from ..config.settings import safe_name
 from ..io import atomic_write, write_json
 
 if TYPE_CHECKING:
-    from ..planners.specs import PlannerSpec
+    from ..planning.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
            "check_folder", "check_label", "run_key", "shard_path", "trajectory_path",

@@ -108,7 +108,7 @@ def choose_in_order(scores: np.ndarray, positions: np.ndarray, masks: np.ndarray
         rescore: ``rescore(k, targets)`` -> agent k's (6,) scores given the (K, 3) next
             waypoints its heard, already decided teammates chose (K may be 0); used instead
             of ``scores[k]`` when given (``ig``'s discount of their footprints,
-            :class:`ipp_toolkit.planners.discount.TeammateDiscount`).
+            :class:`ipp_toolkit.planning.discount.TeammateDiscount`).
 
     Returns:
         (N,) int64 actions, each valid; ties go to the lowest action index.

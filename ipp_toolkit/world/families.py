@@ -30,14 +30,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..config.schema import TerrainConfig, WorldConfig
+from .registry import RASTER_FOLDER, raster_manifest, real_raster_names
 from .terrain import _bilinear_weights, generate_terrain, register_terrain, resample_area_average
 
 __all__ = ["RealRaster", "real_rasters", "real_raster_names", "real_crop", "fractal_field",
@@ -45,8 +44,6 @@ __all__ = ["RealRaster", "real_rasters", "real_raster_names", "real_crop", "frac
 
 DEFAULT_THRESHOLD_QUANTILE = (0.4, 0.9)
 """Quantile range of ``fractal`` and ``real`` when ``terrain.threshold_quantile`` is unset."""
-
-RASTER_FOLDER = Path(__file__).resolve().parents[1] / "data" / "rasters"
 
 _FRACTAL_SPACING = 1.0  # lattice spacing in metres: the field ignores r_M
 _MIN_VALID_SHARE = 0.5  # a map cell is data when at least half of it lies on data pixels
@@ -74,24 +71,10 @@ class RealRaster:
 
 
 @functools.lru_cache(maxsize=1)
-def _manifest() -> tuple[dict, ...]:
-    manifest = RASTER_FOLDER / "sources.json"
-    try:
-        return tuple(json.loads(manifest.read_text()))
-    except (OSError, json.JSONDecodeError) as err:
-        raise ValueError(f"cannot read the bundled raster list {str(manifest)!r}: {err}") from None
-
-
-def real_raster_names(split: str = "all") -> tuple[str, ...]:
-    """Names of the bundled real rasters (of one split: train, validation, test, or all)."""
-    return tuple(e["name"] for e in _manifest() if split in ("all", e["split"]))
-
-
-@functools.lru_cache(maxsize=1)
 def real_rasters() -> tuple[RealRaster, ...]:
     """Every bundled real raster, in ``sources.json`` order (loaded once)."""
     rasters = []
-    for entry in _manifest():
+    for entry in raster_manifest():
         layers = np.load(RASTER_FOLDER / f"{entry['name']}.npy", allow_pickle=False)
         layers.setflags(write=False)
         rasters.append(RealRaster(entry["name"], entry["split"], entry["measures"], layers,

@@ -6,7 +6,8 @@ metres for the map resolution r. ``True`` means interesting.
 
 Every random terrain is defined in metres and only sampled at the cell centres, so the same
 random stream gives the same terrain at any map resolution (up to the cells the boundary
-crosses). Kinds are dispatched through :data:`TERRAIN_GENERATORS`; :func:`register_terrain`
+crosses). Kinds are dispatched through :data:`TERRAIN_GENERATORS` (owned by
+:mod:`ipp_toolkit.world.registry`, re-exported here); :func:`register_terrain`
 adds one, and installed packages add theirs by entry point in the group
 :data:`ENTRY_POINT_GROUP` (``name = module:function``), read on a process's first lookup.
 """
@@ -19,7 +20,6 @@ import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,14 @@ import numpy as np
 
 from ..config.limits import LimitError, check_raster_cells
 from ..config.schema import NAN_POLICIES, TerrainConfig, WorldConfig
+from . import registry
+from .registry import (
+    ENTRY_POINT_GROUP,
+    TERRAIN_GENERATORS,
+    load_entry_point_terrains,
+    register_terrain,
+    takes_namespace,
+)
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -50,12 +58,6 @@ TerrainGenerator = Callable[
 ]
 """``(config, world, rng, raster) -> (H, W) bool map`` with H = W = ``world.map_cells``."""
 
-TERRAIN_GENERATORS: dict[str, TerrainGenerator] = {}
-"""Terrain kind -> generator; :func:`generate_terrain` dispatches on ``config.kind``."""
-
-ENTRY_POINT_GROUP = "ipp_toolkit.terrains"
-"""The entry-point group of terrains from installed packages: ``kind = module:function``."""
-
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 TIFF_SUFFIXES = (".tif", ".tiff")
 RASTER_SUFFIXES = (".npy", *IMAGE_SUFFIXES, *TIFF_SUFFIXES)
@@ -65,69 +67,6 @@ _BLOB_LATTICE_SPACING = 1.0
 
 _BLOB_PADDING_SIGMAS = 5.0
 """Lattice margin around the area, in kernel stds: keeps the FFT's wrap-around below 1e-5."""
-
-
-def register_terrain(name: str, *, replace: bool = False, namespaced: bool = False
-                     ) -> Callable[[TerrainGenerator], TerrainGenerator]:
-    """Decorator adding a terrain generator under ``name`` to :data:`TERRAIN_GENERATORS`.
-
-    The generator is called as ``fn(config, world, rng, raster)`` and must return an
-    (H, W) array (H = W = ``world.map_cells``) that is cast to bool; with ``namespaced`` it
-    also gets the mission's namespace as ``namespace=`` (``train``, ``validation`` or
-    ``test``), e.g. to draw from separate data. Registering a taken name is an error unless
-    ``replace`` is true, so a typo cannot silently shadow a built-in.
-    """
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"terrain kind must be a non-empty string, got {name!r}")
-
-    def decorator(fn: TerrainGenerator) -> TerrainGenerator:
-        if name in TERRAIN_GENERATORS and not replace:
-            raise ValueError(f"terrain kind {name!r} is already registered; "
-                             "pass replace=True to override it")
-        TERRAIN_GENERATORS[name] = fn
-        _NAMESPACED.discard(name)
-        if namespaced:
-            _NAMESPACED.add(name)
-        return fn
-
-    return decorator
-
-
-_NAMESPACED: set[str] = set()
-_ENTRY_POINTS_READ = False
-
-
-def load_entry_point_terrains() -> None:
-    """Register the terrains of the entry-point group :data:`ENTRY_POINT_GROUP`, once per
-    process (every lookup of the kinds calls it: :func:`ipp_toolkit.config.schema.terrain_kinds`,
-    :func:`generate_terrain`).
-
-    This is what makes a package's terrain known in worker processes, which never run the
-    script that registered one by decorator. Each entry point's module is imported; its
-    object is registered under the entry point's name unless the module registered it
-    already (with :func:`register_terrain`, e.g. ``namespaced=True``). A module that fails
-    to import, or a name taken by another generator, is skipped with a warning: the other
-    kinds stay usable.
-    """
-    global _ENTRY_POINTS_READ
-    if _ENTRY_POINTS_READ:
-        return
-    _ENTRY_POINTS_READ = True  # first: a module that builds a config looks the kinds up again
-    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            generator = entry.load()
-        except Exception as err:  # noqa: BLE001 - one broken package must not hide the others
-            warnings.warn(f"terrain entry point {entry.name!r} ({entry.value}) cannot be "
-                          f"loaded: {err}", RuntimeWarning, stacklevel=2)
-            continue
-        registered = TERRAIN_GENERATORS.get(entry.name)
-        if registered is None:
-            register_terrain(entry.name)(generator)
-        elif registered is not generator:
-            owner = (f"{getattr(registered, '__module__', '?')}."
-                     f"{getattr(registered, '__qualname__', registered)}")
-            warnings.warn(f"terrain entry point {entry.name!r} ({entry.value}) is skipped: "
-                          f"the kind is registered by {owner}", RuntimeWarning, stacklevel=2)
 
 
 def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Generator,
@@ -151,12 +90,12 @@ def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.G
     """
     load_entry_point_terrains()
     try:
-        generator = TERRAIN_GENERATORS[config.kind]
+        generator = registry.TERRAIN_GENERATORS[config.kind]
     except KeyError:
         raise ValueError(f"unknown terrain kind {config.kind!r}; registered kinds: "
-                         f"{sorted(TERRAIN_GENERATORS)}") from None
+                         f"{sorted(registry.TERRAIN_GENERATORS)}") from None
     size = world.map_cells
-    if config.kind in _NAMESPACED:
+    if takes_namespace(config.kind):
         truth = np.asarray(generator(config, world, rng, raster, namespace=namespace))
     else:
         truth = np.asarray(generator(config, world, rng, raster))
@@ -582,6 +521,3 @@ def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Ge
             f"map: [{entry.values.min():g}, {entry.values.max():g}])")
     return interesting
 
-
-# The realistic families register themselves on import; they build on the helpers above.
-from . import families  # noqa: E402, F401

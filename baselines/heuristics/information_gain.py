@@ -8,21 +8,21 @@ from ipp_toolkit.belief.gain import footprint_sums_in_box, objective_table
 from ipp_toolkit.belief.mapping import OUTCOME_WEIGHTINGS, expected_gain
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import AgentView, Planner
-from ipp_toolkit.planners.discount import (
+from ipp_toolkit.planning import AgentView, Planner
+from ipp_toolkit.planning.discount import (
     OVERLAP_DISCOUNT,
     bounding_box,
     check_overlap_discount,
     discount_covered,
 )
-from ipp_toolkit.planners.lookahead import (
+from ipp_toolkit.planning.lookahead import (
     LOOKAHEAD_DISCOUNT,
     check_lookahead,
     continuation_values,
     mission_lookahead,
     steps_left,
 )
-from ipp_toolkit.planners.segments import (
+from ipp_toolkit.planning.segments import (
     SegmentBox,
     SegmentGrid,
     SegmentSums,
@@ -97,11 +97,11 @@ class InformationGainPlanner(Planner):
         lookahead_steps: d in [1, 4]: a move is also worth ``lookahead_discount`` times the
             best value of the d - 1 moves of the agent's own path after it, each counting
             the cells no earlier footprint of the path covers
-            (:mod:`ipp_toolkit.planners.lookahead`);
+            (:mod:`ipp_toolkit.planning.lookahead`);
             1 (default): the greedy choice.
         lookahead_discount: gamma in [0, 1], the weight per step further along the path.
         lookahead_silent: look ahead on missions without communication too (default: greedy
-            there, :func:`~ipp_toolkit.planners.lookahead.mission_lookahead`).
+            there, :func:`~ipp_toolkit.planning.lookahead.mission_lookahead`).
     """
 
     name = "ig"
@@ -218,7 +218,7 @@ class InformationGainPlanner(Planner):
 
     @property
     def segment_grid(self) -> SegmentGrid:
-        """The segments the lookahead sums over (:mod:`ipp_toolkit.planners.segments`)."""
+        """The segments the lookahead sums over (:mod:`ipp_toolkit.planning.segments`)."""
         if self._segments is None:
             raise RuntimeError("call reset(config, seed) first")
         return self._segments
@@ -229,7 +229,7 @@ class InformationGainPlanner(Planner):
         lookahead sums.
 
         The built-in objectives keep their tables' segment sums per agent across steps
-        (:class:`~ipp_toolkit.planners.segments.SegmentSums`); a subclass that overrides
+        (:class:`~ipp_toolkit.planning.segments.SegmentSums`); a subclass that overrides
         :meth:`cell_gains` alone gets its values summed from :meth:`cell_gains` over the box
         at every step (the same values, slower).
         """

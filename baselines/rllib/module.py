@@ -1,5 +1,5 @@
 """What ``ipp-train rllib`` hands to RLlib: the multi-agent env, the masked RLModule, the
-episode callback. Imports Ray: only :mod:`baselines.rllib_training` imports this module, and
+episode callback. Imports Ray: only :mod:`baselines.rllib.training` imports this module, and
 only once Ray is known to be importable.
 
 * :class:`IPPMultiAgentEnv`: :class:`ipp_toolkit.env.IPPEnv` as an RLlib ``MultiAgentEnv``.
@@ -8,7 +8,7 @@ only once Ray is known to be importable.
   runner ``w`` flies missions 0, 1, 2, ... of run ``base_seed + w * envs_per_runner + v``
   (``base_seed`` is the run seed plus the agent-steps done before a resume).
 * :class:`IPPMaskedRLModule`: a ``TorchRLModule`` around
-  :class:`baselines.rllib_policy.MaskedConvPolicy` (the conv encoder of the (C, 11, 11)
+  :class:`baselines.rllib.policy.MaskedConvPolicy` (the conv encoder of the (C, 11, 11)
   planes, masked logits, a value head); it implements the ``ValueFunctionAPI`` (PPO, APPO,
   IMPALA) and the ``TargetNetworkAPI`` (APPO).
 * :class:`TeamMetricsCallback`: logs each finished mission's team return, final entropy and
@@ -36,7 +36,7 @@ from ray.rllib.env.multi_agent_env import MultiAgentEnv
 from ipp_toolkit.config.files import config_from_dict
 from ipp_toolkit.env import IPPEnv
 
-from .rllib_policy import MaskedConvPolicy, RLlibArchitecture
+from .policy import MaskedConvPolicy, RLlibArchitecture
 
 __all__ = ["SHARED_POLICY", "ENV_NAME", "IPPMultiAgentEnv", "make_env", "IPPMaskedRLModule",
            "TeamMetricsCallback"]
@@ -106,7 +106,7 @@ class IPPMaskedRLModule(TorchRLModule, ValueFunctionAPI, TargetNetworkAPI):
     ``{"observation": (C, G, G), "action_mask": (6,)}``.
 
     ``model_config``: ``width``, ``features_dim``, ``hidden`` (the sizes of
-    :class:`~baselines.rllib_policy.RLlibArchitecture`).
+    :class:`~baselines.rllib.policy.RLlibArchitecture`).
     """
 
     def setup(self) -> None:

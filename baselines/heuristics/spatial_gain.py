@@ -10,10 +10,10 @@ from ipp_toolkit.belief.interest import InterestSmoother, interest_smoother
 from ipp_toolkit.belief.mapping import false_positive_term_applies
 from ipp_toolkit.belief.value_table import ValueTable
 from ipp_toolkit.config.schema import EnvConfig, check_int
-from ipp_toolkit.planners import AgentView
-from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
-from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT
-from ipp_toolkit.planners.segments import SegmentBox, objective_segment_values
+from ipp_toolkit.planning import AgentView
+from ipp_toolkit.planning.discount import OVERLAP_DISCOUNT
+from ipp_toolkit.planning.lookahead import LOOKAHEAD_DISCOUNT
+from ipp_toolkit.planning.segments import SegmentBox, objective_segment_values
 
 from .information_gain import InformationGainPlanner, gain_table
 
@@ -67,11 +67,13 @@ class SpatialGainPlanner(InformationGainPlanner):
 
     Args:
         sigma: standard deviation of the smoothing in metres (> 0).
-        overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
+        overlap_discount: as for
+            :class:`~baselines.heuristics.information_gain.InformationGainPlanner`.
         false_positive_weight: w >= 0 of the false-positive term.
         false_positive_steps: k >= 1, the last steps in which the term applies; None: all.
         lookahead_steps, lookahead_discount, lookahead_silent: as for
-            :class:`~baselines.information_gain.InformationGainPlanner` (default: greedy).
+            :class:`~baselines.heuristics.information_gain.InformationGainPlanner`
+            (default: greedy).
     """
 
     name = "ig_spatial"

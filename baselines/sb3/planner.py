@@ -4,8 +4,8 @@
 policy of an ``ipp-train sb3`` run of any algorithm (PPO, MaskablePPO, A2C, DQN, QRDQN,
 RecurrentPPO, TRPO, ARS), the ``ipp-train ppo`` files, and SB3's own ``model.save`` zips of
 a model trained on :func:`ipp_toolkit.vec.make_sb3_vec_env` (``sb3=model.zip``; read without
-unpickling, :mod:`baselines.sb3_zip`). Inference only: this module never
-imports the training code (:mod:`baselines.sb3_training`, :mod:`baselines.sb3_runner`).
+unpickling, :mod:`baselines.sb3.zips`). Inference only: this module never
+imports the training code (:mod:`baselines.sb3.training`, :mod:`baselines.sb3.runner`).
 """
 
 from __future__ import annotations
@@ -19,31 +19,31 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import (
+from ipp_toolkit.planning import (
     AgentView,
     Planner,
     check_policy_transfer,
     choose_for_views,
     policy_inputs,
 )
-from ipp_toolkit.planners.discount import (
+from ipp_toolkit.planning.discount import (
     OVERLAP_DISCOUNT,
     TeammateDiscount,
     check_overlap_discount,
 )
-from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, lookahead_options
+from ipp_toolkit.planning.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS, lookahead_options
 from ipp_toolkit.sim.features import relative_option_gains
 from ipp_toolkit.sim.team import N_ACTIONS
 
-from .ppo import GainPriorExtractor, GainPriorMlpExtractor, resolve_policy
-from .sb3_policies import (
+from .loading import load_sb3_policy
+from .policies import (
     RECURRENT_ALGORITHMS,
     LSTMStates,
     action_scores,
     expected_obs_shape,
-    load_sb3_policy,
     masked_argmax,
 )
+from .ppo import GainPriorExtractor, GainPriorMlpExtractor, resolve_policy
 
 __all__ = ["SB3Planner", "PPOPlanner"]
 
@@ -60,11 +60,11 @@ class SB3Planner(Planner):
     RecurrentPPO), Q-values (DQN), mean quantiles (QRDQN) or action-net outputs (ARS); a
     masked action is never chosen. By default the agents choose in agent order, each its
     best option among those whose 2-D target no heard teammate of lower index already chose
-    (``ig``'s rule, :func:`~ipp_toolkit.planners.choose_for_views`), instead of each taking
+    (``ig``'s rule, :func:`~ipp_toolkit.planning.choose_for_views`), instead of each taking
     its own argmax and losing same-target contests. A policy with a gain prior
     (``ipp-train ppo --gain-prior``) also values, in that order, the cells under the next
     footprints of those teammates at ``overlap_discount`` times their gain, as ``ig`` does
-    (:class:`~ipp_toolkit.planners.discount.TeammateDiscount`: the six relative gains its
+    (:class:`~ipp_toolkit.planning.discount.TeammateDiscount`: the six relative gains its
     action layer reads are discounted, the rest of its forward pass kept). A RecurrentPPO
     policy keeps its LSTM state per agent across the steps of a mission and starts each
     mission from zeros.
@@ -72,7 +72,7 @@ class SB3Planner(Planner):
     Args:
         checkpoint: a ``policy.pt`` (or ``checkpoint.pt``) of ``ipp-train sb3`` or
             ``ipp-train ppo``, an SB3 ``model.save`` zip, or a shipped PPO policy by name
-            (``shipped:NAME``, :data:`baselines.ppo.SHIPPED_POLICIES`).
+            (``shipped:NAME``, :data:`baselines.sb3.ppo.SHIPPED_POLICIES`).
         device: torch device of the forward pass.
         in_order: choose in agent order under the same-step rule (default); False gives
             every agent its own argmax, as the policy acted while it trained.
@@ -80,12 +80,12 @@ class SB3Planner(Planner):
             [0, 1] (1: the planes' gains as they are); other policies ignore it.
         lookahead_steps, lookahead_discount, lookahead_silent: a gain-prior policy's six
             gains also count each option's best continuation along the UAV's own path, as
-            the ``ig`` planners with these options do (:mod:`ipp_toolkit.planners.lookahead`;
+            the ``ig`` planners with these options do (:mod:`ipp_toolkit.planning.lookahead`;
             default 1 step: the planes' one-step gains); other policies ignore them.
 
     Raises:
         CheckpointError: no checkpoint; a missing, corrupt or foreign one; or one trained for
-            another action count (see :func:`~baselines.sb3_policies.load_sb3_policy`).
+            another action count (see :func:`~baselines.sb3.loading.load_sb3_policy`).
         ValueError: an unknown ``shipped:`` name.
     """
 
@@ -171,7 +171,7 @@ class SB3Planner(Planner):
 def _discounted_rescore(policy: Any, observations: np.ndarray, masks: np.ndarray,
                         views: list[AgentView], scores: np.ndarray,
                         discount: TeammateDiscount) -> Callable[[int, np.ndarray], np.ndarray]:
-    """``rescore(k, targets)`` for :func:`~ipp_toolkit.planners.choose_for_views`: a
+    """``rescore(k, targets)`` for :func:`~ipp_toolkit.planning.choose_for_views`: a
     gain-prior policy's logits for agent k with the six relative gains its action layer
     reads recomputed from its planes' gains discounted under ``targets``' footprints."""
     with torch.no_grad():
@@ -196,8 +196,8 @@ class PPOPlanner(SB3Planner):
 
     Args:
         checkpoint: a ``policy.pt`` of ``ipp-train ppo`` (or of ``ipp-train sb3``), or
-            ``shipped:NAME`` (:data:`baselines.ppo.SHIPPED_POLICIES`); None loads the default
-            shipped policy (:data:`baselines.ppo.DEFAULT_SHIPPED`).
+            ``shipped:NAME`` (:data:`baselines.sb3.ppo.SHIPPED_POLICIES`); None loads the default
+            shipped policy (:data:`baselines.sb3.ppo.DEFAULT_SHIPPED`).
         device: torch device of the forward pass.
         in_order, overlap_discount, lookahead_steps, lookahead_discount, lookahead_silent:
             as in :class:`SB3Planner`; by default a gain-prior policy looks three steps

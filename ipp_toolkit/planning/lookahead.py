@@ -13,16 +13,16 @@ at its first reading on the path: a second reading of the same ground is worth l
 counting it zero keeps every term a rectangle sum. Footprints are rectangles and so are
 their intersections, so each term is an inclusion-exclusion over the earlier footprints,
 taken from a summed-area table of each altitude's values over the segments every footprint
-edge and every ~0.5 m block edge cut the map into (:mod:`ipp_toolkit.planners.segments`),
+edge and every ~0.5 m block edge cut the map into (:mod:`ipp_toolkit.planning.segments`),
 within the box the paths can reach at that altitude. Paths that leave the grid of waypoints
 are skipped; a path is as long as the steps left in the mission allow.
 
 The segment values come from the planner (a callable), with whatever the planner applies to
 the first move (a teammate's same-step discount) applied to the whole path: used by the
 ``ig`` family (``lookahead_steps``) and by the planners that read the gain planes
-(:class:`~ipp_toolkit.planners.discount.TeammateDiscount`). Their tables' segment sums are
+(:class:`~ipp_toolkit.planning.discount.TeammateDiscount`). Their tables' segment sums are
 kept per UAV and summed again only where its map changed
-(:class:`~ipp_toolkit.planners.segments.SegmentSums`).
+(:class:`~ipp_toolkit.planning.segments.SegmentSums`).
 
 Cost per UAV and step: the segment sums where the map changed (its own and the heard
 readings), one product per segment of each altitude's box (about 100 x 100 segments at
@@ -97,7 +97,7 @@ def check_lookahead(steps: int, discount: float) -> tuple[int, float]:
 
 def lookahead_options(steps: int, discount: float, silent: bool) -> tuple[int, float, bool]:
     """``(steps, discount, silent)`` checked (:func:`check_lookahead`), as a planner that
-    hands them to :class:`~ipp_toolkit.planners.discount.TeammateDiscount` keeps them."""
+    hands them to :class:`~ipp_toolkit.planning.discount.TeammateDiscount` keeps them."""
     return (*check_lookahead(steps, discount), bool(silent))
 
 
@@ -147,7 +147,7 @@ def _segment_tables(boxes: list[tuple[int, SegmentBox]],
                     shape: tuple[int, int]) -> np.ndarray:
     """(Z, R + 1, C + 1) float64 per altitude of ``boxes`` the summed-area table of the
     values at that altitude over the segments of its box (a grid of ``shape`` = (R, C)
-    segments; :mod:`ipp_toolkit.planners.segments`), at the box's segments, so that a
+    segments; :mod:`ipp_toolkit.planning.segments`), at the box's segments, so that a
     rectangle's corners index it directly (the rest is never read, but [0, 0, 0] = 0: what
     the empty rectangle of a path off the grid reads)."""
     tables = np.empty((max((altitude for altitude, _ in boxes), default=0) + 1, shape[0] + 1,
@@ -175,7 +175,7 @@ def _rect_sums(tables: np.ndarray, rect: np.ndarray, altitude: np.ndarray) -> np
 
 class _PathTerms(NamedTuple):
     """The rectangles the lookahead sums for the paths from one waypoint's six first moves,
-    as cut indices of a :class:`~ipp_toolkit.planners.segments.SegmentGrid` (see
+    as cut indices of a :class:`~ipp_toolkit.planning.segments.SegmentGrid` (see
     :func:`_path_terms`)."""
 
     valid: np.ndarray  # (6, S) bool: the path stays on the grid of waypoints
@@ -286,7 +286,7 @@ def continuation_values(rects: np.ndarray, first_targets: np.ndarray, allowed: n
         discount: gamma, the weight per step further along the path.
         segment_values: ``(altitude, box) -> (i1 - i0, j1 - j0)`` float64 the per-cell
             values of a reading at ``altitude`` summed over each segment of ``box`` (i0, i1,
-            j0, j1) of ``grid`` (:mod:`ipp_toolkit.planners.segments`).
+            j0, j1) of ``grid`` (:mod:`ipp_toolkit.planning.segments`).
         grid: the segments: cut by every footprint edge of ``rects``.
     """
     first = np.flatnonzero(allowed)

@@ -1,9 +1,9 @@
 """The training run every SB3 algorithm shares: files, resume, callbacks and the learn loop.
 
-:func:`run_sb3_training` is the one loop behind ``ipp-train ppo`` (:mod:`baselines.ppo_training`)
-and ``ipp-train sb3`` (:mod:`baselines.sb3_training`). A caller says how to build the vec env
-and the model and what a policy file holds; this module does the rest, identically for every
-algorithm:
+:func:`run_sb3_training` is the one loop behind ``ipp-train ppo``
+(:mod:`baselines.sb3.ppo_training`) and ``ipp-train sb3`` (:mod:`baselines.sb3.training`). A
+caller says how to build the vec env and the model and what a policy file holds; this module
+does the rest, identically for every algorithm:
 
 * ``OUT/checkpoint.pt`` (+ ``.json``): the policy's state dict, its optimiser state, the step
   and episode counts and the training seconds, written atomically every

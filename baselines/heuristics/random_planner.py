@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import AgentView, Planner
+from ipp_toolkit.planning import AgentView, Planner
 
 __all__ = ["RandomPlanner"]
 

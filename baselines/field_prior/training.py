@@ -57,7 +57,7 @@ from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch, write_json
-from ipp_toolkit.planners import Planner, planner_views
+from ipp_toolkit.planning import Planner, planner_views
 from ipp_toolkit.runs.cli_flags import comm_range_list, int_list, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import progress_bar, report_interrupt
@@ -65,8 +65,8 @@ from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.world.seeding import planner_seed
 
-from .learned_prior import LearnedPriorPlanner
-from .spatial_gain import SpatialGainPlanner
+from ..heuristics.spatial_gain import SpatialGainPlanner
+from .planner import LearnedPriorPlanner
 
 __all__ = ["PriorTrainingConfig", "collect_states", "main", "train_prior"]
 

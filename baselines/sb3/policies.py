@@ -1,9 +1,9 @@
 """Shared policies of any supported SB3 algorithm: architecture, files and greedy actions.
 
-The inference side of ``ipp-train sb3`` (:mod:`baselines.sb3_training` trains, this module and
-:mod:`baselines.sb3_planner` fly; neither imports the training code). Supported algorithms
+The inference side of ``ipp-train sb3`` (:mod:`baselines.sb3.training` trains, this module and
+:mod:`baselines.sb3.planner` fly; neither imports the training code). Supported algorithms
 (:data:`ALGORITHMS`), all with one policy shared by every UAV (parameter sharing) and the
-:class:`~baselines.ppo.SmallCNN` features extractor on the (C, G, G) actor planes:
+:class:`~baselines.sb3.ppo.SmallCNN` features extractor on the (C, G, G) actor planes:
 
 * PPO, A2C, TRPO: ``ActorCriticPolicy``; greedy = argmax of the valid logits;
 * MaskablePPO: ``MaskableActorCriticPolicy``; argmax of the valid logits;
@@ -18,10 +18,11 @@ Files: a policy file is a plain state dict saved with :func:`ipp_toolkit.io.save
 (format ``ipp-toolkit/sb3``; ``ipp-toolkit/sb3-training`` for a resumable checkpoint) holding
 the weights, the algorithm, the observation shape, the action count, the architecture and the
 configs; a JSON record sits beside it. PPO and MaskablePPO runs are written by
-``ipp-train ppo`` (the PPO case of ``ipp-train sb3``) in its ``ipp-toolkit/ppo`` format, which
-:func:`load_sb3_policy` reads as well, and SB3's own ``model.save`` zips too
-(:mod:`baselines.sb3_zip`). Nothing is ever unpickled: the policy is rebuilt from the records
-(or the zip's JSON) and the weights loaded with ``torch.load(weights_only=True)``.
+``ipp-train ppo`` (the PPO case of ``ipp-train sb3``) in its ``ipp-toolkit/ppo`` format;
+:func:`~baselines.sb3.loading.load_sb3_policy` reads every one of them, and SB3's own
+``model.save`` zips too (:mod:`baselines.sb3.zips`). Nothing is ever unpickled: the policy is
+rebuilt from the records (or the zip's JSON) and the weights loaded with
+``torch.load(weights_only=True)``.
 """
 
 from __future__ import annotations
@@ -40,17 +41,13 @@ from sb3_contrib.qrdqn.policies import QRDQNPolicy
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.dqn.policies import DQNPolicy
 
-from ipp_toolkit.config.files import config_from_dict
 from ipp_toolkit.config.limits import check_layer_size
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.io import CheckpointError, load_torch
+from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.sim.team import N_ACTIONS
 
-from .ppo import CHECKPOINT_KIND as PPO_KIND
-from .ppo import TRAINING_KIND as PPO_TRAINING_KIND
 from .ppo import NoOptimizer, SmallCNN, actor_logits, check_policy_size, masked_argmax
-from .ppo import load_policy as load_ppo_policy
 
 __all__ = [
     "ALGORITHMS",
@@ -68,7 +65,6 @@ __all__ = [
     "build_policy",
     "expected_obs_shape",
     "sb3_policy_metadata",
-    "load_sb3_policy",
     "check_shapes",
     "masked_argmax",
     "action_scores",
@@ -101,8 +97,6 @@ _POLICY_CLASSES: dict[str, type[BasePolicy]] = {
     "TRPO": ActorCriticPolicy,
     "ARS": ARSPolicy,
 }
-#: ``algo`` values of ``ipp-toolkit/ppo`` files.
-_PPO_FILE_ALGOS = {"ppo": "PPO", "maskable_ppo": "MaskablePPO"}
 _CONTINUOUS_ONLY = ("SAC", "TD3", "DDPG", "TQC", "CROSSQ")
 
 
@@ -137,7 +131,7 @@ class PolicyArchitecture:
     """Sizes of a shared policy network (the same features extractor for every algorithm).
 
     Attributes:
-        width: channels of the two 3x3 conv layers of :class:`~baselines.ppo.SmallCNN`.
+        width: channels of the two 3x3 conv layers of :class:`~baselines.sb3.ppo.SmallCNN`.
         features_dim: output size of the features extractor.
         hidden: width of the one hidden layer of each head (policy, value, Q or quantiles).
         lstm_hidden_size: LSTM size (RecurrentPPO only).
@@ -196,7 +190,7 @@ def build_policy(algo: str, architecture: PolicyArchitecture, obs_shape: tuple[i
     """A fresh (untrained) policy of ``algo`` for (C, G, G) observations, in eval mode.
 
     It is built to act (weights are loaded into it): its optimiser is a
-    :class:`~baselines.ppo.NoOptimizer`, as a torch optimiser's import of ``torch._dynamo``
+    :class:`~baselines.sb3.ppo.NoOptimizer`, as a torch optimiser's import of ``torch._dynamo``
     costs seconds per process.
     """
     lstm = float(architecture.lstm_hidden_size)
@@ -263,93 +257,6 @@ def sb3_policy_metadata(payload: dict[str, Any], **extra: Any) -> dict[str, Any]
     return {"format": SB3_POLICY_KIND, **meta, **extra}
 
 
-def _format_tag(path: Path) -> Any:
-    """The format tag of a plain-weights file, or None when it cannot be read as one."""
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception:  # noqa: BLE001 - load_torch names the problem just after
-        return None
-    return data.get("format") if isinstance(data, dict) else None
-
-
-def load_sb3_policy(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, LoadedPolicy]:
-    """Rebuild the policy of an ``ipp-train sb3`` (or ``ipp-train ppo``) file and load its weights.
-
-    Reads ``policy.pt`` and ``checkpoint.pt`` files of the formats ``ipp-toolkit/sb3``,
-    ``ipp-toolkit/sb3-training``, ``ipp-toolkit/ppo`` and ``ipp-toolkit/ppo-training``, and
-    the zips of SB3's ``model.save`` (:func:`baselines.sb3_zip.load_sb3_zip`).
-
-    Returns:
-        (policy in eval mode, :class:`LoadedPolicy`).
-
-    Raises:
-        CheckpointError: a missing, empty, corrupt or foreign file; an unsupported algorithm;
-            another action count than the simulator's; an observation shape that its feature
-            planes cannot give; weights that do not fit (each message names the file and, for
-            shapes, both values).
-    """
-    path = Path(path)
-    from .sb3_zip import is_sb3_zip, load_sb3_zip
-
-    if is_sb3_zip(path):
-        return load_sb3_zip(path, device)
-    accepted = (SB3_POLICY_KIND, SB3_TRAINING_KIND, PPO_KIND, PPO_TRAINING_KIND)
-    tag = _format_tag(path) if path.is_file() and path.stat().st_size > 0 else None
-    if tag is None:
-        load_torch(path, SB3_POLICY_KIND)  # raises: missing, empty or corrupt
-    if tag not in accepted:
-        raise CheckpointError(f"checkpoint {str(path)!r} is not a policy of ipp-train sb3 or "
-                              f"ipp-train ppo, nor an SB3 model zip (format tag: {tag!r}; "
-                              f"expected one of {', '.join(accepted)})")
-    if tag in (PPO_KIND, PPO_TRAINING_KIND):
-        return _load_ppo_file(path, device)
-    data = load_torch(path, tag)
-    missing = [key for key in ("policy", "algo", "obs_shape", "n_actions", "architecture",
-                               "env_config") if key not in data]
-    if missing:
-        raise CheckpointError(f"checkpoint {str(path)!r} lacks {missing}")
-    try:
-        algo = canonical_algo(data["algo"])
-        architecture = PolicyArchitecture.from_dict(data["architecture"])
-        env_config = config_from_dict(data["env_config"])
-        obs_shape = tuple(int(d) for d in data["obs_shape"])
-        n_actions = int(data["n_actions"])
-    except (TypeError, ValueError) as error:
-        raise CheckpointError(f"checkpoint {str(path)!r} holds invalid records: "
-                              f"{error}") from None
-    meta = LoadedPolicy(algo=algo, obs_shape=obs_shape, n_actions=n_actions,  # type: ignore[arg-type]
-                        architecture=architecture, env_config=env_config,
-                        num_timesteps=int(data.get("num_timesteps", 0)), format=tag,
-                        record={k: data[k] for k in ("sb3_config",) if k in data})
-    check_shapes(path, meta)
-    try:
-        policy = build_policy(algo, architecture, obs_shape, n_actions, device)
-    except ValueError as error:  # networks over the parameter limit
-        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
-    try:
-        policy.load_state_dict(data["policy"])
-    except (RuntimeError, TypeError, AttributeError) as error:
-        raise CheckpointError(f"checkpoint {str(path)!r}: the weights do not fit the {algo} "
-                              f"policy its records describe "
-                              f"({str(error).splitlines()[0][:200]})") from None
-    policy.set_training_mode(False)
-    return policy, meta
-
-
-def _load_ppo_file(path: Path, device: str) -> tuple[BasePolicy, LoadedPolicy]:
-    policy, ppo_meta = load_ppo_policy(path, device)
-    config = ppo_meta["ppo_config"]
-    algo = _PPO_FILE_ALGOS.get(ppo_meta["algo"], "MaskablePPO" if config.masked else "PPO")
-    meta = LoadedPolicy(
-        algo=algo, obs_shape=ppo_meta["obs_shape"], n_actions=N_ACTIONS,
-        architecture=PolicyArchitecture(width=config.width, features_dim=config.features_dim,
-                                        hidden=config.hidden),
-        env_config=ppo_meta["env_config"], num_timesteps=ppo_meta["num_timesteps"],
-        format=PPO_KIND, record={"ppo_config": config.to_dict()})
-    check_shapes(path, meta)
-    return policy, meta
-
-
 def check_shapes(path: Path, meta: LoadedPolicy) -> None:
     """CheckpointError unless ``meta`` records 6 actions and (C, G, G) planes its env config
     (if recorded) gives."""
@@ -390,7 +297,8 @@ def action_scores(policy: BasePolicy, algo: str, observations: np.ndarray,
     applied. Higher is better in every case.
 
     Args:
-        policy: a policy of ``algo`` (from :func:`load_sb3_policy` or a trained model).
+        policy: a policy of ``algo`` (from :func:`~baselines.sb3.loading.load_sb3_policy` or a
+            trained model).
         algo: its algorithm (any case).
         observations: (B, C, G, G) float32 planes.
         lstm_states: RecurrentPPO only: the (hidden, cell) states of the B agents, each
@@ -423,7 +331,8 @@ def greedy_actions(policy: BasePolicy, algo: str, observations: np.ndarray, mask
     """Greedy valid actions of a batch of agents in one forward pass, each on its own.
 
     Args:
-        policy: a policy of ``algo`` (from :func:`load_sb3_policy` or a trained model).
+        policy: a policy of ``algo`` (from :func:`~baselines.sb3.loading.load_sb3_policy` or a
+            trained model).
         algo: its algorithm (any case).
         observations: (B, C, G, G) float32 planes.
         masks: (B, A) valid actions (nonzero = valid); a masked action is never chosen.

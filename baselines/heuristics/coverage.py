@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.planners import AgentView, Planner
+from ipp_toolkit.planning import AgentView, Planner
 from ipp_toolkit.sim.team import ACTION_NAMES
 
 __all__ = ["CoveragePlanner", "PaperCoveragePlanner", "boustrophedon", "paper_lawnmower_paths"]

@@ -5,11 +5,11 @@ Training runs sb3-contrib's ``MaskablePPO`` (default) or plain SB3 ``PPO`` on
 the team reward, and the policy sees only its own (C, 11, 11) actor planes. This module owns
 the training mission (:func:`training_env_config`), the PPO run (:func:`train_ppo`: fresh or
 resumed from ``checkpoint.pt``; the loop, its callbacks for progress, time limit and
-checkpoints are :mod:`baselines.sb3_runner`'s, shared by every SB3 algorithm) and the command
+checkpoints are :mod:`baselines.sb3.runner`'s, shared by every SB3 algorithm) and the command
 line (:func:`main`). ``ipp-train ppo`` is the PPO case of ``ipp-train sb3``
-(:mod:`baselines.sb3_training`): ``ipp-train sb3 --algo MaskablePPO`` runs the same code with
+(:mod:`baselines.sb3.training`): ``ipp-train sb3 --algo MaskablePPO`` runs the same code with
 the same flags, ``--algo PPO`` adds ``--no-masked``. The policy's architecture and files, and
-the planner that flies it, live in :mod:`baselines.ppo`.
+the planner that flies it, live in :mod:`baselines.sb3.ppo`.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from .ppo import (
     policy_kwargs,
     policy_metadata,
 )
-from .sb3_runner import RunFormat, run_sb3_training, same_run_check
+from .runner import RunFormat, run_sb3_training, same_run_check
 
 __all__ = ["TrainingWorld", "training_env_config", "train_ppo", "add_mission_flags",
            "add_network_flags", "mission_config_from_args", "add_run_config_flags",
@@ -81,7 +81,7 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
               announce: str = "") -> Path:
     """Train a shared PPO policy and write it to ``out_dir/policy.pt``.
 
-    The PPO case of ``ipp-train sb3`` (:mod:`baselines.sb3_runner` runs it). The env is
+    The PPO case of ``ipp-train sb3`` (:mod:`baselines.sb3.runner` runs it). The env is
     ``env_config`` with the team size, range and resolution of ``config``
     (:func:`training_env_config`). Plain PPO (``masked=False``) samples from the unmasked
     policy; the view holds a UAV whose sampled action is masked in place for the step
@@ -213,7 +213,7 @@ def mission_config_from_args(args: argparse.Namespace, defaults: SB3RunConfig | 
 
 
 def add_run_config_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig) -> None:
-    """The flags of :class:`~baselines.ppo.SB3RunConfig`'s fields (every SB3 trainer): the
+    """The flags of :class:`~baselines.sb3.ppo.SB3RunConfig`'s fields (every SB3 trainer): the
     mission flags (:func:`add_mission_flags`), the run's length and network sizes."""
     add_mission_flags(parser, defaults)
     parser.add_argument("--timesteps", type=int, default=defaults.total_timesteps,
@@ -234,7 +234,7 @@ def add_run_config_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig
 
 def run_config_from_args(args: argparse.Namespace, defaults: SB3RunConfig
                     ) -> tuple[EnvConfig, dict[str, Any]]:
-    """The env config and the :class:`~baselines.ppo.SB3RunConfig` fields that
+    """The env config and the :class:`~baselines.sb3.ppo.SB3RunConfig` fields that
     :func:`add_run_config_flags`' flags give (flag > ``--config`` file > ``defaults``)."""
     env_config = mission_config_from_args(args, defaults)
     fields = {"total_timesteps": args.timesteps, "n_envs": args.n_envs, "seed": args.seed,

@@ -13,12 +13,12 @@ k's own local map with the objective the planes were built with (``ig``'s, or
 clean-up term). With the policy's own correction at zero, the planner then chooses what the
 ``ig`` planner of the same objective chooses. With ``lookahead_steps`` > 1 it also adds each
 option's best continuation along the agent's own path, as the ``ig`` planner with the same
-options does (:mod:`ipp_toolkit.planners.lookahead`).
+options does (:mod:`ipp_toolkit.planning.lookahead`).
 
 Cost without a lookahead: nothing while no decided teammate is heard; otherwise the team's
 probability of interest (a learned prior answers from the gain planes' call of the same
 step, see :meth:`~ipp_toolkit.belief.field_prior.FieldPrior.square_values`) and the
-objective's sums over the segments (:mod:`ipp_toolkit.planners.segments`) of the boxes of
+objective's sums over the segments (:mod:`ipp_toolkit.planning.segments`) of the boxes of
 the options whose footprints a teammate's overlaps, from their cells. A lookahead adds, for
 every agent and step, the probability of interest and the continuation's summed-area tables
 over the segments, from the tables' segment sums kept per agent and summed again where its
@@ -110,11 +110,11 @@ class TeammateDiscount:
         overlap_discount: factor in [0, 1] on covered cells; 1 leaves the values alone.
         lookahead_steps, lookahead_discount: each option's value also gains
             ``lookahead_discount`` times its best continuation along the agent's own path
-            (:func:`~ipp_toolkit.planners.lookahead.continuation_values`, the planes'
+            (:func:`~ipp_toolkit.planning.lookahead.continuation_values`, the planes'
             objective, teammates' footprints discounted), as the ``ig`` planner with these
             options values its moves; 1 step (default): the planes' one-step values.
         lookahead_silent: look ahead on missions without communication too (default:
-            not, :func:`~ipp_toolkit.planners.lookahead.mission_lookahead`).
+            not, :func:`~ipp_toolkit.planning.lookahead.mission_lookahead`).
     """
 
     def __init__(self, config: EnvConfig, features: FeatureConfig,
@@ -214,7 +214,7 @@ class TeammateDiscount:
     def rescorer(self, views: Sequence[AgentView], gains: np.ndarray, scores: np.ndarray,
                  masks: np.ndarray, logits_of: Callable[[int, np.ndarray], np.ndarray]
                  ) -> Callable[[int, np.ndarray], np.ndarray]:
-        """``rescore(k, targets)`` for :func:`~ipp_toolkit.planners.choose_for_views`: agent
+        """``rescore(k, targets)`` for :func:`~ipp_toolkit.planning.choose_for_views`: agent
         k's ``scores`` while no decided teammate is heard, else ``logits_of(k, discounted)``
         (a policy's (6,) logits from its options' discounted gains), masked. Starts the step
         (:meth:`start_step`).
@@ -243,7 +243,7 @@ class TeammateDiscount:
     def continuation(self, view: AgentView, mate_targets: np.ndarray, valid: np.ndarray
                      ) -> np.ndarray:
         """(6,) float64 each valid option's best continuation in plane units
-        (:func:`~ipp_toolkit.planners.lookahead.continuation_values` of the planes' objective,
+        (:func:`~ipp_toolkit.planning.lookahead.continuation_values` of the planes' objective,
         cells under ``mate_targets``' footprints discounted); 0 for the others."""
         camera, grid = self.camera, self._segments
         mate_rects = self._rects_of(mate_targets)
@@ -295,14 +295,14 @@ class TeammateDiscount:
     def _segment_values(self, view: AgentView, altitude: int, box: SegmentBox) -> np.ndarray:
         """(i1 - i0, j1 - j0) float64 the planes' per-cell objective of a reading at
         ``altitude`` summed over each segment of ``box`` of ``view``'s local map, from the
-        tables' kept segment sums (:class:`~ipp_toolkit.planners.segments.SegmentSums`)."""
+        tables' kept segment sums (:class:`~ipp_toolkit.planning.segments.SegmentSums`)."""
         i0, i1, j0, j1 = box
         return self._objective_values(view, self._kept_sums(view)[..., i0:i1, j0:j1],
                                       altitude, box)
 
     def _objective_values(self, view: AgentView, sums: np.ndarray, altitude: int,
                           box: SegmentBox) -> np.ndarray:
-        """:func:`~ipp_toolkit.planners.segments.objective_segment_values` of (T, Z, h, w)
+        """:func:`~ipp_toolkit.planning.segments.objective_segment_values` of (T, Z, h, w)
         table ``sums`` over ``box`` at altitude slot ``altitude``, with the planes' probability
         of interest and clean-up term."""
         if self.objective != "interesting":

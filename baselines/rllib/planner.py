@@ -1,9 +1,9 @@
 """The ``rllib`` planner: flies the shared policy an ``ipp-train rllib`` run exported.
 
 ``ipp-compare --planners ig,rllib=RUN`` (or ``rllib=RUN/policy.pt``) loads ``RUN/policy.pt``
-(:mod:`baselines.rllib_policy`, plain weights read with ``torch.load(weights_only=True)``)
+(:mod:`baselines.rllib.policy`, plain weights read with ``torch.load(weights_only=True)``)
 and flies it greedily for every UAV. Inference only: this module needs torch, never Ray, and
-never imports the training code (:mod:`baselines.rllib_training`, :mod:`baselines.rllib_module`).
+never imports the training code (:mod:`baselines.rllib.training`, :mod:`baselines.rllib.module`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import torch
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
-from ipp_toolkit.planners import (
+from ipp_toolkit.planning import (
     AgentView,
     Planner,
     check_policy_transfer,
@@ -24,7 +24,7 @@ from ipp_toolkit.planners import (
 )
 from ipp_toolkit.sim.features import actor_plane_names
 
-from .rllib_policy import load_rllib_policy, policy_file_of
+from .policy import load_rllib_policy, policy_file_of
 
 __all__ = ["RLlibPlanner"]
 
@@ -82,7 +82,7 @@ class RLlibPlanner(Planner):
     def act(self, views: list[AgentView]) -> np.ndarray:
         """(N,) greedy valid actions from the agents' (C, G, G) planes and (6,) masks, chosen
         in agent order under the same-step rule
-        (:func:`~ipp_toolkit.planners.choose_for_views`), like the other learned planners."""
+        (:func:`~ipp_toolkit.planning.choose_for_views`), like the other learned planners."""
         planes, masks = policy_inputs(views, self.obs_shape,
                                       f"RLlib policy {str(self.checkpoint)!r}")
         with torch.no_grad():

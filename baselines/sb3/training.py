@@ -2,7 +2,7 @@
 
 Every algorithm trains on :func:`ipp_toolkit.vec.make_sb3_vec_env` (one env slot per UAV, one
 policy for all, the team reward for every slot) through the same run loop as
-``ipp-train ppo`` (:func:`baselines.sb3_runner.run_sb3_training`: TensorBoard logs, atomic
+``ipp-train ppo`` (:func:`baselines.sb3.runner.run_sb3_training`: TensorBoard logs, atomic
 checkpoints, ``--resume``, ``--time-limit``, a progress bar). Only MaskablePPO reads the
 action masks; the others train with the view's ``invalid_action="hold"``: a masked action
 holds the UAV for the step (minus ``invalid_penalty``), so the stored action is the executed
@@ -12,7 +12,7 @@ one.
   ``--masked``): the same code, flags, presets (``--preset shipped``) and files
   (``ipp-toolkit/ppo``).
 * ``--algo A2C|DQN|QRDQN|RecurrentPPO|TRPO|ARS`` write ``OUT/policy.pt`` in the ``ipp-toolkit/sb3``
-  format (:mod:`baselines.sb3_policies`): the policy's state dict with the algorithm, its
+  format (:mod:`baselines.sb3.policies`): the policy's state dict with the algorithm, its
   hyper-parameters, the observation shape, the action count, the architecture and the env
   config; ``policy.json`` adds the exact command. Never a pickled SB3 zip (the ``sb3``
   planner flies SB3's own zips as well, without unpickling them).
@@ -41,6 +41,16 @@ from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.vec import make_sb3_vec_env
 
+from .policies import (
+    ALGORITHMS,
+    SB3_POLICY_KIND,
+    SB3_TRAINING_KIND,
+    PolicyArchitecture,
+    canonical_algo,
+    policy_class,
+    sb3_policy_kwargs,
+    sb3_policy_metadata,
+)
 from .ppo import (
     PPOTrainConfig,
     SB3RunConfig,
@@ -57,17 +67,7 @@ from .ppo_training import (
     training_env_config,
 )
 from .ppo_training import main as ppo_main
-from .sb3_policies import (
-    ALGORITHMS,
-    SB3_POLICY_KIND,
-    SB3_TRAINING_KIND,
-    PolicyArchitecture,
-    canonical_algo,
-    policy_class,
-    sb3_policy_kwargs,
-    sb3_policy_metadata,
-)
-from .sb3_runner import RunFormat, run_sb3_training, same_run_check
+from .runner import RunFormat, run_sb3_training, same_run_check
 
 __all__ = ["SB3TrainConfig", "ALGORITHM_DEFAULTS", "PPO_ALGORITHMS", "algorithm_class",
            "coerce_hyperparameter", "sb3_model_payload", "make_sb3_model", "save_sb3_policy",
@@ -174,11 +174,11 @@ def coerce_hyperparameter(algo: str, name: str, text: str) -> int | float:
 
 @dataclass(frozen=True)
 class SB3TrainConfig(SB3RunConfig):
-    """One ``ipp-train sb3`` run: :class:`~baselines.ppo.SB3RunConfig`'s fields (length, seed,
+    """One ``ipp-train sb3`` run: :class:`~baselines.sb3.ppo.SB3RunConfig`'s fields (length, seed,
     network sizes, training world), the algorithm and its hyper-parameters.
 
     Attributes:
-        algo: one of :data:`~baselines.sb3_policies.ALGORITHMS` (any case; stored in SB3's
+        algo: one of :data:`~baselines.sb3.policies.ALGORITHMS` (any case; stored in SB3's
             spelling).
         hyperparameters: the algorithm's hyper-parameters (:data:`ALGORITHM_DEFAULTS` keys);
             missing ones take the defaults, so the stored dict is complete.
@@ -259,7 +259,7 @@ def sb3_model_payload(model: Any, config: SB3TrainConfig,
 def make_sb3_model(config: SB3TrainConfig, env: Any, seed: int | None = None,
                    tensorboard_log: str | None = None) -> Any:
     """A fresh SB3 model of ``config.algo`` on ``env`` whose policy the ``sb3`` planner can
-    rebuild (the policy class and sizes of :mod:`baselines.sb3_policies`).
+    rebuild (the policy class and sizes of :mod:`baselines.sb3.policies`).
 
     Args:
         config: algorithm, hyper-parameters and network sizes.
@@ -301,7 +301,7 @@ def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
 def _check_rebuildable(model: Any, config: SB3TrainConfig) -> None:
     """ValueError unless ``model``'s policy is the one the planner rebuilds from ``config``
     (same class, parameter names and shapes): a file of another policy would not load."""
-    from .sb3_policies import build_policy
+    from .policies import build_policy
 
     policy = getattr(model, "policy", None)
     shape = tuple(getattr(getattr(model, "observation_space", None), "shape", ()) or ())
@@ -326,7 +326,7 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
               command: str | None = None, announce: str = "") -> Path:
     """Train ``config.algo`` with parameter sharing and write ``out_dir/policy.pt``.
 
-    PPO and MaskablePPO are handed to :func:`baselines.ppo_training.train_ppo` (the
+    PPO and MaskablePPO are handed to :func:`baselines.sb3.ppo_training.train_ppo` (the
     ``ipp-toolkit/ppo`` files); the other algorithms write ``ipp-toolkit/sb3`` files. The env
     is ``env_config`` with the team size, range and resolution of ``config``.
 

@@ -1,9 +1,9 @@
 """The Ray side of ``ipp-train rllib``: the algorithm's config, the loop, checkpoints, logs.
 
-Imported by :func:`baselines.rllib_training.train_rllib` once RLlib is known to import; see
+Imported by :func:`baselines.rllib.training.train_rllib` once RLlib is known to import; see
 that module for the run folder's files. Seeds: the run seed seeds RLlib (weights, sampling);
 the env copies fly missions of runs ``seed + done + w * envs_per_runner + v``
-(:class:`baselines.rllib_module.IPPMultiAgentEnv`), ``done`` being the agent-steps trained
+(:class:`baselines.rllib.module.IPPMultiAgentEnv`), ``done`` being the agent-steps trained
 before a resume (0 for a fresh run), so a resumed run flies new missions, reproducibly.
 """
 
@@ -26,15 +26,15 @@ from ipp_toolkit.runs.progress import progress_bar
 from ipp_toolkit.runs.ray_backend import session
 from ipp_toolkit.runs.run_folder import claim
 
-from .rllib_module import (
+from .module import (
     ENV_NAME,
     SHARED_POLICY,
     IPPMaskedRLModule,
     TeamMetricsCallback,
     make_env,
 )
-from .rllib_policy import RLlibPolicyFile, save_rllib_policy
-from .rllib_training import RLlibTrainConfig, env_record, same_run
+from .policy import RLlibPolicyFile, save_rllib_policy
+from .train_config import RLlibTrainConfig, env_record, same_run
 
 __all__ = ["algorithm_config", "run"]
 
@@ -131,7 +131,7 @@ def _scalars(result: dict[str, Any]) -> dict[str, float]:
 def run(config: RLlibTrainConfig, env_cfg: EnvConfig, out_dir: Path, *, address: str | None,
         progress: bool, resume: bool, time_limit_s: float | None, command: str | None,
         announce: str) -> Path:
-    """:func:`baselines.rllib_training.train_rllib` after its checks (see there)."""
+    """:func:`baselines.rllib.training.train_rllib` after its checks (see there)."""
     with claim(out_dir, f"ipp-train rllib --algo {config.algo}") as folder:
         out = folder.path
         ckpt = out / "checkpoint"

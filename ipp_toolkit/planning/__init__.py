@@ -7,7 +7,7 @@ read-only numpy views into the mission, so a planner cannot change the mission b
 
 Register a planner with the decorator::
 
-    from ipp_toolkit.planners import Planner, register_planner
+    from ipp_toolkit.planning import Planner, register_planner
 
     @register_planner("stay-low")
     class StayLow(Planner):

@@ -2,7 +2,7 @@
 
 This module owns what flies a PPO policy: its architecture (:class:`PPOTrainConfig`, the
 features extractor :class:`SmallCNN`, the optional gain prior) and its files. Training
-(``ipp-train ppo``, its callbacks and command line) lives in :mod:`baselines.ppo_training`,
+(``ipp-train ppo``, its callbacks and command line) lives in :mod:`baselines.sb3.ppo_training`,
 which this module never imports.
 
 Files in a run folder:
@@ -16,7 +16,7 @@ Files in a run folder:
   ``resume=True`` carries on from it, and :func:`load_policy` reads it too.
 * ``tb/``: TensorBoard logs.
 
-The ``ppo`` planner (:class:`baselines.sb3_planner.PPOPlanner`, the ``sb3`` planner with the
+The ``ppo`` planner (:class:`baselines.sb3.planner.PPOPlanner`, the ``sb3`` planner with the
 shipped policy as its default) flies a saved model greedily: one batched forward for the whole
 team, invalid actions masked out.
 """
@@ -43,7 +43,7 @@ from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.limits import check_layer_size, check_parameters
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
-from ipp_toolkit.planners import resolve_shipped
+from ipp_toolkit.planning import resolve_shipped
 from ipp_toolkit.sim.features import (
     actor_plane_names,
     gain_plane_channels,
@@ -220,7 +220,7 @@ class PPOTrainConfig(SB3RunConfig):
         max_grad_norm: gradient clipping norm.
         masked: train with sb3-contrib ``MaskablePPO`` (invalid actions never sampled) instead
             of plain ``PPO`` (a sampled masked action holds the UAV for the step, see
-            :func:`baselines.ppo_training.train_ppo`).
+            :func:`baselines.sb3.ppo_training.train_ppo`).
         gain_prior: 0 for the plain policy; > 0 adds the ``gain`` planes' expected gain of each
             option to the logits (:class:`GainPriorExtractor`), starting at this weight with a
             zero learned part, so the untrained greedy policy flies the gain's argmax. Needs
@@ -605,12 +605,3 @@ def masked_argmax(scores: torch.Tensor, masks: np.ndarray) -> np.ndarray:
                          f"{tuple(scores.shape)}")
     return scores.masked_fill(~valid, -math.inf).argmax(dim=1).cpu().numpy().astype(np.int64)
 
-
-def __getattr__(name: str) -> Any:
-    # PPOPlanner moved to baselines.sb3_planner (the sb3 planner with the shipped default);
-    # imported lazily here because sb3_planner imports this module.
-    if name == "PPOPlanner":
-        from .sb3_planner import PPOPlanner
-
-        return PPOPlanner
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,9 +1,9 @@
 """The shared RLlib policy's network and its plain-weights file, in torch alone (no Ray).
 
-``ipp-train rllib`` (:mod:`baselines.rllib_training`) trains :class:`MaskedConvPolicy` inside
-an RLlib ``RLModule`` (:mod:`baselines.rllib_module`) and exports its state dict to
+``ipp-train rllib`` (:mod:`baselines.rllib.training`) trains :class:`MaskedConvPolicy` inside
+an RLlib ``RLModule`` (:mod:`baselines.rllib.module`) and exports its state dict to
 ``OUT/policy.pt`` (format ``ipp-toolkit/rllib``, loaded with ``torch.load(weights_only=True)``)
-with a JSON record ``OUT/policy.json``. The ``rllib`` planner (:mod:`baselines.rllib_planner`)
+with a JSON record ``OUT/policy.json``. The ``rllib`` planner (:mod:`baselines.rllib.planner`)
 rebuilds the network from this module and flies it: flying needs torch, not Ray.
 
 The network: conv 3x3 (pad 1) -> conv 3x3 (stride 2, pad 1) -> linear ``features_dim`` (the

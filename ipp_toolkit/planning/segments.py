@@ -1,6 +1,6 @@
 """Per-segment sums of a UAV's per-cell values, kept across steps, for the lookahead.
 
-The lookahead (:mod:`ipp_toolkit.planners.lookahead`) sums a planner's per-cell values over
+The lookahead (:mod:`ipp_toolkit.planning.lookahead`) sums a planner's per-cell values over
 footprints and over the intersections of footprints. Every edge of such a rectangle is the
 edge of some footprint, and the probability of interest that the ``interesting`` objective
 weights cells by is constant over ~0.5 m blocks (:func:`~ipp_toolkit.belief.interest.
@@ -111,7 +111,7 @@ class SegmentGrid:
                  box: SegmentBox | None = None) -> None:
         """Scale, in place, the values of ``box``'s segments (default: all) inside any of
         (K, 4) ``rects`` (decided teammates' next footprints) by ``factor``: once per
-        segment, however many cover it (:func:`~ipp_toolkit.planners.discount.
+        segment, however many cover it (:func:`~ipp_toolkit.planning.discount.
         discount_covered`, by segments)."""
         if len(rects) and factor != 1.0:
             values[self.covered(rects, box)] *= factor

@@ -2,7 +2,7 @@
 Ray or a cluster (``--address``).
 
 Every UAV is one agent of an RLlib multi-agent env and all map to one policy (parameter
-sharing, :mod:`baselines.rllib_module`); the RLModule reads the action mask from the
+sharing, :mod:`baselines.rllib.module`); the RLModule reads the action mask from the
 observation and masks the invalid logits, so a masked action is never sampled. The run folder
 ``OUT`` holds, as the other trainers' do:
 
@@ -24,31 +24,26 @@ imports it only inside :func:`train_rllib`, so the command line checks its argum
 from __future__ import annotations
 
 import argparse
-import math
 import shlex
 import sys
-from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
 
-from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
 from ipp_toolkit.extras import install_command, require_extra
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
-from ipp_toolkit.sim.features import actor_plane_names
 
-from .ppo import check_policy_size
-from .ppo_training import (
+from ..sb3.ppo_training import (
     add_mission_flags,
     add_network_flags,
     add_run_flags,
     mission_config_from_args,
     training_env_config,
 )
-from .rllib_policy import RLLIB_ALGORITHMS, canonical_rllib_algo
+from .policy import RLLIB_ALGORITHMS, canonical_rllib_algo
+from .train_config import RLlibTrainConfig, check_sizes
 
 __all__ = ["INSTALL_COMMAND", "RLlibUnavailableError", "RLlibTrainConfig", "require_rllib",
            "train_rllib", "main"]
@@ -66,90 +61,6 @@ def require_rllib() -> None:
     (:func:`~ipp_toolkit.extras.require_extra`)."""
     require_extra("ray.rllib", "ipp-train rllib", INSTALL_COMMAND, package="ray[rllib]",
                   error=RLlibUnavailableError)
-
-
-@dataclass(frozen=True)
-class RLlibTrainConfig:
-    """One ``ipp-train rllib`` run.
-
-    Attributes:
-        algo: ``PPO``, ``APPO`` or ``IMPALA`` (any case; stored in RLlib's spelling).
-        iterations: RLlib training iterations (``algo.train()`` calls) of the whole run.
-        seed: the run seed (missions, weights).
-        n_agents, comm_range, resolution: the training world.
-        width, features_dim, hidden: the network's sizes.
-        num_env_runners: Ray actors that sample (0: the driver samples).
-        envs_per_runner: env copies each runner steps.
-        train_batch: team steps (joint steps of all UAVs) sampled per iteration (RLlib's
-            ``train_batch_size_per_learner`` counts env steps): N times as many agent-steps.
-        lr: learning rate.
-        gamma: discount factor.
-        checkpoint_every: iterations between checkpoints (and policy exports).
-    """
-
-    algo: str = "PPO"
-    iterations: int = 10
-    seed: int = 0
-    n_agents: int = 4
-    comm_range: float = 25.0
-    resolution: float = 0.5
-    width: int = 32
-    features_dim: int = 128
-    hidden: int = 64
-    num_env_runners: int = 0
-    envs_per_runner: int = 1
-    train_batch: int = 512
-    lr: float = 3e-4
-    gamma: float = 0.99
-    checkpoint_every: int = 5
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "algo", canonical_rllib_algo(self.algo))
-        minimum = {"iterations": 1, "seed": 0, "n_agents": 1, "width": 1, "features_dim": 1,
-                   "hidden": 1, "num_env_runners": 0, "envs_per_runner": 1, "train_batch": 2,
-                   "checkpoint_every": 1}
-        for name, low in minimum.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"invalid RLlib config: {name} must be an integer >= {low}, "
-                                 f"got {value!r}")
-        for name in ("comm_range", "resolution", "lr", "gamma"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) \
-                    or math.isnan(value) or value <= 0:
-                raise ValueError(f"invalid RLlib config: {name} must be a number > 0, got "
-                                 f"{value!r}")
-        if not math.isfinite(self.lr) or self.gamma > 1:
-            raise ValueError(f"invalid RLlib config: lr must be finite and gamma <= 1, got "
-                             f"lr={self.lr!r}, gamma={self.gamma!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (an infinite comm_range becomes ``"inf"``)."""
-        values = asdict(self)
-        if math.isinf(self.comm_range):
-            values["comm_range"] = "inf"
-        return values
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> RLlibTrainConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are refused."""
-        unknown = set(values) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"unknown RLlib config keys {sorted(unknown)}")
-        values = dict(values)
-        if values.get("comm_range") == "inf":
-            values["comm_range"] = math.inf
-        return cls(**values)
-
-    def model_config(self) -> dict[str, int]:
-        """The RLModule's ``model_config`` (the network's sizes)."""
-        return {"width": self.width, "features_dim": self.features_dim, "hidden": self.hidden}
-
-
-def check_sizes(config: RLlibTrainConfig, env_cfg: EnvConfig) -> None:
-    """Refuse (before any work) a network whose parameter count exceeds the project's limit."""
-    check_policy_size(len(actor_plane_names(env_cfg.features)), env_cfg.world.grid_points,
-                      config.width, config.features_dim, config.hidden, "an RLlib policy")
 
 
 def train_rllib(config: RLlibTrainConfig, env_config: EnvConfig, out_dir: str | Path,
@@ -196,28 +107,11 @@ def train_rllib(config: RLlibTrainConfig, env_config: EnvConfig, out_dir: str | 
 
         probe(address)  # fails in seconds, naming the address, with or without Ray here
     require_rllib()
-    from . import rllib_run  # imports Ray
+    from . import run as rllib_run  # imports Ray
 
     return rllib_run.run(config, env_cfg, Path(out_dir), address=address, progress=progress,
                          resume=resume, time_limit_s=time_limit_s, command=command,
                          announce=announce)
-
-
-def same_run(config: RLlibTrainConfig, env_cfg: EnvConfig, record: dict[str, Any],
-             where: str) -> None:
-    """ValueError unless ``record`` (``checkpoint.json``) is a run of ``config`` (except its
-    ``iterations``) on ``env_cfg``."""
-    stored = RLlibTrainConfig.from_dict(record["rllib_config"])
-    if replace(stored, iterations=config.iterations) != config:
-        raise ValueError(f"cannot resume {where!r}: its RLlib config {stored} differs from the "
-                         f"given {config} (only iterations may change)")
-    if config_from_dict(record["env_config"]) != env_cfg:
-        raise ValueError(f"cannot resume {where!r}: it was trained on another env config")
-
-
-def env_record(env_cfg: EnvConfig) -> dict[str, Any]:
-    """The env config as stored in the JSON records."""
-    return config_to_dict(env_cfg)
 
 
 # --------------------------------------------------------------------------------------------

@@ -9,22 +9,22 @@ UAV's own local map, how likely each 2 m block is to be interesting, having lear
 shapes fields take (straight boundaries continue, hotspots have sizes) from simulator ground
 truth (``ipp-train prior``). No policy is learned: the decision is an argmax of the
 objective, which, when the team communicates, also counts half the best value of the next
-two moves of the UAV's own path (``lookahead_steps`` 3, :mod:`ipp_toolkit.planners.lookahead`;
+two moves of the UAV's own path (``lookahead_steps`` 3, :mod:`ipp_toolkit.planning.lookahead`;
 greedy without communication, where the lookahead drew UAVs together; docs/lookahead.md).
 
 In the mission's last 10 steps (of 15 in the paper's missions) a cell the map holds above 0.5
 that the prior doubts is given value too (``false_positive_weight`` 0.5,
-``false_positive_steps`` 10, :class:`~baselines.spatial_gain.SpatialGainPlanner`): the entropy
-over interesting cells never counts such a false positive, the final F1 does. Cleaning up
-late keeps the F1 of ``ig_spatial`` at a small cost in entropy; the same term on every step
-cost split too much (docs/field-prior-cleanup.md). ``false_positive_weight=0`` flies the prior's
-objective alone.
+``false_positive_steps`` 10,
+:class:`~baselines.heuristics.spatial_gain.SpatialGainPlanner`): the entropy over interesting
+cells never counts such a false positive, the final F1 does. Cleaning up late keeps the F1 of
+``ig_spatial`` at a small cost in entropy; the same term on every step cost split too much
+(docs/field-prior-cleanup.md). ``false_positive_weight=0`` flies the prior's objective alone.
 
 ``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON
 record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read
 the same file); ``ig_learned=RUN/best.pt`` flies your own. Deterministic; the seed is
 unused. Cost: ``ig_spatial``'s work plus one batched forward pass of the prior per step,
-and the lookahead's segment values (:mod:`ipp_toolkit.planners.segments`) per UAV and step.
+and the lookahead's segment values (:mod:`ipp_toolkit.planning.segments`) per UAV and step.
 """
 
 from __future__ import annotations
@@ -35,11 +35,11 @@ import numpy as np
 
 from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, prior_file, shared_prior
 from ipp_toolkit.belief.interest import block_means
-from ipp_toolkit.planners import AgentView
-from ipp_toolkit.planners.discount import OVERLAP_DISCOUNT
-from ipp_toolkit.planners.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS
+from ipp_toolkit.planning import AgentView
+from ipp_toolkit.planning.discount import OVERLAP_DISCOUNT
+from ipp_toolkit.planning.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS
 
-from .spatial_gain import SpatialGainPlanner
+from ..heuristics.spatial_gain import SpatialGainPlanner
 
 __all__ = ["CLEANUP_STEPS", "CLEANUP_WEIGHT", "DEFAULT_PRIOR", "LearnedPriorPlanner"]
 
@@ -57,12 +57,13 @@ class LearnedPriorPlanner(SpatialGainPlanner):
     Args:
         checkpoint: a field-prior file (``ipp-train prior`` writes ``RUN/best.pt``); None: the
             shipped one.
-        overlap_discount: as for :class:`~baselines.information_gain.InformationGainPlanner`.
+        overlap_discount: as for
+            :class:`~baselines.heuristics.information_gain.InformationGainPlanner`.
         false_positive_weight, false_positive_steps: as for
-            :class:`~baselines.spatial_gain.SpatialGainPlanner`; the defaults clean up in the
-            last 10 steps, weight 0 flies the prior's objective alone.
+            :class:`~baselines.heuristics.spatial_gain.SpatialGainPlanner`; the defaults clean
+            up in the last 10 steps, weight 0 flies the prior's objective alone.
         lookahead_steps, lookahead_discount, lookahead_silent: as for
-            :class:`~baselines.information_gain.InformationGainPlanner`; by default three
+            :class:`~baselines.heuristics.information_gain.InformationGainPlanner`; by default three
             steps, greedy without communication (docs/lookahead.md).
     """
 

@@ -5,8 +5,8 @@ not JSON-safe is a cloudpickle blob beside a readable description) and ``policy.
 policy's state dict). This module reads only the JSON's readable parts and the weights with
 ``torch.load(weights_only=True)``; the blobs are never unpickled. The policy is rebuilt from
 the classes it knows by name (SB3's and sb3-contrib's policies of the algorithms in
-:data:`~baselines.sb3_policies.ALGORITHMS`, their default ``MlpPolicy``, and the toolkit's
-:class:`~baselines.ppo.SmallCNN`), and everything else is refused by name: a custom features
+:data:`~baselines.sb3.policies.ALGORITHMS`, their default ``MlpPolicy``, and the toolkit's
+:class:`~baselines.sb3.ppo.SmallCNN`), and everything else is refused by name: a custom features
 extractor, ``MultiInputPolicy`` or ``CnnPolicy`` (they need other observations than the
 (C, G, G) planes the planner feeds), another action space, an unknown ``policy_kwargs`` key.
 """
@@ -31,8 +31,8 @@ from stable_baselines3.dqn.policies import DQNPolicy
 
 from ipp_toolkit.io import CheckpointError
 
+from .policies import LoadedPolicy, PolicyArchitecture, check_shapes
 from .ppo import NoOptimizer, SmallCNN
-from .sb3_policies import LoadedPolicy, PolicyArchitecture, check_shapes
 
 __all__ = ["is_sb3_zip", "load_sb3_zip"]
 
@@ -156,7 +156,7 @@ def load_sb3_zip(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, Loa
     """Rebuild the policy of an SB3 ``model.save`` zip and load its weights.
 
     Returns:
-        (policy in eval mode, :class:`~baselines.sb3_policies.LoadedPolicy` with
+        (policy in eval mode, :class:`~baselines.sb3.policies.LoadedPolicy` with
         ``env_config=None``: a zip does not record the feature switches, so the planner
         observes with the mission's own and checks only the plane shape).
 

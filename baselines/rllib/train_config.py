@@ -1,0 +1,124 @@
+"""The settings of one ``ipp-train rllib`` run (:class:`RLlibTrainConfig`) and what its files
+record of them: the checks a resumed run must pass (:func:`same_run`), the env config as
+stored (:func:`env_record`) and the network's size limit (:func:`check_sizes`).
+
+Shared by the command line (:mod:`baselines.rllib.training`, which never imports Ray) and the
+run itself (:mod:`baselines.rllib.run`, which does).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+from ipp_toolkit.config.files import config_from_dict, config_to_dict
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.sim.features import actor_plane_names
+
+from ..sb3.ppo import check_policy_size
+from .policy import canonical_rllib_algo
+
+__all__ = ["RLlibTrainConfig", "check_sizes", "same_run", "env_record"]
+
+
+@dataclass(frozen=True)
+class RLlibTrainConfig:
+    """One ``ipp-train rllib`` run.
+
+    Attributes:
+        algo: ``PPO``, ``APPO`` or ``IMPALA`` (any case; stored in RLlib's spelling).
+        iterations: RLlib training iterations (``algo.train()`` calls) of the whole run.
+        seed: the run seed (missions, weights).
+        n_agents, comm_range, resolution: the training world.
+        width, features_dim, hidden: the network's sizes.
+        num_env_runners: Ray actors that sample (0: the driver samples).
+        envs_per_runner: env copies each runner steps.
+        train_batch: team steps (joint steps of all UAVs) sampled per iteration (RLlib's
+            ``train_batch_size_per_learner`` counts env steps): N times as many agent-steps.
+        lr: learning rate.
+        gamma: discount factor.
+        checkpoint_every: iterations between checkpoints (and policy exports).
+    """
+
+    algo: str = "PPO"
+    iterations: int = 10
+    seed: int = 0
+    n_agents: int = 4
+    comm_range: float = 25.0
+    resolution: float = 0.5
+    width: int = 32
+    features_dim: int = 128
+    hidden: int = 64
+    num_env_runners: int = 0
+    envs_per_runner: int = 1
+    train_batch: int = 512
+    lr: float = 3e-4
+    gamma: float = 0.99
+    checkpoint_every: int = 5
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "algo", canonical_rllib_algo(self.algo))
+        minimum = {"iterations": 1, "seed": 0, "n_agents": 1, "width": 1, "features_dim": 1,
+                   "hidden": 1, "num_env_runners": 0, "envs_per_runner": 1, "train_batch": 2,
+                   "checkpoint_every": 1}
+        for name, low in minimum.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"invalid RLlib config: {name} must be an integer >= {low}, "
+                                 f"got {value!r}")
+        for name in ("comm_range", "resolution", "lr", "gamma"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) \
+                    or math.isnan(value) or value <= 0:
+                raise ValueError(f"invalid RLlib config: {name} must be a number > 0, got "
+                                 f"{value!r}")
+        if not math.isfinite(self.lr) or self.gamma > 1:
+            raise ValueError(f"invalid RLlib config: lr must be finite and gamma <= 1, got "
+                             f"lr={self.lr!r}, gamma={self.gamma!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict (an infinite comm_range becomes ``"inf"``)."""
+        values = asdict(self)
+        if math.isinf(self.comm_range):
+            values["comm_range"] = "inf"
+        return values
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> RLlibTrainConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are refused."""
+        unknown = set(values) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"unknown RLlib config keys {sorted(unknown)}")
+        values = dict(values)
+        if values.get("comm_range") == "inf":
+            values["comm_range"] = math.inf
+        return cls(**values)
+
+    def model_config(self) -> dict[str, int]:
+        """The RLModule's ``model_config`` (the network's sizes)."""
+        return {"width": self.width, "features_dim": self.features_dim, "hidden": self.hidden}
+
+
+def check_sizes(config: RLlibTrainConfig, env_cfg: EnvConfig) -> None:
+    """Refuse (before any work) a network whose parameter count exceeds the project's limit."""
+    check_policy_size(len(actor_plane_names(env_cfg.features)), env_cfg.world.grid_points,
+                      config.width, config.features_dim, config.hidden, "an RLlib policy")
+
+
+
+def same_run(config: RLlibTrainConfig, env_cfg: EnvConfig, record: dict[str, Any],
+             where: str) -> None:
+    """ValueError unless ``record`` (``checkpoint.json``) is a run of ``config`` (except its
+    ``iterations``) on ``env_cfg``."""
+    stored = RLlibTrainConfig.from_dict(record["rllib_config"])
+    if replace(stored, iterations=config.iterations) != config:
+        raise ValueError(f"cannot resume {where!r}: its RLlib config {stored} differs from the "
+                         f"given {config} (only iterations may change)")
+    if config_from_dict(record["env_config"]) != env_cfg:
+        raise ValueError(f"cannot resume {where!r}: it was trained on another env config")
+
+
+def env_record(env_cfg: EnvConfig) -> dict[str, Any]:
+    """The env config as stored in the JSON records."""
+    return config_to_dict(env_cfg)
