@@ -37,7 +37,7 @@ from torch import nn
 
 from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.io import CheckpointError, write_json
+from ipp_toolkit.io import CheckpointError, load_weights, write_json
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.runs.progress import progress_bar
 from ipp_toolkit.runs.run_folder import COMA_COMMAND, claim
@@ -59,7 +59,6 @@ from .persistence import (
     build_networks,
     check_network_size,
     load_policy,
-    load_state_into,
     save_policy,
 )
 from .run_files import (
@@ -111,7 +110,8 @@ def _initialise_from(networks: COMANetworks, path: str) -> None:
     for name in ("actor", "critic", "value"):
         module = getattr(networks, name)
         if module is not None:
-            load_state_into(module, getattr(source, name).state_dict(), f"the {name}", path)
+            load_weights(module, getattr(source, name).state_dict(), path,
+                         f"cannot restore the {name}")
 
 
 def _move(networks: COMANetworks, device: torch.device) -> None:
@@ -190,8 +190,8 @@ def _resume(resumable: tuple[COMANetworks, dict[str, Any]], last_path: Path, csv
             module.train()
     _move(networks, device)
     target_critic = copy.deepcopy(networks.critic)
-    load_state_into(target_critic, data["target_critic"], "the target critic",
-                    str(last_path))
+    load_weights(target_critic, data["target_critic"], last_path,
+                 "cannot restore the target critic")
     optimisers = make_optimisers(networks)
     for name, optimiser in optimisers.items():
         try:

@@ -25,7 +25,14 @@ import torch
 from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.limits import check_parameters
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.io import CheckpointError, load_torch, save_torch
+from ipp_toolkit.io import (
+    CheckpointError,
+    built_from_checkpoint,
+    first_line,
+    load_torch,
+    load_weights,
+    save_torch,
+)
 from ipp_toolkit.planning import check_policy_transfer as check_transfer
 from ipp_toolkit.planning import resolve_shipped
 from ipp_toolkit.sim.features import actor_plane_names, gain_plane_channels
@@ -159,19 +166,16 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, A
     except (KeyError, TypeError, ValueError) as error:
         raise CheckpointError(f"checkpoint {str(path)!r} has no valid configs: {error}") \
             from None
-    try:
-        networks = build_networks(coma_config, env_config)
-    except ValueError as error:  # networks over the size limit, or a grid too small
-        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
+    # networks over the size limit, or a grid too small: CheckpointError
+    networks = built_from_checkpoint(path, lambda: build_networks(coma_config, env_config))
     for name in ("actor", "critic", "value"):
         module = getattr(networks, name)
         if module is None:
             continue
-        try:
-            module.load_state_dict(data[name])
-        except (KeyError, TypeError, RuntimeError) as error:
+        if name not in data:
             raise CheckpointError(f"checkpoint {str(path)!r}: the {name} weights do not fit "
-                                  f"its configs ({str(error).splitlines()[0][:200]})") from None
+                                  f"its configs ({first_line(KeyError(name))})")
+        load_weights(module, data[name], path, f"the {name} weights do not fit its configs")
         module.eval()
     return networks, data
 
@@ -190,11 +194,3 @@ def resolve_policy(policy: str | os.PathLike[str]) -> Path:
     return resolve_shipped(policy, {name: shipped_policy(file)
                                     for name, file in SHIPPED_POLICIES.items()}, "coma")
 
-
-def load_state_into(module: torch.nn.Module, state: Any, what: str, path: str) -> None:
-    """``module.load_state_dict(state)`` with a :class:`CheckpointError` naming the file."""
-    try:
-        module.load_state_dict(state)
-    except (TypeError, RuntimeError, KeyError) as error:
-        raise CheckpointError(f"checkpoint {path!r}: cannot restore {what} "
-                              f"({str(error).splitlines()[0][:200]})") from None

@@ -1,7 +1,8 @@
 """The files of a COMA training run other than the networks: its progress log and its end.
 
 This module owns ``progress.csv`` (one row per update, the columns :data:`CSV_COLUMNS`:
-:func:`write_progress`, :func:`read_progress` for a resume), which configuration fields a
+:func:`write_progress`, :func:`read_progress` for a resume, read by
+:func:`ipp_toolkit.runs.progress_csv.read_progress_csv`), which configuration fields a
 resumed run must share with its checkpoint (:func:`resume_fields`), and
 :class:`TrainResult`, what :func:`coma.learner.train` returns. The networks' files
 (``last.pt``, ``best.pt``) are written by :mod:`coma.persistence`.
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ipp_toolkit.io import CheckpointError, atomic_write
+from ipp_toolkit.runs.progress_csv import read_progress_csv
 
 from .config import COMAConfig
 from .persistence import load_policy
@@ -87,15 +89,7 @@ def read_progress(path: Path, up_to_update: int) -> list[dict[str, Any]]:
                               f"{up_to_update}: resuming would lose the history; restore it "
                               "or start a new folder")
     try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            reader = csv.DictReader(handle)
-            if reader.fieldnames is None or list(reader.fieldnames) != CSV_COLUMNS:
-                raise ValueError(f"its header is not {','.join(CSV_COLUMNS)}")
-            history = []
-            for row in reader:
-                if None in row or any(value is None for value in row.values()):
-                    raise ValueError(f"line {reader.line_num} has the wrong number of cells")
-                history.append({k: _parse(v) for k, v in row.items()})
+        history = read_progress_csv(path, CSV_COLUMNS)
     except (OSError, UnicodeDecodeError, csv.Error, ValueError) as err:
         raise CheckpointError(f"{str(path)!r} is damaged ({err}); restore it or start a new "
                               "folder") from None
@@ -119,10 +113,3 @@ def saved_update(path: Path) -> str:
     except (CheckpointError, KeyError):
         return "unreadable"
 
-
-def _parse(text: str) -> Any:
-    if text == "":
-        return None
-    number = float(text)
-    return int(number) if number.is_integer() and "." not in text and "e" not in text \
-        else number

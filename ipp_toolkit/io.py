@@ -21,7 +21,8 @@ from typing import IO, Any
 import yaml
 
 __all__ = ["CheckpointError", "atomic_write", "write_json", "save_torch", "load_torch",
-           "read_yaml"]
+           "save_checkpoint", "load_checkpoint", "built_from_checkpoint", "load_weights",
+           "first_line", "read_yaml"]
 
 
 class CheckpointError(ValueError):
@@ -88,9 +89,8 @@ def load_torch(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # torch raises many types for corrupt or foreign files
-        first_line = (str(error).splitlines() or [""])[0][:200]
         raise CheckpointError(f"checkpoint {str(path)!r} is corrupt or not a plain-weights file "
-                              f"({type(error).__name__}: {first_line})") from None
+                              f"({type(error).__name__}: {first_line(error)})") from None
     if not isinstance(data, dict) or data.get("format") != kind:
         found = data.get("format") if isinstance(data, dict) else type(data).__name__
         raise CheckpointError(f"checkpoint {str(path)!r} is not an {kind!r} file "
@@ -120,6 +120,64 @@ def _non_finite(value: Any, where: str = "") -> str:
         if found:
             return found
     return ""
+
+
+def first_line(error: BaseException) -> str:
+    """The first line of an error's message, at most 200 characters (for one-line messages)."""
+    return (str(error).splitlines() or [""])[0][:200]
+
+
+def save_checkpoint(path: str | os.PathLike[str], payload: Mapping[str, Any], kind: str,
+                    record: Any = None) -> Path:
+    """Write ``payload`` with :func:`save_torch` (format tag ``kind``) and, given a JSON-safe
+    ``record``, the JSON beside it (``path.with_suffix('.json')``), each atomically.
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+    """
+    path = Path(path)
+    save_torch(path, payload, kind)
+    if record is not None:
+        write_json(path.with_suffix(".json"), record)
+    return path
+
+
+def load_checkpoint(path: str | os.PathLike[str], *kinds: str) -> dict[str, Any]:
+    """:func:`load_torch` under the first of ``kinds`` the file is tagged with (e.g. a final
+    policy or a training checkpoint of the same learner).
+
+    Raises:
+        CheckpointError: the file is none of ``kinds``; the message is the first kind's.
+    """
+    refused: CheckpointError | None = None
+    for kind in kinds:
+        try:
+            return load_torch(path, kind)
+        except CheckpointError as error:
+            refused = refused or error
+    if refused is None:
+        raise ValueError("load_checkpoint needs at least one format tag")
+    raise refused
+
+
+def built_from_checkpoint(path: str | os.PathLike[str], build: Callable[[], Any]) -> Any:
+    """``build()`` (the networks a checkpoint's records describe), with its ValueError (a
+    network over the size limit, a grid too small) as a :class:`CheckpointError` naming the
+    file."""
+    try:
+        return build()
+    except ValueError as error:
+        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
+
+
+def load_weights(module: Any, state: Any, path: str | os.PathLike[str], problem: str) -> None:
+    """``module.load_state_dict(state)``; weights that do not fit raise a
+    :class:`CheckpointError` ``checkpoint PATH: PROBLEM (first line of torch's message)``."""
+    try:
+        module.load_state_dict(state)
+    except (RuntimeError, TypeError, AttributeError, KeyError) as error:
+        raise CheckpointError(f"checkpoint {str(path)!r}: {problem} "
+                              f"({first_line(error)})") from None
 
 
 class _StrictLoader(yaml.SafeLoader):

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import csv
 import os
 from pathlib import Path
 
 import numpy as np
+
+from ipp_toolkit.runs.progress_csv import read_progress_csv
 
 from .plots import _new_figure, save_figure
 
@@ -14,7 +15,8 @@ __all__ = ["read_progress", "plot_training"]
 
 
 def read_progress(run_dir: str | os.PathLike[str]) -> dict[str, np.ndarray]:
-    """Columns of ``run_dir/progress.csv`` as float arrays (NaN where a cell is empty).
+    """Columns of ``run_dir/progress.csv`` as float arrays (NaN where a cell is empty), read by
+    :func:`ipp_toolkit.runs.progress_csv.read_progress_csv`.
 
     Raises:
         FileNotFoundError: the folder holds no ``progress.csv``.
@@ -22,12 +24,11 @@ def read_progress(run_dir: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     path = Path(run_dir) / "progress.csv"
     if not path.is_file():
         raise FileNotFoundError(f"no training log at {str(path)!r}")
-    with open(path, newline="") as handle:
-        rows = list(csv.DictReader(handle))
+    rows = read_progress_csv(path, strict=False)
     if not rows:
         return {}
-    return {key: np.array([float(row[key]) if row[key] not in ("", None) else np.nan
-                           for row in rows]) for key in rows[0]}
+    return {key: np.array([np.nan if row[key] is None else float(row[key]) for row in rows])
+            for key in rows[0]}
 
 
 def plot_training(run_dir: str | os.PathLike[str], stem: str | os.PathLike[str] | None = None,

@@ -24,7 +24,7 @@ from torch import nn
 
 from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
+from ipp_toolkit.io import CheckpointError, load_torch, save_checkpoint
 from ipp_toolkit.sim.team import N_ACTIONS
 
 __all__ = ["RLLIB_POLICY_KIND", "RLLIB_ALGORITHMS", "MASKED_LOGIT", "RLlibArchitecture",
@@ -157,9 +157,8 @@ def save_rllib_policy(path: str | Path, policy: MaskedConvPolicy, meta: RLlibPol
               "env_config": config_to_dict(meta.env_config),
               "agent_steps": int(meta.agent_steps), "iteration": int(meta.iteration)}
     state = {k: v.detach().cpu().clone() for k, v in policy.state_dict().items()}
-    save_torch(path, {"policy": state, **record}, RLLIB_POLICY_KIND)
-    write_json(path.with_suffix(".json"), {"format": RLLIB_POLICY_KIND, **record, **extra})
-    return path
+    return save_checkpoint(path, {"policy": state, **record}, RLLIB_POLICY_KIND,
+                           {"format": RLLIB_POLICY_KIND, **record, **extra})
 
 
 def policy_file_of(checkpoint: str | Path) -> Path:

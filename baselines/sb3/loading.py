@@ -15,7 +15,7 @@ import torch
 from stable_baselines3.common.policies import BasePolicy
 
 from ipp_toolkit.config.files import config_from_dict
-from ipp_toolkit.io import CheckpointError, load_torch
+from ipp_toolkit.io import CheckpointError, built_from_checkpoint, load_torch, load_weights
 from ipp_toolkit.sim.team import N_ACTIONS
 
 from .policies import (
@@ -95,16 +95,10 @@ def load_sb3_policy(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, 
                         num_timesteps=int(data.get("num_timesteps", 0)), format=tag,
                         record={k: data[k] for k in ("sb3_config",) if k in data})
     check_shapes(path, meta)
-    try:
-        policy = build_policy(algo, architecture, obs_shape, n_actions, device)
-    except ValueError as error:  # networks over the parameter limit
-        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
-    try:
-        policy.load_state_dict(data["policy"])
-    except (RuntimeError, TypeError, AttributeError) as error:
-        raise CheckpointError(f"checkpoint {str(path)!r}: the weights do not fit the {algo} "
-                              f"policy its records describe "
-                              f"({str(error).splitlines()[0][:200]})") from None
+    policy = built_from_checkpoint(  # networks over the parameter limit: CheckpointError
+        path, lambda: build_policy(algo, architecture, obs_shape, n_actions, device))
+    load_weights(policy, data["policy"], path,
+                 f"the weights do not fit the {algo} policy its records describe")
     policy.set_training_mode(False)
     return policy, meta
 

@@ -42,7 +42,13 @@ from torch import nn
 from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.limits import check_layer_size, check_parameters
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.io import CheckpointError, load_torch, save_torch, write_json
+from ipp_toolkit.io import (
+    CheckpointError,
+    built_from_checkpoint,
+    load_checkpoint,
+    load_weights,
+    save_checkpoint,
+)
 from ipp_toolkit.planning import resolve_shipped
 from ipp_toolkit.sim.features import (
     actor_plane_names,
@@ -510,11 +516,8 @@ def policy_metadata(payload: dict[str, Any], **extra: Any) -> dict[str, Any]:
 def save_policy(path: str | Path, model: Any, config: PPOTrainConfig, env_config: EnvConfig,
                 **extra: Any) -> Path:
     """Write ``path`` (weights + configs) and ``path.with_suffix('.json')`` atomically."""
-    path = Path(path)
     payload = model_payload(model, config, env_config)
-    save_torch(path, payload, CHECKPOINT_KIND)
-    write_json(path.with_suffix(".json"), policy_metadata(payload, **extra))
-    return path
+    return save_checkpoint(path, payload, CHECKPOINT_KIND, policy_metadata(payload, **extra))
 
 
 def load_policy(path: str | Path, device: str = "cpu") -> tuple[Any, dict[str, Any]]:
@@ -531,17 +534,7 @@ def load_policy(path: str | Path, device: str = "cpu") -> tuple[Any, dict[str, A
         CheckpointError: missing, corrupt or foreign file, or weights that do not fit.
     """
     path = Path(path)
-    try:
-        data = load_torch(path, CHECKPOINT_KIND)
-    except CheckpointError:
-        try:
-            data = load_torch(path, TRAINING_KIND)
-        except CheckpointError:
-            pass
-        else:
-            return _rebuild(path, data, device)
-        raise
-    return _rebuild(path, data, device)
+    return _rebuild(path, load_checkpoint(path, CHECKPOINT_KIND, TRAINING_KIND), device)
 
 
 def _rebuild(path: Path, data: dict[str, Any], device: str) -> tuple[Any, dict[str, Any]]:
@@ -558,15 +551,10 @@ def _rebuild(path: Path, data: dict[str, Any], device: str) -> tuple[Any, dict[s
     except (TypeError, ValueError) as error:
         raise CheckpointError(f"checkpoint {str(path)!r} holds an invalid configuration: "
                               f"{error}") from None
-    try:
-        policy = _build_policy(config, env_config, obs_shape, device, optimizer=False)
-    except ValueError as error:
-        raise CheckpointError(f"checkpoint {str(path)!r}: {error}") from None
-    try:
-        policy.load_state_dict(data["policy"])
-    except (RuntimeError, TypeError, AttributeError) as error:
-        raise CheckpointError(f"checkpoint {str(path)!r}: the weights do not fit the policy its "
-                              f"config describes ({str(error).splitlines()[0][:200]})") from None
+    policy = built_from_checkpoint(
+        path, lambda: _build_policy(config, env_config, obs_shape, device, optimizer=False))
+    load_weights(policy, data["policy"], path,
+                 "the weights do not fit the policy its config describes")
     policy.set_training_mode(False)
     meta = {"obs_shape": obs_shape, "ppo_config": config, "env_config": env_config,
             "algo": data.get("algo"), "num_timesteps": int(data.get("num_timesteps", 0))}

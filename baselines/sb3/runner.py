@@ -37,7 +37,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
 from ipp_toolkit.config.files import config_from_dict
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.io import load_torch, save_torch, write_json
+from ipp_toolkit.io import load_torch, save_checkpoint
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.runs.progress import progress_bar
 from ipp_toolkit.runs.run_folder import claim
@@ -131,7 +131,7 @@ class RunFormat:
 
     Attributes:
         algo_label: the algorithm in messages ("already holds a PPO run") and the progress bar.
-        policy_kind: format tag of ``policy.pt`` (``ipp_toolkit.io.save_torch``).
+        policy_kind: format tag of ``policy.pt`` (``ipp_toolkit.io.save_checkpoint``).
         training_kind: format tag of ``checkpoint.pt``.
         metadata: ``(payload, extra) -> JSON record`` of a file (the payload without weights).
         tb_log_name: TensorBoard run name under ``OUT/tb``.
@@ -282,19 +282,18 @@ def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timestep
         def seconds() -> float:
             return elapsed_before + time.perf_counter() - started
 
-        def save_checkpoint() -> None:
+        def checkpoint_now() -> None:
             data = payload(model)
             optimizer = getattr(model.policy, "optimizer", None)
             if optimizer is not None:
                 data["optimizer"] = optimizer.state_dict()
             data["episodes"] = int(model._episode_num)
             data["train_seconds"] = seconds()
-            save_torch(ckpt_path, data, run_format.training_kind)
-            write_json(ckpt_path.with_suffix(".json"),
-                       run_format.metadata(data, train_seconds=data["train_seconds"],
-                                           **extra_record))
+            save_checkpoint(ckpt_path, data, run_format.training_kind,
+                            run_format.metadata(data, train_seconds=data["train_seconds"],
+                                                **extra_record))
 
-        callbacks = [checkpoint_callback(checkpoint_every, save_checkpoint),
+        callbacks = [checkpoint_callback(checkpoint_every, checkpoint_now),
                      task_metrics_callback()]
         if progress:
             callbacks.append(progress_callback(total_timesteps, done,
@@ -305,14 +304,12 @@ def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timestep
         if remaining > 0:
             model.learn(total_timesteps=remaining, callback=callbacks,
                         reset_num_timesteps=state is None, tb_log_name=run_format.tb_log_name)
-        save_checkpoint()
+        checkpoint_now()
         final = payload(model)
         policy_path = out_dir / "policy.pt"
-        save_torch(policy_path, final, run_format.policy_kind)
-        write_json(policy_path.with_suffix(".json"),
-                   run_format.metadata(final, train_seconds=round(seconds(), 1),
-                                       **extra_record))
-        return policy_path
+        return save_checkpoint(policy_path, final, run_format.policy_kind,
+                               run_format.metadata(final, train_seconds=round(seconds(), 1),
+                                                   **extra_record))
     finally:
         # SB3 leaves its TensorBoard writer (a thread with an open file) running after learn.
         if getattr(model, "_logger", None) is not None:

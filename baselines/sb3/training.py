@@ -35,7 +35,7 @@ from typing import Any
 from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
-from ipp_toolkit.io import CheckpointError, save_torch, write_json
+from ipp_toolkit.io import CheckpointError, save_checkpoint
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.sim.features import actor_plane_names
@@ -291,11 +291,8 @@ def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
     _check_rebuildable(model, config)
     if config.algo in PPO_ALGORITHMS:
         return save_policy(path, model, config.to_ppo_config(), env_config, **extra)
-    path = Path(path)
     payload = sb3_model_payload(model, config, env_config)
-    save_torch(path, payload, SB3_POLICY_KIND)
-    write_json(path.with_suffix(".json"), sb3_policy_metadata(payload, **extra))
-    return path
+    return save_checkpoint(path, payload, SB3_POLICY_KIND, sb3_policy_metadata(payload, **extra))
 
 
 def _check_rebuildable(model: Any, config: SB3TrainConfig) -> None:
