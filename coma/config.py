@@ -28,11 +28,18 @@ from typing import Any, NoReturn
 from ipp_toolkit.config.limits import check_layer_size
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 
-__all__ = ["VARIANTS", "PRECISIONS", "PRESETS", "FLAT_NAMES", "WarmStartConfig", "COMAConfig",
-           "from_dict", "nested_fields", "preset", "mission_settings"]
+__all__ = ["VARIANTS", "ADVANTAGES", "CRITIC_TARGETS", "PRECISIONS", "PRESETS", "FLAT_NAMES",
+           "WarmStartConfig", "COMAConfig", "from_dict", "nested_fields", "preset",
+           "mission_settings"]
 
 #: The credit-assignment variants of the paper's study.
 VARIANTS = ("coma", "central_qv", "actor_independent", "decentralised")
+
+#: How the critic's targets are computed (:attr:`COMAConfig.critic_targets`).
+CRITIC_TARGETS = ("td_lambda", "reference")
+
+#: What the actor's advantage takes for the action taken (:attr:`COMAConfig.advantage`).
+ADVANTAGES = ("critic", "return")
 
 #: What the learning passes compute in (:attr:`COMAConfig.precision`).
 PRECISIONS = ("float32", "bfloat16")
@@ -212,6 +219,16 @@ class COMAConfig:
             instructions (recent CPUs with AVX512-BF16 or AMX, GPUs) and slower elsewhere;
             it trains other weights than float32 from the same seed. Missions always fly,
             and policies are validated and deployed, in float32.
+        critic_targets: ``td_lambda`` (the paper's per-episode TD(lambda) targets from a
+            target critic refreshed every ``target_update_transitions``) or ``reference``
+            (what the authors' code computed: a target critic never refreshed from its random
+            start, their episode-boundary errors, lambda-weights that do not sum to one and
+            the reward paid one step late; :func:`coma.advantages.reference_td_targets`).
+        advantage: what the actor's advantage takes for the action taken: ``critic`` (the
+            paper: the critic's ``Q(s, u)``, so ``A = Q(s, u) - baseline``) or ``return`` (the
+            mission's flown lambda-return, the critic's own target: ``A = G - baseline``,
+            the baseline unchanged; unbiased whatever the critic's errors, since the
+            counterfactual baseline does not depend on the agent's own action).
     """
 
     variant: str = "coma"
@@ -248,6 +265,8 @@ class COMAConfig:
     validation_resolutions: tuple[float, ...] = ()
     selection: str = "mean"
     precision: str = "float32"
+    critic_targets: str = "td_lambda"
+    advantage: str = "critic"
 
     def __post_init__(self) -> None:
         if not isinstance(self.warm_start, WarmStartConfig):
@@ -263,6 +282,10 @@ class COMAConfig:
                            _resolutions(self.validation_resolutions))
         if self.selection not in ("mean", "worst_vs_ig"):
             _fail("selection", self.selection, "choose 'mean' or 'worst_vs_ig'")
+        if self.advantage not in ADVANTAGES:
+            _fail("advantage", self.advantage, f"choose from {list(ADVANTAGES)}")
+        if self.critic_targets not in CRITIC_TARGETS:
+            _fail("critic_targets", self.critic_targets, f"choose from {list(CRITIC_TARGETS)}")
         if self.precision not in PRECISIONS:
             _fail("precision", self.precision, f"choose from {list(PRECISIONS)}")
         for name in ("team_sizes", "comm_ranges"):

@@ -497,7 +497,9 @@ class _Run:
         cfg, state, networks = self.coma_config, learning.state, learning.networks
         tick = time.perf_counter()
         eps = epsilon_at(state["missions"], cfg.eps_start, cfg.eps_end, cfg.eps_anneal_missions)
-        if state["since_target"] >= cfg.target_update_transitions:
+        # The authors' targets come from the critic's random start, never refreshed.
+        if state["since_target"] >= cfg.target_update_transitions \
+                and cfg.critic_targets != "reference":
             learning.target_critic.load_state_dict(networks.critic.state_dict())
             state["since_target"] = 0
         setting = setting_of_update(len(self.settings), cfg.seed, state["update"])

@@ -18,7 +18,12 @@ from torch import nn
 
 from ipp_toolkit.sim.team import N_ACTIONS
 
-from .advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
+from .advantages import (
+    counterfactual_baseline,
+    lagged_rewards,
+    reference_td_targets,
+    td_lambda_targets,
+)
 from .networks import (
     GainPriorActor,
     bounded_softmax,
@@ -99,11 +104,18 @@ def _flatten(networks: COMANetworks, target_critic: nn.Module, rollout: Rollout,
         q_target = learning_forward(target_critic, critic_obs, cfg.precision).view(
             e, n, t, N_ACTIONS)
         q_target_taken = q_target.gather(-1, rollout.actions.unsqueeze(-1)).squeeze(-1)
-        next_values = torch.roll(q_target_taken, shifts=-1, dims=-1)  # Q'(s_{t+1}, u_{t+1})
-        terminal = torch.zeros(e, n, t, dtype=torch.bool, device=device)
-        terminal[..., -1] = True
         rewards = rollout.rewards.unsqueeze(1).expand(e, n, t)
-        targets = td_lambda_targets(rewards, next_values, terminal, cfg.gamma, cfg.td_lambda)
+        if cfg.critic_targets == "reference":
+            # The authors' targets over each agent's buffer of episodes, on their reward timing.
+            targets = reference_td_targets(lagged_rewards(rewards, 0.0).transpose(0, 1),
+                                           q_target_taken.transpose(0, 1), cfg.gamma,
+                                           cfg.td_lambda).transpose(0, 1)
+        else:
+            next_values = torch.roll(q_target_taken, shifts=-1, dims=-1)  # Q'(s_{t+1}, u_{t+1})
+            terminal = torch.zeros(e, n, t, dtype=torch.bool, device=device)
+            terminal[..., -1] = True
+            targets = td_lambda_targets(rewards, next_values, terminal, cfg.gamma,
+                                        cfg.td_lambda)
     return _Samples(actor_obs, critic_obs, value_obs, rollout.masks.flatten(0, 2),
                     rollout.actions.flatten(), rollout.behaviour_probs.flatten(),
                     targets.flatten())
@@ -141,11 +153,15 @@ def _actor_step(networks: COMANetworks, optimisers: dict[str, Any], samples: _Sa
     q = q.detach()
     with torch.no_grad():
         if cfg.variant == "central_qv":
-            v = learning_forward(networks.value, samples.value_obs[batch],
-                                 cfg.precision).squeeze(-1)
-            advantage = central_value_advantage(q, actions, v)
+            baseline = learning_forward(networks.value, samples.value_obs[batch],
+                                        cfg.precision).squeeze(-1)
         else:
-            advantage = counterfactual_advantage(q, actions, probs.detach(), masks)
+            baseline = counterfactual_baseline(q, probs.detach(), masks)
+        # The paper values the action taken by the critic's Q(s, u); ``return`` by the flown
+        # lambda-return (the critic's own target), the baseline the same either way.
+        taken = (samples.targets[batch] if cfg.advantage == "return"
+                 else q.gather(-1, actions.unsqueeze(-1)).squeeze(-1))
+        advantage = taken - baseline
     raw_std = float(advantage.std()) if len(batch) > 1 else 0.0
     if cfg.normalise_advantage and len(batch) > 1:
         advantage = (advantage - advantage.mean()) / (advantage.std() + 1e-8)

@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 import torch
 
-from coma.advantages import central_value_advantage, counterfactual_advantage, td_lambda_targets
+from coma.advantages import (
+    central_value_advantage,
+    counterfactual_advantage,
+    counterfactual_baseline,
+    lagged_rewards,
+    reference_td_targets,
+    td_lambda_targets,
+)
 from coma.networks import ConvNet, bounded_softmax, epsilon_at
 
 # ---------------------------------------------------------------------------- TD(lambda)
@@ -48,6 +55,49 @@ def test_td_lambda_equals_forward_view(lam):
     got = td_lambda_targets(torch.tensor(rewards), torch.tensor(next_values), terminal, 0.9, lam)
     want = _brute_force_lambda_return(rewards, next_values, 0.9, lam)
     assert np.allclose(got.numpy(), want)
+
+
+@pytest.mark.parametrize("lam", [0.0, 0.5, 0.8, 1.0])
+def test_td_lambda_with_an_exact_critic_is_the_monte_carlo_return(lam):
+    # On a logged episode, a critic that knows each step's return to go makes every
+    # lambda-return the Monte-Carlo return: the targets then carry no critic error at all.
+    rng = np.random.default_rng(5)
+    rewards = rng.normal(size=(3, 7))
+    returns = np.zeros_like(rewards)
+    following = np.zeros(3)
+    for t in range(6, -1, -1):
+        following = rewards[:, t] + 0.95 * following
+        returns[:, t] = following
+    next_values = np.roll(returns, -1, axis=1)  # Q(s_{t+1}, u_{t+1}) = G_{t+1}
+    terminal = torch.zeros(3, 7, dtype=torch.bool)
+    terminal[:, -1] = True
+    got = td_lambda_targets(torch.tensor(rewards), torch.tensor(next_values), terminal, 0.95,
+                            lam)
+    assert np.allclose(got.numpy(), returns)
+
+
+def test_reference_targets_reproduce_the_authors_buffer_on_the_hand_example():
+    # r = 1, Q' = 0, one agent, two episodes of 4 steps, gamma 0.99, lambda 0.8: the values
+    # the authors' code gives (zero at the second episode's start, weights not summing to 1).
+    targets = reference_td_targets(torch.ones(1, 2, 4), torch.zeros(1, 2, 4), 0.99, 0.8)
+    expected = [[1.56, 1.14, 0.72, 0.33], [0.0, 0.90, 0.52, 0.20]]
+    assert torch.allclose(targets[0], torch.tensor(expected), atol=5e-3)
+
+
+def test_reference_targets_bootstrap_from_the_next_episodes_first_state():
+    # Only Q' at the second episode's first state is non-zero: the first episode's targets
+    # see it through each step's longest (whole-episode) return, weighted (1-lam) lam^(M-1).
+    target_q = torch.zeros(1, 2, 3)
+    target_q[0, 1, 0] = 10.0
+    targets = reference_td_targets(torch.zeros(1, 2, 3), target_q, 1.0, 0.5)
+    left = torch.tensor([3.0, 2.0, 1.0])
+    assert torch.allclose(targets[0, 0], 10.0 * 0.5 * 0.5 ** (left - 1))
+    assert torch.all(targets[0, 1] == 0)
+
+
+def test_lagged_rewards_pay_each_step_one_step_late():
+    lagged = lagged_rewards(torch.tensor([[1.0, 2.0, 3.0]]), first=-0.5)
+    assert lagged.tolist() == [[-0.5, 1.0, 2.0]]
 
 
 def test_td_lambda_never_bootstraps_across_episodes():
@@ -139,3 +189,13 @@ def test_epsilon_schedule_paper_values():
     assert epsilon_at(5_000, 0.5, 0.02, 10_000) == pytest.approx(0.26)
     assert epsilon_at(10_000, 0.5, 0.02, 10_000) == 0.02
     assert epsilon_at(70_000, 0.5, 0.02, 10_000) == 0.02
+
+
+def test_the_counterfactual_baseline_ignores_the_agents_own_action():
+    q = torch.tensor([[1.0, 3.0, 5.0]])
+    policy = torch.tensor([[0.5, 0.25, 0.25]])
+    baseline = counterfactual_baseline(q, policy)
+    assert baseline.item() == pytest.approx(0.5 + 0.75 + 1.25)
+    for action in range(3):
+        advantage = counterfactual_advantage(q, torch.tensor([action]), policy)
+        assert advantage.item() == pytest.approx(q[0, action].item() - baseline.item())
