@@ -77,7 +77,11 @@ flies at any resolution) with the own-position plane (docs/departures.md). A ``-
 wins over them, an explicit flag over the file."""
 
 PAPER_TRAINING_DEFAULTS = {"world": {"resolution": 0.5}}
-"""With ``--preset paper`` the actor sees the paper's inputs: no own-position plane."""
+"""With ``--preset paper`` or ``scratch`` the actor sees the paper's inputs: no own-position
+plane."""
+
+PAPER_INPUT_PRESETS = ("paper", "scratch")
+"""The presets trained on the paper's inputs (:data:`PAPER_TRAINING_DEFAULTS`)."""
 
 
 def _preset_name(value: str) -> str:
@@ -224,7 +228,7 @@ def configs_from_args(args: argparse.Namespace) -> tuple[COMAConfig, EnvConfig]:
     if args.preset in RECIPES:
         return stage_configs(args)[-1][1:]
     coma_config = preset(args.preset, **_changes_from_args(args))
-    defaults = PAPER_TRAINING_DEFAULTS if args.preset == "paper" else TRAINING_DEFAULTS
+    defaults = PAPER_TRAINING_DEFAULTS if args.preset in PAPER_INPUT_PRESETS else TRAINING_DEFAULTS
     return coma_config, _env_from_args(args, defaults)
 
 

@@ -14,6 +14,7 @@ match (see :func:`check_transfer`).
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 from importlib import resources
@@ -44,7 +45,7 @@ from .networks import ConvNet, GainPriorActor
 
 __all__ = ["CHECKPOINT_KIND", "COMANetworks", "build_networks", "save_policy", "load_policy",
            "check_transfer", "shipped_policy", "resolve_policy", "SHIPPED_POLICIES",
-           "DEFAULT_SHIPPED", "SHIPPED_POLICY", "SHIPPED_PRIOR_POLICY"]
+           "DEFAULT_SHIPPED", "SHIPPED_POLICY", "SHIPPED_PRIOR_POLICY", "untrained_reason"]
 
 CHECKPOINT_KIND = "ipp-toolkit/coma"
 SHIPPED_POLICY = "coma_4agents_d25.pt"
@@ -58,18 +59,14 @@ SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 #: (``features.gain_smoothing`` = 5 m), its residual trained by COMA on the terrain mixture.
 #: ``learned-mixture``: the same recipe over ``ig_learned``'s objective
 #: (``features.gain_interest = learned``: the learned field prior in the gain planes).
-#: ``learned-cleanup``: ``learned-mixture``'s recipe on planes that also value re-measuring
-#: likely false positives in the last steps (``features.gain_false_positive``).
 #: Removed names (``mixed``) are refused with a hint: ``ipp_toolkit.planning.REMOVED_NAMES``.
 SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
                     "prior-mixture": "coma_prior_mixture_4agents_d25.pt",
                     "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt",
-                    "learned-mixture": "coma_learned_mixture_4agents_d25.pt",
-                    "learned-cleanup": "coma_learned_cleanup_4agents_d25.pt"}
-#: The shipped policy the ``coma`` planner flies by default: chosen on validation missions
-#: (4 UAVs, 25 m, every terrain family and the team settings at r_M = 0.5 m; how:
-#: docs/field-prior-cleanup.md).
-DEFAULT_SHIPPED = "learned-cleanup"
+                    "learned-mixture": "coma_learned_mixture_4agents_d25.pt"}
+#: The shipped policy the ``coma`` planner flies by default: a policy COMA's training moved
+#: (:func:`untrained_reason`), chosen on validation missions (docs/training.md).
+DEFAULT_SHIPPED = "paper-actor"
 
 
 @dataclass
@@ -178,6 +175,32 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[COMANetworks, dict[str, A
         load_weights(module, data[name], path, f"the {name} weights do not fit its configs")
         module.eval()
     return networks, data
+
+
+def untrained_reason(path: str | os.PathLike[str]) -> str | None:
+    """Why the policy file ``path`` is not a policy COMA's training moved, or None.
+
+    A shipped policy must be one: its JSON record (``path`` with ``.json``) gives a
+    ``best_update`` > 0 (a checkpoint after the start beat the start on validation), and its
+    actor's weights differ from the start that its configs and seed build (a random or
+    gain-prior start; a warm start's imitation is itself trained, and checked by the record).
+    """
+    path = Path(path)
+    record_path = path.with_suffix(".json")
+    try:
+        record = json.loads(record_path.read_text())
+    except (OSError, ValueError) as error:
+        return f"its record {str(record_path)!r} cannot be read ({error})"
+    best_update = record.get("best_update") if isinstance(record, dict) else None
+    if not isinstance(best_update, int) or best_update <= 0:
+        return f"its record gives best_update = {best_update!r}: training never beat the start"
+    networks, _ = load_policy(path)
+    torch.manual_seed(networks.coma_config.seed)
+    start = build_networks(networks.coma_config, networks.env_config)
+    trained = networks.actor.state_dict()
+    if all(torch.equal(trained[k], v) for k, v in start.actor.state_dict().items()):
+        return "its actor's weights equal the start its configs and seed build"
+    return None
 
 
 def shipped_policy(name: str = SHIPPED_POLICY) -> Path:

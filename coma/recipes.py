@@ -79,15 +79,6 @@ RECIPES: dict[str, tuple[Stage, ...]] = {
               {"features": {"gain": True, "gain_interest": "learned"},
                "terrain": {"kind": "mixture"}}),
     ),
-    # learned-mixture's recipe on planes that also value cleaning up likely false positives
-    # in the last 10 of the 15 steps (ig_learned's default objective since 2026-12-02).
-    "learned-cleanup": (
-        Stage("learned", {**_GAIN_PRIOR, **_MIXTURE_SELECTION, "missions": 2500,
-                          "lr_actor": 1e-4, "seed": 0},
-              {"features": {"gain": True, "gain_interest": "learned",
-                            "gain_false_positive": 0.5, "gain_false_positive_steps": 10},
-               "terrain": {"kind": "mixture"}}),
-    ),
 }
 
 
