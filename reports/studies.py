@@ -389,10 +389,12 @@ def _compare_runs(policies: dict[str, Path], out: Path, name: str, caption: str,
     return CreditStudy(policies, text, out)
 
 
-def training_mission(train_resolution: float) -> EnvConfig:
-    """The default training mission of ``ipp-train coma`` at ``train_resolution``."""
+def training_mission(train_resolution: float, paper_inputs: bool = False) -> EnvConfig:
+    """The default training mission of ``ipp-train coma`` at ``train_resolution``: with the
+    ``own_position`` plane, or the paper's inputs alone (``paper_inputs``, as the ``paper``
+    and ``scratch`` presets train)."""
     return EnvConfig().replace(world={"resolution": train_resolution},
-                               features={"own_position": True})
+                               features={"own_position": not paper_inputs})
 
 
 def credit_assignment_study(variants: Sequence[str] | None = None, missions: int = 5_000,
@@ -402,13 +404,15 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
                             workers: int = 1, eval_resolution: float | None = None,
                             progress: bool = True,
                             seeds: Sequence[int] | None = None, backend: str = "local",
-                            address: str | None = None) -> CreditStudy:
+                            address: str | None = None, preset: str = "cpu") -> CreditStudy:
     """Train COMA and its credit-assignment variants alike, then compare them on test missions.
 
-    Every variant gets the ``cpu`` preset with ``overrides`` and ``missions`` training
-    missions on the default mission (4 UAVs, D = 25 m, the ``own_position`` plane) at map
+    Every variant gets the preset ``preset`` with ``overrides`` and ``missions`` training
+    missions on the default mission (4 UAVs, D = 25 m; the ``own_position`` plane, except
+    for the presets trained on the paper's inputs, ``paper`` and ``scratch``) at map
     resolution ``train_resolution``; the greedy policies (``best.pt``, chosen on validation
     missions) then fly the same ``trials`` test missions. Runs resume if interrupted.
+    ``preset="scratch"`` trains every variant from random networks.
 
     Args:
         variants: subset of ``coma.config.VARIANTS`` (default: all four).
@@ -431,8 +435,11 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
         address: with ``backend="ray"``, the cluster's head (``HOST:PORT``); None starts a
             local Ray with ``workers`` CPUs.
     """
-    from coma.config import VARIANTS
+    from coma.cli import PAPER_INPUT_PRESETS
+    from coma.config import PRESETS, VARIANTS
 
+    if preset not in PRESETS:
+        raise ValueError(f"unknown COMA preset {preset!r}; choose from {sorted(PRESETS)}")
     variants = list(VARIANTS if variants is None else variants)
     unknown = sorted(set(variants) - set(VARIANTS))
     if unknown:
@@ -440,12 +447,13 @@ def credit_assignment_study(variants: Sequence[str] | None = None, missions: int
     training_seeds = _training_seeds(seeds, overrides)
     check_backend(backend, address)
     out = Path(out)
-    env = config_to_dict(training_mission(train_resolution))
-    values = {**(overrides or {}), "missions": int(missions)}
+    env = config_to_dict(training_mission(train_resolution, preset in PAPER_INPUT_PRESETS))
+    values = {**PRESETS[preset], **(overrides or {}), "missions": int(missions)}
     tasks = _seeded_tasks([(v, {**values, "variant": v}, env, out / "runs" / v)
                            for v in variants], training_seeds, progress and workers == 1)
     caption = (f"Credit-assignment study: each variant trained for {missions} missions "
-               f"(cpu preset, overrides {overrides or {}}), {_seeds_text(training_seeds)}; "
+               f"({preset} preset, overrides {overrides or {}}), "
+               f"{_seeds_text(training_seeds)}; "
                f"test: {trials} missions.")
     with backend_session(backend, address, workers) as cluster:
         policies = train_runs(tasks, workers, cluster, progress)

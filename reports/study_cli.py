@@ -119,6 +119,9 @@ def _study_parser() -> argparse.ArgumentParser:
     parser.add_argument("--ablations",
                         default="own_position,centred,masking,other_actions,footprints",
                         help="ablation: feature switches to toggle, or masking / centred")
+    parser.add_argument("--preset", choices=["cpu", "paper", "scratch"], default="cpu",
+                        help="credit: the COMA preset every variant trains with (scratch: "
+                             "from random networks, docs/training.md)")
     parser.add_argument("--missions", type=positive_int("--missions"), default=None,
                         help="credit, ablation, sweep: training missions per run (default "
                              "5000)")
@@ -136,6 +139,13 @@ def _study_parser() -> argparse.ArgumentParser:
                         help="credit, ablation, sweep: training seeds; with several, each run "
                              "is trained once per seed and the table gives mean and spread "
                              "over seeds (default: one seed, 0)")
+    _add_generalisation_flags(parser)
+    add_progress_flag(parser, None)
+    return parser
+
+
+def _add_generalisation_flags(parser: argparse.ArgumentParser) -> None:
+    """The flags only ``ipp-study generalisation`` reads."""
     parser.add_argument("--families", default="split,blobs,fractal,real",
                         help="generalisation: terrain families at 4 UAVs / 25 m (real: one cell "
                              "per test raster)")
@@ -148,8 +158,6 @@ def _study_parser() -> argparse.ArgumentParser:
                              "paired, on the same missions, one set of columns each; each "
                              "named one must be flown (the figure uses the first). Default: "
                              "ig and ig_spatial, each where flown")
-    add_progress_flag(parser, None)
-    return parser
 
 
 def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], seed: int,
@@ -218,7 +226,7 @@ def _training_study(args: argparse.Namespace, out: str, backend: dict[str, str |
                   **backend)
     if args.study == "credit":
         result = credit_assignment_study([v for v in args.variants.split(",") if v],
-                                         **common)
+                                         preset=args.preset, **common)
     else:
         result = ablation_study([a for a in args.ablations.split(",") if a], **common)
     print(result.table)

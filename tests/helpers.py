@@ -70,3 +70,24 @@ def page_faults_of_reallocation(setup: str = "") -> int:
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     return int(done.stdout.split()[-1])
+
+
+def zero_residual_coma(path) -> str:
+    """A gain-prior COMA policy at its untrained start on ``ig_learned``'s planes (the learned
+    prior with the false-positive term in the last 10 steps), saved at ``path``: its greedy
+    choice is the planes' best option, so the ``coma`` planner flying it must fly
+    ``ig_learned``'s choices. Returns the path as a string."""
+    import torch
+
+    from coma.config import preset
+    from coma.persistence import build_networks, save_policy
+
+    coma_config = preset("cpu", warm_start="", gain_prior=50.0)
+    env = EnvConfig().replace(world={"resolution": 0.5}, terrain={"kind": "mixture"},
+                              features={"own_position": True, "gain": True,
+                                        "gain_interest": "learned",
+                                        "gain_false_positive": 0.5,
+                                        "gain_false_positive_steps": 10})
+    torch.manual_seed(0)
+    save_policy(path, build_networks(coma_config, env))
+    return str(path)

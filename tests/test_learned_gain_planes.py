@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import zero_residual_coma
 
 from ipp_toolkit.belief.field_prior import (
     SHIPPED_PRIOR,
@@ -242,18 +243,18 @@ def test_a_bad_gain_false_positive_steps_on_the_command_line_exits_2_naming_it(
     assert not out.exists()
 
 
-def test_the_default_ig_learned_and_coma_clean_up_in_the_same_last_steps():
-    """``ig_learned``'s default objective and the default ``coma``'s planes are the same: the
-    learned prior with the false-positive term in the last 10 steps; the prior alone stays one
-    option away, and the default ``coma`` flies ``ig_learned``'s planes' argmax for agent 0
-    (its residual is the untrained one its recipe selected)."""
+def test_ig_learned_and_coma_on_its_planes_clean_up_in_the_same_last_steps(tmp_path):
+    """``ig_learned``'s default objective and the planes of a ``coma`` policy trained on
+    them are the same: the learned prior with the false-positive term in the last 10 steps;
+    the prior alone stays one option away, and a zero-residual ``coma`` flies
+    ``ig_learned``'s planes' argmax for agent 0."""
     from baselines.field_prior.planner import LearnedPriorPlanner
     from ipp_toolkit.planning import make_planner, planner_views
 
     default = LearnedPriorPlanner()
     assert (default.false_positive_weight, default.false_positive_steps) == (0.5, 10)
     assert LearnedPriorPlanner(false_positive_weight=0).false_positive_weight == 0
-    coma = make_planner("coma")
+    coma = make_planner("coma", checkpoint=zero_residual_coma(tmp_path / "start.pt"))
     trained = coma.trained_config
     features = trained.features
     assert (features.gain_interest, features.gain_false_positive,

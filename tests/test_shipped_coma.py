@@ -6,6 +6,7 @@ import json
 
 import pytest
 import torch
+from helpers import tiny_coma, tiny_env
 
 from coma.persistence import (
     DEFAULT_SHIPPED,
@@ -15,7 +16,6 @@ from coma.persistence import (
     shipped_policy,
     untrained_reason,
 )
-from tests.helpers import tiny_coma, tiny_env
 
 
 @pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from helpers import zero_residual_coma
 
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.planning import choose_for_views, planner_views
@@ -183,16 +184,17 @@ def test_a_discount_outside_zero_to_one_is_refused_naming_it(value):
         PPOPlanner(overlap_discount=value)
 
 
-def test_the_default_coma_flies_ig_learneds_choices_for_every_agent():
-    """The default ``coma`` (its residual the untrained start its recipe selected), greedy,
-    chooses what a greedy ``ig_learned`` chooses for every UAV at every step, teammates
-    heard; with ``overlap_discount=1`` (the planes' values as they are) it does not."""
+def test_a_zero_residual_coma_flies_ig_learneds_choices_for_every_agent(tmp_path):
+    """A ``coma`` policy whose residual is its untrained start, greedy, chooses what a greedy
+    ``ig_learned`` chooses for every UAV at every step, teammates heard; with
+    ``overlap_discount=1`` (the planes' values as they are) it does not."""
     from baselines.field_prior.planner import LearnedPriorPlanner
     from ipp_toolkit.planning import make_planner
 
+    policy = zero_residual_coma(tmp_path / "start.pt")
     ig_learned = LearnedPriorPlanner(lookahead_steps=1)
-    coma = make_planner("coma", lookahead_steps=1)
-    plain = make_planner("coma", overlap_discount=1.0, lookahead_steps=1)
+    coma = make_planner("coma", checkpoint=policy, lookahead_steps=1)
+    plain = make_planner("coma", checkpoint=policy, overlap_discount=1.0, lookahead_steps=1)
     assert coma.needs_local_maps and not plain.needs_local_maps
     config = coma.trained_config.replace(world={"resolution": 1.0},
                                          team={"n_agents": 4, "comm_range": math.inf})
@@ -203,17 +205,19 @@ SILENT = {"lookahead_steps": 3, "lookahead_discount": 0.5, "lookahead_silent": T
 
 
 @pytest.mark.parametrize("options, comm", [(SILENT, 0.0), (SILENT, math.inf), ({}, 25.0)])
-def test_coma_looking_ahead_flies_ig_learneds_choices_with_the_same_lookahead(options, comm):
-    """With a three-step lookahead (without communication too) the default ``coma`` values
-    each option's continuation as ``ig_learned`` with the same options does, and so flies
-    its choices (a greedy ``coma`` does not, on these missions); so do the defaults of both.
-    """
+def test_coma_looking_ahead_flies_ig_learneds_choices_with_the_same_lookahead(options, comm,
+                                                                              tmp_path):
+    """With a three-step lookahead (without communication too) a zero-residual ``coma``
+    values each option's continuation as ``ig_learned`` with the same options does, and so
+    flies its choices (a greedy ``coma`` does not, on these missions); so do the defaults of
+    both planners."""
     from baselines.field_prior.planner import LearnedPriorPlanner
     from ipp_toolkit.planning import make_planner
 
+    policy = zero_residual_coma(tmp_path / "start.pt")
     ig_learned = LearnedPriorPlanner(**options)
-    coma = make_planner("coma", **options)
-    greedy = make_planner("coma", lookahead_steps=1)
+    coma = make_planner("coma", checkpoint=policy, **options)
+    greedy = make_planner("coma", checkpoint=policy, lookahead_steps=1)
     assert coma.needs_local_maps
     config = coma.trained_config.replace(world={"resolution": 1.0},
                                          team={"n_agents": 4, "comm_range": comm})
