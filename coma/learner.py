@@ -542,12 +542,14 @@ class _Run:
                                                             "update": state["update"]})
 
     def save_checkpoint(self, learning: _Learning) -> None:
-        """``last.pt`` (networks, target critic, optimisers, shuffling state, counters) and
-        ``progress.csv``."""
+        """``progress.csv``, then ``last.pt`` (networks, target critic, optimisers, shuffling
+        state, counters). In this order a run stopped between the two writes leaves rows
+        ahead of the checkpoint, which a resume drops (:func:`coma.run_files.read_progress`),
+        never a checkpoint ahead of its rows."""
+        write_progress(self.csv_path, learning.history)
         save_policy(self.last_path, learning.networks, {
             "target_critic": learning.target_critic.state_dict(),
             "optimisers": {k: o.state_dict() for k, o in learning.optimisers.items()},
             "generator": learning.generator.get_state(),
             "progress": dict(learning.state),
         })
-        write_progress(self.csv_path, learning.history)

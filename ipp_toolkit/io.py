@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
+import stat
 import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -20,13 +22,55 @@ from typing import IO, Any
 
 import yaml
 
-__all__ = ["CheckpointError", "atomic_write", "write_json", "save_torch", "load_torch",
+__all__ = ["CheckpointError", "atomic_write", "temporary_path", "temporary_writer",
+           "check_regular_file", "write_json", "save_torch", "load_torch",
            "save_checkpoint", "load_checkpoint", "built_from_checkpoint", "load_weights",
            "first_line", "read_yaml"]
 
 
 class CheckpointError(ValueError):
     """A checkpoint file is missing, corrupt, foreign or does not fit what is asked of it."""
+
+
+# The toolkit's temporary files are named ``.NAME.ipptk-PID-HEX.tmp``: the tag and the
+# writer's PID let a run remove what a killed run of the toolkit left, and nothing else
+# (an editor's or a download's ``*.tmp`` in the same folder is not the toolkit's to delete).
+_TEMPORARY_TAG = "ipptk"
+_TEMPORARY_NAME = re.compile(r"\..+\." + _TEMPORARY_TAG + r"-([1-9][0-9]{0,9})-[0-9a-f]{8}\.tmp")
+
+
+def temporary_path(path: str | os.PathLike[str]) -> Path:
+    """A fresh temporary name beside ``path`` (``.NAME.ipptk-PID-HEX.tmp``), for a file or
+    folder written there and then renamed into place; :func:`temporary_writer` reads it."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{_TEMPORARY_TAG}-{os.getpid()}-"
+                          f"{uuid.uuid4().hex[:8]}.tmp")
+
+
+def temporary_writer(name: str) -> int | None:
+    """The PID of the process that named ``name`` with :func:`temporary_path`, or None: not
+    a temporary file of the toolkit."""
+    match = _TEMPORARY_NAME.fullmatch(name)
+    return int(match.group(1)) if match else None
+
+
+def check_regular_file(path: str | os.PathLike[str], what: str = "file") -> None:
+    """Refuse (ValueError naming the file) a path that is not a regular file: a FIFO, a
+    device or a socket would block a reader forever or never end (``/dev/zero``), and is
+    refused by its type before it is opened. A missing file raises FileNotFoundError, a
+    folder IsADirectoryError (both OSError, naming the file)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as err:
+        raise type(err)(err.errno, err.strerror, os.fspath(path)) from None
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(21, "is a folder, not a file", os.fspath(path))
+    if not stat.S_ISREG(mode):
+        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+                "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else
+                "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+        raise ValueError(f"{what} {os.fspath(path)!r} is {kind}, not a regular file: refusing "
+                         "to read it")
 
 
 def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None]) -> None:
@@ -38,7 +82,7 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    tmp = temporary_path(path)
     try:
         with open(tmp, "xb") as handle:
             write(handle)
