@@ -124,10 +124,17 @@ def load_torch(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
     import torch
 
     path = Path(path)
-    if path.is_dir():
-        raise CheckpointError(f"checkpoint {str(path)!r} is a folder, not a checkpoint file")
-    if not path.is_file():
-        raise CheckpointError(f"checkpoint {str(path)!r} does not exist")
+    try:
+        check_regular_file(path, "checkpoint")
+    except IsADirectoryError:
+        raise CheckpointError(f"checkpoint {str(path)!r} is a folder, not a checkpoint file") \
+            from None
+    except FileNotFoundError:
+        raise CheckpointError(f"checkpoint {str(path)!r} does not exist") from None
+    except OSError as err:
+        raise CheckpointError(f"cannot read checkpoint {str(path)!r}: {err.strerror}") from None
+    except ValueError as err:  # a FIFO or a device: reading it would block or never end
+        raise CheckpointError(str(err)) from None
     if path.stat().st_size == 0:
         raise CheckpointError(f"checkpoint {str(path)!r} is empty (0 bytes)")
     try:
@@ -273,8 +280,7 @@ def read_yaml(path: str | os.PathLike[str], what: str = "file",
     """
     path = Path(path)
     try:
-        if path.is_dir():
-            raise IsADirectoryError(21, "is a folder, not a file")
+        check_regular_file(path, what)  # a FIFO as --config would block forever
         if check_size is not None:
             check_size(path.stat().st_size, f"{what} {str(path)!r}")
         text = path.read_text(encoding="utf-8")
