@@ -239,6 +239,12 @@ def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, 
     seen: set[Any] = set()
     for key_node, _ in node.value:
         key = loader.construct_object(key_node)
+        try:
+            hash(key)
+        except TypeError:  # a list or mapping as a key (``? [a, b]``): no file of ours has one
+            raise yaml.constructor.ConstructorError(
+                None, None, f"a key must be a plain value, not a {key_node.id}",
+                key_node.start_mark) from None
         if key in seen:
             raise yaml.constructor.ConstructorError(
                 None, None, f"duplicate key {key!r}", key_node.start_mark)
@@ -249,15 +255,29 @@ def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, 
 _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _strict_mapping)
 
 
+#: How deep YAML may nest: a config is 2 levels deep; 100,000 nested brackets would exhaust
+#: Python's recursion limit in the composer (a RecursionError traceback).
+MAX_YAML_DEPTH = 64
+
+
 def _no_anchors(loader: _StrictLoader, parent: Any, index: Any) -> Any:
     """Compose a node, refusing anchors (``&a``) and aliases (``*a``): a config needs neither,
-    and a few hundred bytes of nested aliases expand to gigabytes (a "billion laughs")."""
+    and a few hundred bytes of nested aliases expand to gigabytes (a "billion laughs");
+    refusing also nesting deeper than :data:`MAX_YAML_DEPTH`."""
     event = loader.peek_event()
     if isinstance(event, yaml.events.AliasEvent) or getattr(event, "anchor", None) is not None:
         raise yaml.composer.ComposerError(
             None, None, "anchors and aliases (&name, *name) are not allowed in config files",
             event.start_mark)
-    return yaml.composer.Composer.compose_node(loader, parent, index)
+    depth = getattr(loader, "_ipp_depth", 0)
+    if depth >= MAX_YAML_DEPTH:
+        raise yaml.composer.ComposerError(
+            None, None, f"nested more than {MAX_YAML_DEPTH} levels deep", event.start_mark)
+    loader._ipp_depth = depth + 1  # type: ignore[attr-defined]
+    try:
+        return yaml.composer.Composer.compose_node(loader, parent, index)
+    finally:
+        loader._ipp_depth = depth  # type: ignore[attr-defined]
 
 
 _StrictLoader.compose_node = _no_anchors  # type: ignore[method-assign]

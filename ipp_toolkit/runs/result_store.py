@@ -22,6 +22,8 @@ import io
 import json
 import math
 import warnings
+import zipfile
+import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,9 +31,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..config.files import config_from_dict, config_to_dict
+from ..config.limits import check_limit
 from ..config.schema import EnvConfig
 from ..config.settings import safe_name
-from ..io import atomic_write, write_json
+from ..io import atomic_write, check_regular_file, write_json
 
 if TYPE_CHECKING:
     from ..planning.specs import PlannerSpec
@@ -310,20 +313,38 @@ def write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
 
 
 def read_trajectory(path: Path) -> dict[str, Any]:
-    """A recorded mission back from its npz (ValueError when arrays are missing)."""
-    with np.load(path, allow_pickle=False) as data:
-        missing = {"ground_truth", "final_prob", "positions", "footprints", "area_size",
-                   "resolution"} - set(data.files)
-        if missing:
-            raise ValueError(f"missing arrays {sorted(missing)}")
-        return {
-            "ground_truth": data["ground_truth"].astype(bool),
-            "final_prob": data["final_prob"],
-            "positions": data["positions"],
-            "footprints": data["footprints"],
-            "area_size": float(data["area_size"]),
-            "resolution": float(data["resolution"]),
-        }
+    """A recorded mission back from its npz.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not a regular file, is corrupt (truncated, not a zip, a
+            damaged member), lacks arrays, or has a member over the ``zip_member_bytes``
+            limit (checked before it is inflated).
+    """
+    check_regular_file(path, "trajectory")
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise ValueError("not an npz archive")
+        with loaded as data:
+            for info in data.zip.infolist():  # before any member is inflated
+                check_limit("zip_member_bytes", info.file_size,
+                            f"member {info.filename!r} of {str(path)!r}", estimate=False)
+            missing = {"ground_truth", "final_prob", "positions", "footprints", "area_size",
+                       "resolution"} - set(data.files)
+            if missing:
+                raise ValueError(f"missing arrays {sorted(missing)}")
+            return {
+                "ground_truth": data["ground_truth"].astype(bool),
+                "final_prob": data["final_prob"],
+                "positions": data["positions"],
+                "footprints": data["footprints"],
+                "area_size": float(data["area_size"]),
+                "resolution": float(data["resolution"]),
+            }
+    except (zipfile.BadZipFile, zlib.error, EOFError, KeyError) as err:
+        # numpy and zipfile raise these for a truncated or damaged archive
+        raise ValueError(f"corrupt npz file ({type(err).__name__}: {err})") from None
 
 
 def _format_cell(value: Any) -> str:
