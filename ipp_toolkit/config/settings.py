@@ -265,7 +265,10 @@ def _with_team_rules(layered: dict[str, Any], team_from_flag: bool,
             rules["team"] = {"start": fitted}
     features = layered.get("features", {})
     scale = features.get("agent_id_scale", FeatureConfig.agent_id_scale)
-    if features.get("agent_id", True) and isinstance(scale, int) and n_agents > scale:
+    # Only a valid scale is raised to fit the team: 0 or -1 is refused by the config's own
+    # validation, not silently replaced.
+    if features.get("agent_id", True) and isinstance(scale, int) and not isinstance(scale, bool) \
+            and 1 <= scale < n_agents:
         rules["features"] = {"agent_id_scale": n_agents}
     return merge_sections(layered, rules)
 

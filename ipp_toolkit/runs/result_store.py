@@ -40,8 +40,8 @@ if TYPE_CHECKING:
     from ..planning.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
-           "check_folder", "check_label", "run_key", "shard_path", "trajectory_path",
-           "stored_planners", "read_shard", "read_stored_missions",
+           "check_folder", "check_label", "check_finite_row", "run_key", "shard_path",
+           "trajectory_path", "stored_planners", "read_shard", "read_stored_missions",
            "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
            "read_results_csv"]
 
@@ -198,7 +198,20 @@ def _check_rows(rows: Any, label: str, mission: int, budget: int,
             raise ValueError(f"row {step} belongs to another planner, mission or step")
         if row["seed"] != seed:
             raise ValueError(f"row {step} is of seed {row['seed']!r}, the folder's is {seed}")
+        check_finite_row(row, f"row {step}")
     return rows
+
+
+def check_finite_row(row: Mapping[str, Any], where: str) -> None:
+    """ValueError naming ``where`` when a metric of ``row`` is not a finite number: its
+    entropy, F1 or RMSE, or (after step 0, where both are NaN) its reward or planning time.
+    A NaN would flow into every mean of the tables without a word."""
+    columns = ("entropy", "f1", "rmse") + (("reward", "plan_ms") if row["step"] else ())
+    for column in columns:
+        value = row[column]
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value):
+            raise ValueError(f"{where} has {column} = {value!r}, not a finite number")
 
 
 def stored_planners(folder: Path, exclude: Sequence[str], missions: int, budget: int,
