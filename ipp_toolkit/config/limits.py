@@ -21,8 +21,8 @@ if TYPE_CHECKING:
     from .schema import EnvConfig
 
 __all__ = ["LimitError", "Limit", "LIMITS", "limit_value", "check_limit",
-           "mission_bytes", "check_mission", "check_result_rows", "check_layer_size",
-           "check_parameters", "check_raster_cells"]
+           "mission_bytes", "check_mission", "check_rollout", "check_result_rows",
+           "check_layer_size", "check_parameters", "check_raster_cells"]
 
 GIB = 1024 ** 3
 
@@ -52,6 +52,8 @@ LIMITS = {
                         "parameters of the networks of one policy or run"),
     "raster_cells": Limit("IPP_MAX_RASTER_CELLS", 100_000_000, "cells",
                           "cells of a raster file read as terrain"),
+    "rollout_memory": Limit("IPP_MAX_ROLLOUT_GB", 8.0, "GiB",
+                            "estimated memory of a trainer's rollout of observations"),
     "mission_steps": Limit("IPP_MAX_MISSION_STEPS", 100_000, "UAV-steps",
                            "steps of one mission times its UAVs: budget x n_agents"),
     "config_bytes": Limit("IPP_MAX_CONFIG_BYTES", 4 * 1024 ** 2, "bytes",
@@ -150,6 +152,16 @@ def check_mission(config: EnvConfig, at_once: int = 1) -> None:
                 f"a mission of budget {config.team.budget} with {config.team.n_agents} UAVs "
                 f"(about {hours:.2g} h per mission for the simulator alone, more with a "
                 "planner)")
+
+
+def check_rollout(transitions: float, channels: int, grid: int, what: str,
+                  copies: float = 2.0) -> None:
+    """LimitError when ``transitions`` stored observations of ``channels`` x ``grid`` x
+    ``grid`` float32 planes, ``copies`` times over (a buffer and the minibatches cut from it;
+    a critic's inputs beside the actor's), would not fit the ``rollout_memory`` limit; checked
+    before a trainer allocates them (``--n-steps 10000000`` asked for 505 GiB at once)."""
+    per_transition = float(channels) * float(grid) * float(grid) * 4.0 * copies + 64.0
+    check_limit("rollout_memory", float(transitions) * per_transition / GIB, what)
 
 
 def check_result_rows(budget: int, missions: int, planners: int) -> None:
