@@ -297,19 +297,25 @@ def _running(pid: int) -> bool:
     return True
 
 
-def _remove_stale_temporaries(folder: Path) -> None:
+#: How deep below a run folder the toolkit writes (``shards/LABEL/mission_00000.json``).
+_WRITTEN_DEPTH = 2
+
+
+def _remove_stale_temporaries(folder: Path, depth: int = 0) -> None:
     """Remove the toolkit's temporary files that runs killed mid-write (SIGTERM, SIGKILL,
-    power loss) left in ``folder`` and the folders it wrote: only names of
+    power loss) left in ``folder`` and the folders it writes: only names of
     :func:`ipp_toolkit.io.temporary_path` whose writer no longer runs. Folders of other runs
-    (holding a ``run.json``) and symbolic links are not entered."""
+    (holding a ``run.json``), symbolic links and anything deeper than the toolkit writes
+    (``--force`` into a home folder) are not entered."""
     try:
         entries = list(os.scandir(folder))
     except OSError:
         return
     for entry in entries:
         if entry.is_dir(follow_symlinks=False):
-            if not os.path.lexists(os.path.join(entry.path, RECORD_NAME)):
-                _remove_stale_temporaries(Path(entry.path))
+            if depth < _WRITTEN_DEPTH \
+                    and not os.path.lexists(os.path.join(entry.path, RECORD_NAME)):
+                _remove_stale_temporaries(Path(entry.path), depth + 1)
             continue
         pid = temporary_writer(entry.name)
         if pid is not None and entry.is_file(follow_symlinks=False) and not _running(pid):
