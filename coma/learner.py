@@ -36,12 +36,13 @@ import torch
 from torch import nn
 
 from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.limits import check_rollout
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_weights, write_json
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.runs.progress import progress_bar
 from ipp_toolkit.runs.run_folder import COMA_COMMAND, claim
-from ipp_toolkit.sim.features import actor_plane_names
+from ipp_toolkit.sim.features import actor_plane_names, critic_plane_names
 from ipp_toolkit.sim.mission import MissionGeometry
 
 from .config import COMAConfig, mission_settings
@@ -292,6 +293,12 @@ def _check_missions(coma_config: COMAConfig, env_config: EnvConfig
                          "evaluate a trained policy on them with ipp-compare instead")
     settings = mission_settings(coma_config, env_config)
     check_network_size(coma_config, env_config)
+    for setting in settings:  # one update's missions are held at once: actor and critic inputs
+        check_rollout(float(coma_config.missions_per_update) * setting.team.budget
+                      * setting.team.n_agents, len(actor_plane_names(setting.features))
+                      + len(critic_plane_names(setting.features)), setting.world.grid_points,
+                      f"an update of {coma_config.missions_per_update} missions of "
+                      f"{setting.team.n_agents} UAVs and budget {setting.team.budget}")
     geometries = [MissionGeometry(config) for config in settings]
     checks = validation_settings(coma_config, settings)
     # The checks' geometries are the settings' own objects where the checks are the settings.
@@ -544,12 +551,14 @@ class _Run:
                                                             "update": state["update"]})
 
     def save_checkpoint(self, learning: _Learning) -> None:
-        """``last.pt`` (networks, target critic, optimisers, shuffling state, counters) and
-        ``progress.csv``."""
+        """``progress.csv``, then ``last.pt`` (networks, target critic, optimisers, shuffling
+        state, counters). In this order a run stopped between the two writes leaves rows
+        ahead of the checkpoint, which a resume drops (:func:`coma.run_files.read_progress`),
+        never a checkpoint ahead of its rows."""
+        write_progress(self.csv_path, learning.history)
         save_policy(self.last_path, learning.networks, {
             "target_critic": learning.target_critic.state_dict(),
             "optimisers": {k: o.state_dict() for k, o in learning.optimisers.items()},
             "generator": learning.generator.get_state(),
             "progress": dict(learning.state),
         })
-        write_progress(self.csv_path, learning.history)

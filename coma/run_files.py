@@ -77,6 +77,9 @@ def resume_fields(config: COMAConfig) -> dict[str, Any]:
 def read_progress(path: Path, up_to_update: int) -> list[dict[str, Any]]:
     """The rows of ``progress.csv`` for updates 1..``up_to_update`` (a resumed run's history).
 
+    Rows after ``up_to_update`` are dropped: the file is written before the checkpoint, so a
+    run stopped between the two writes left rows of updates the checkpoint does not hold.
+
     Raises:
         CheckpointError: the file is missing (at update > 0), unreadable, malformed, or does
             not hold one row per update up to ``up_to_update``; resuming would silently

@@ -32,6 +32,7 @@ later ``reset()`` calls without a seed run missions 1, 2, ... of the same run, a
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -176,7 +177,10 @@ class IPPEnv(ParallelEnv):
                 # Unseeded: fresh OS entropy, so copies of one env never replay each other.
                 self._seed = int(np.random.SeedSequence().entropy % (2**63))
             self._mission_index += 1
-        unknown = sorted(set(options or {}) - {"mission"})
+        if options is not None and not isinstance(options, Mapping):
+            raise TypeError(f"options must be a dict such as {{'mission': 3}} or None, got "
+                            f"{type(options).__name__} {options!r:.80}")
+        unknown = sorted(map(str, set(options or {}) - {"mission"}))
         if unknown:  # a warning, not an error: PettingZoo's API test passes other options
             warnings.warn(f"ignoring unknown reset option(s) {unknown}; the only option is "
                           "'mission'", UserWarning, stacklevel=2)
@@ -207,6 +211,9 @@ class IPPEnv(ParallelEnv):
             ValueError: an agent is missing or unknown, an action is out of range, or (with
                 ``invalid_action="raise"``) masked.
         """
+        if not isinstance(actions, Mapping):
+            raise TypeError(f"actions must be a dict of agent name -> action index, got "
+                            f"{type(actions).__name__} {actions!r:.80}")
         if self.mission is None:
             raise RuntimeError("call reset() before step()")
         if not self.agents:

@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
+import stat
 import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -20,13 +22,55 @@ from typing import IO, Any
 
 import yaml
 
-__all__ = ["CheckpointError", "atomic_write", "write_json", "save_torch", "load_torch",
+__all__ = ["CheckpointError", "atomic_write", "temporary_path", "temporary_writer",
+           "check_regular_file", "write_json", "save_torch", "load_torch",
            "save_checkpoint", "load_checkpoint", "built_from_checkpoint", "load_weights",
            "first_line", "read_yaml"]
 
 
 class CheckpointError(ValueError):
     """A checkpoint file is missing, corrupt, foreign or does not fit what is asked of it."""
+
+
+# The toolkit's temporary files are named ``.NAME.ipptk-PID-HEX.tmp``: the tag and the
+# writer's PID let a run remove what a killed run of the toolkit left, and nothing else
+# (an editor's or a download's ``*.tmp`` in the same folder is not the toolkit's to delete).
+_TEMPORARY_TAG = "ipptk"
+_TEMPORARY_NAME = re.compile(r"\..+\." + _TEMPORARY_TAG + r"-([1-9][0-9]{0,9})-[0-9a-f]{8}\.tmp")
+
+
+def temporary_path(path: str | os.PathLike[str]) -> Path:
+    """A fresh temporary name beside ``path`` (``.NAME.ipptk-PID-HEX.tmp``), for a file or
+    folder written there and then renamed into place; :func:`temporary_writer` reads it."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{_TEMPORARY_TAG}-{os.getpid()}-"
+                          f"{uuid.uuid4().hex[:8]}.tmp")
+
+
+def temporary_writer(name: str) -> int | None:
+    """The PID of the process that named ``name`` with :func:`temporary_path`, or None: not
+    a temporary file of the toolkit."""
+    match = _TEMPORARY_NAME.fullmatch(name)
+    return int(match.group(1)) if match else None
+
+
+def check_regular_file(path: str | os.PathLike[str], what: str = "file") -> None:
+    """Refuse (ValueError naming the file) a path that is not a regular file: a FIFO, a
+    device or a socket would block a reader forever or never end (``/dev/zero``), and is
+    refused by its type before it is opened. A missing file raises FileNotFoundError, a
+    folder IsADirectoryError (both OSError, naming the file)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as err:
+        raise type(err)(err.errno, err.strerror, os.fspath(path)) from None
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(21, "is a folder, not a file", os.fspath(path))
+    if not stat.S_ISREG(mode):
+        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+                "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else
+                "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+        raise ValueError(f"{what} {os.fspath(path)!r} is {kind}, not a regular file: refusing "
+                         "to read it")
 
 
 def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None]) -> None:
@@ -38,7 +82,7 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    tmp = temporary_path(path)
     try:
         with open(tmp, "xb") as handle:
             write(handle)
@@ -80,10 +124,17 @@ def load_torch(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
     import torch
 
     path = Path(path)
-    if path.is_dir():
-        raise CheckpointError(f"checkpoint {str(path)!r} is a folder, not a checkpoint file")
-    if not path.is_file():
-        raise CheckpointError(f"checkpoint {str(path)!r} does not exist")
+    try:
+        check_regular_file(path, "checkpoint")
+    except IsADirectoryError:
+        raise CheckpointError(f"checkpoint {str(path)!r} is a folder, not a checkpoint file") \
+            from None
+    except FileNotFoundError:
+        raise CheckpointError(f"checkpoint {str(path)!r} does not exist") from None
+    except OSError as err:
+        raise CheckpointError(f"cannot read checkpoint {str(path)!r}: {err.strerror}") from None
+    except ValueError as err:  # a FIFO or a device: reading it would block or never end
+        raise CheckpointError(str(err)) from None
     if path.stat().st_size == 0:
         raise CheckpointError(f"checkpoint {str(path)!r} is empty (0 bytes)")
     try:
@@ -188,6 +239,12 @@ def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, 
     seen: set[Any] = set()
     for key_node, _ in node.value:
         key = loader.construct_object(key_node)
+        try:
+            hash(key)
+        except TypeError:  # a list or mapping as a key (``? [a, b]``): no file of ours has one
+            raise yaml.constructor.ConstructorError(
+                None, None, f"a key must be a plain value, not a {key_node.id}",
+                key_node.start_mark) from None
         if key in seen:
             raise yaml.constructor.ConstructorError(
                 None, None, f"duplicate key {key!r}", key_node.start_mark)
@@ -198,15 +255,29 @@ def _strict_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Any, 
 _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _strict_mapping)
 
 
+#: How deep YAML may nest: a config is 2 levels deep; 100,000 nested brackets would exhaust
+#: Python's recursion limit in the composer (a RecursionError traceback).
+MAX_YAML_DEPTH = 64
+
+
 def _no_anchors(loader: _StrictLoader, parent: Any, index: Any) -> Any:
     """Compose a node, refusing anchors (``&a``) and aliases (``*a``): a config needs neither,
-    and a few hundred bytes of nested aliases expand to gigabytes (a "billion laughs")."""
+    and a few hundred bytes of nested aliases expand to gigabytes (a "billion laughs");
+    refusing also nesting deeper than :data:`MAX_YAML_DEPTH`."""
     event = loader.peek_event()
     if isinstance(event, yaml.events.AliasEvent) or getattr(event, "anchor", None) is not None:
         raise yaml.composer.ComposerError(
             None, None, "anchors and aliases (&name, *name) are not allowed in config files",
             event.start_mark)
-    return yaml.composer.Composer.compose_node(loader, parent, index)
+    depth = getattr(loader, "_ipp_depth", 0)
+    if depth >= MAX_YAML_DEPTH:
+        raise yaml.composer.ComposerError(
+            None, None, f"nested more than {MAX_YAML_DEPTH} levels deep", event.start_mark)
+    loader._ipp_depth = depth + 1  # type: ignore[attr-defined]
+    try:
+        return yaml.composer.Composer.compose_node(loader, parent, index)
+    finally:
+        loader._ipp_depth = depth  # type: ignore[attr-defined]
 
 
 _StrictLoader.compose_node = _no_anchors  # type: ignore[method-assign]
@@ -229,8 +300,7 @@ def read_yaml(path: str | os.PathLike[str], what: str = "file",
     """
     path = Path(path)
     try:
-        if path.is_dir():
-            raise IsADirectoryError(21, "is a folder, not a file")
+        check_regular_file(path, what)  # a FIFO as --config would block forever
         if check_size is not None:
             check_size(path.stat().st_size, f"{what} {str(path)!r}")
         text = path.read_text(encoding="utf-8")

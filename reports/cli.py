@@ -34,7 +34,9 @@ from ipp_toolkit.config.settings import (
 from ipp_toolkit.env import IPPEnv
 from ipp_toolkit.io import atomic_write
 from ipp_toolkit.runs.cli_flags import (
+    FORCE_HELP,
     add_compute_flags,
+    add_force_flag,
     add_progress_flag,
     comm_range,
     finite_float,
@@ -43,7 +45,7 @@ from ipp_toolkit.runs.cli_flags import (
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
-from ipp_toolkit.runs.run_folder import check_out_path
+from ipp_toolkit.runs.run_folder import allow_foreign_files, check_out_path, claim
 
 from .compare import DEFAULT_PLANNERS, interrupted
 
@@ -66,6 +68,7 @@ def _simulate_parser() -> argparse.ArgumentParser:
     parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
     parser.add_argument("--out", default="results/simulate",
                         help="folder for metrics.csv and final.png")
+    add_force_flag(parser)
     return parser
 
 
@@ -84,18 +87,26 @@ def simulate_main(argv: list[str] | None = None) -> int:
                                  "written after the mission")
         env = IPPEnv(config, render_mode="rgb_array", namespace="test")
         observations, infos = env.reset(seed=args.seed, options={"mission": args.mission})
-        args.out.mkdir(parents=True, exist_ok=True)  # after the mission is built: no litter
+        with allow_foreign_files(args.force), claim(args.out, "ipp-simulate"):
+            # Held from the mission to the files: a run writing the folder is not mixed in.
+            return _simulate(env, observations, infos, args.seed, targets)
     except ValueError as err:
         print(f"ipp-simulate: error: {err}", file=sys.stderr)
         return 2
     except OSError as err:
-        print(f"ipp-simulate: error: cannot write --out {str(args.out)!r}: {err.strerror}",
+        print(f"ipp-simulate: error: cannot write into {str(args.out)!r}: {err.strerror}",
               file=sys.stderr)
         return 2
-    rng = np.random.default_rng(args.seed)
+
+
+def _simulate(env: IPPEnv, observations: dict, infos: dict, seed: int,
+              targets: tuple[Path, Path]) -> int:
+    """Fly ``env``'s mission with random valid actions, print and write its metrics."""
+    rng = np.random.default_rng(seed)
     metric_keys = ("entropy", "f1", "rmse")
-    first = infos[env.possible_agents[0]]
+    first = next(iter(infos.values()))
     rows = [{"step": 0, "reward": "", **{key: first[key] for key in metric_keys}}]
+    config = env.config
     print(f"{config.team.n_agents} UAVs, D = {config.team.comm_range:g} m, "
           f"{config.world.map_cells}^2 map, budget {config.team.budget} steps")
     print(f"{'step':>4} {'reward':>8} {'entropy':>8} {'f1':>6} {'rmse':>6}")
@@ -103,10 +114,12 @@ def simulate_main(argv: list[str] | None = None) -> int:
     while env.agents:
         actions = {agent: int(rng.choice(np.flatnonzero(observations[agent]["action_mask"])))
                    for agent in env.agents}
+        # The team's reward is any flying UAV's: a failed one (kept or gone) gets none.
+        flying = [agent for agent in env.agents
+                  if env.mission.alive[env.possible_agents.index(agent)]]
         observations, rewards, _, _, infos = env.step(actions)
-        info = infos[env.possible_agents[0]]
-        metrics = {key: info[key] for key in metric_keys}
-        reward = rewards[env.possible_agents[0]]
+        metrics = {key: next(iter(infos.values()))[key] for key in metric_keys}
+        reward = rewards[flying[0]] if flying else 0.0
         rows.append({"step": env.mission.step, "reward": reward, **metrics})
         print(f"{env.mission.step:>4} {reward:8.3f} {metrics['entropy']:8.3f} "
               f"{metrics['f1']:6.3f} {metrics['rmse']:6.3f}")
@@ -118,14 +131,9 @@ def simulate_main(argv: list[str] | None = None) -> int:
     writer.writeheader()
     writer.writerows(rows)
     data = text.getvalue().encode("utf-8")
-    try:
-        save_png(env.render(), targets[0])
-        atomic_write(targets[1], lambda handle: handle.write(data))
-    except OSError as err:
-        print(f"ipp-simulate: error: cannot write into {str(args.out)!r}: {err.strerror}",
-              file=sys.stderr)
-        return 2
-    print(f"wrote {args.out / 'metrics.csv'} and {args.out / 'final.png'}")
+    save_png(env.render(), targets[0])
+    atomic_write(targets[1], lambda handle: handle.write(data))
+    print(f"wrote {targets[1]} and {targets[0]}")
     return 0
 
 
@@ -207,6 +215,7 @@ def _compare_parser() -> argparse.ArgumentParser:
     parser.add_argument("--animate", action="store_true", default=False,
                         help="also write animations/<planner>.gif of mission 0 per planner")
     add_progress_flag(parser, "hide the progress bar")
+    add_force_flag(parser)
     return parser
 
 
@@ -252,11 +261,12 @@ def compare_main(argv: list[str] | None = None) -> int:
         return error(err)
     print(setting_line(env_config, args.config), file=sys.stderr)
     try:
-        comparison = compare(
-            planners=args.planners, trials=args.trials, seed=args.seed, workers=args.workers,
-            out=out_dir, config=env_config, progress=not args.no_progress,
-            animate=args.animate, namespace=args.namespace, backend=args.backend,
-            address=args.address, reference=args.reference)
+        with allow_foreign_files(args.force):
+            comparison = compare(
+                planners=args.planners, trials=args.trials, seed=args.seed,
+                workers=args.workers, out=out_dir, config=env_config,
+                progress=not args.no_progress, animate=args.animate, namespace=args.namespace,
+                backend=args.backend, address=args.address, reference=args.reference)
     except (ValueError, OSError) as err:  # ConnectionError (no Ray at --address) included
         return error(err)
     except KeyboardInterrupt:
@@ -293,8 +303,9 @@ def train_main(argv: list[str] | None = None) -> int:
     import importlib
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    usage = (f"usage: ipp-train {{{','.join(TRAINERS)}}} [options]   "
-             "(ipp-train coma --help, ipp-train sb3 --help for the options)")
+    usage = (f"usage: ipp-train {{{','.join(TRAINERS)}}} [--force] [options]   "
+             "(ipp-train coma --help, ipp-train sb3 --help for the options; --force: "
+             f"{FORCE_HELP})")
     if not argv or argv[0] in ("-h", "--help"):
         print(usage)
         return 0 if argv else 2
@@ -306,8 +317,10 @@ def train_main(argv: list[str] | None = None) -> int:
               f"{usage}", file=sys.stderr)
         return 2
     module = importlib.import_module(TRAINERS[argv[0]])
+    force = "--force" in argv[1:]
     try:
-        code = int(module.main(argv[1:]))
+        with allow_foreign_files(force):  # every trainer's --force: see FORCE_HELP
+            code = int(module.main([item for item in argv[1:] if item != "--force"]))
     except SystemExit as exit_:  # argparse: --help (0) or a usage error (2, already printed)
         return exit_.code if isinstance(exit_.code, int) else 2
     out = _flag_value(argv, "--out")

@@ -19,6 +19,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
+import numbers
 import os
 import sys
 from collections.abc import Callable, Collection, Mapping, Sequence
@@ -438,10 +440,11 @@ def compare(agents: int | None = None, comm: float | None = None,
 def _check_run_inputs(trials: int, workers: int, namespace: str, backend: str,
                       address: str | None) -> None:
     """Refuse bad counts, namespace or backend (ValueError) before the planners are built."""
-    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
-        raise ValueError(f"trials must be an integer >= 1, got {trials!r}")
-    if isinstance(workers, bool) or int(workers) != workers or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    for name, value in (("trials", trials), ("workers", workers)):
+        # Checked by type first: int(inf) and int(None) would raise their own errors.
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                or not math.isfinite(value) or int(value) != value or value < 1:
+            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     if namespace not in ("test", "validation"):
         raise ValueError(f"namespace must be 'test' or 'validation', got {namespace!r}")
     check_backend(backend, address)

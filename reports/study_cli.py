@@ -14,6 +14,7 @@ from pathlib import Path
 from ipp_toolkit.config.settings import comm_label
 from ipp_toolkit.runs.cli_flags import (
     add_compute_flags,
+    add_force_flag,
     add_progress_flag,
     add_set_flag,
     comm_range_list,
@@ -23,7 +24,7 @@ from ipp_toolkit.runs.cli_flags import (
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
-from ipp_toolkit.runs.run_folder import claim
+from ipp_toolkit.runs.run_folder import allow_foreign_files, claim
 
 from .compare import DEFAULT_PLANNERS, interrupted
 
@@ -49,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     comm = [0.0, 25.0, float("inf")] if args.comm is None else args.comm
     try:
         # The study's folder holds the folders of its runs: one study at a time.
-        with claim(out, f"ipp-study {args.study}"):
+        with allow_foreign_files(args.force), claim(out, f"ipp-study {args.study}"):
             return _study(args, out, backend, seed, agents, comm)
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
         # OSError: ConnectionError (no Ray at --address) included
@@ -141,6 +142,7 @@ def _study_parser() -> argparse.ArgumentParser:
                              "over seeds (default: one seed, 0)")
     _add_generalisation_flags(parser)
     add_progress_flag(parser, None)
+    add_force_flag(parser)
     return parser
 
 

@@ -27,6 +27,7 @@ from ipp_toolkit.runs.evaluation import (
     run_mission,
 )
 from ipp_toolkit.runs.process_pool import WorkerPool
+from ipp_toolkit.runs.run_folder import RunFolderError, allow_foreign_files
 from ipp_toolkit.sim.mission import reset_mission
 from ipp_toolkit.world.seeding import planner_seed
 
@@ -406,7 +407,9 @@ def test_another_configuration_is_refused_and_nothing_written(tmp_path):
     assert snapshot(out) == before
     stray = tmp_path / "stray"
     (stray / "shards").mkdir(parents=True)
-    with pytest.raises(EvaluationError, match="no config.json"):
+    with pytest.raises(RunFolderError, match="holds files no run of the toolkit wrote"):
+        evaluate(tiny_config(), PLANNERS, missions=1, progress=False, out_dir=stray)
+    with allow_foreign_files(), pytest.raises(EvaluationError, match="no config.json"):
         evaluate(tiny_config(), PLANNERS, missions=1, progress=False, out_dir=stray)
 
 

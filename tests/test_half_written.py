@@ -3,6 +3,10 @@ temporary files of a run killed mid-write are removed by the next run into the f
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -51,11 +55,18 @@ def test_temporary_files_of_a_killed_run_are_removed_by_the_next(tmp_path, capsy
     out = tmp_path / "out"
     argv = [*QUICK, "--planners", "random", "--resolution", "1", "--out", str(out)]
     assert compare_main(argv) == 0
-    stale = [out / ".curves.png.4242.0a1b2c3d.tmp", out / "trajectories" / ".tmp-x1y2.png",
-             out / "shards" / "random" / ".mission_00000.json.4242.deadbeef.tmp"]
-    for path in stale:
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()  # a PID that no longer runs: the writer of the files below was killed
+    stale = [out / f".curves.png.ipptk-{dead.pid}-0a1b2c3d.tmp",
+             out / "trajectories" / f".random_mission0.png.ipptk-{dead.pid}-12345678.tmp",
+             out / "shards" / "random" / f".mission_00000.json.ipptk-{dead.pid}-deadbeef.tmp"]
+    # Not the toolkit's (another program's, or a running writer's): never touched.
+    kept = [out / ".curves.png.4242.0a1b2c3d.tmp", out / "shards" / ".editor.swp.tmp",
+            out / f".curves.png.ipptk-{os.getpid()}-0a1b2c3d.tmp"]
+    for path in stale + kept:
         path.write_bytes(b"half")
     assert compare_main(argv) == 0
     capsys.readouterr()
     assert not any(path.exists() for path in stale)
+    assert all(path.read_bytes() == b"half" for path in kept)
     assert (out / "curves.png").is_file()

@@ -400,7 +400,14 @@ def _open_run(out: Path, record: dict[str, Any], resume: bool, found: frozenset[
         if not config_path.is_file() or not (out / "last.pt").is_file():
             raise ValueError(f"nothing to resume in {str(out)!r} (no config.json and last.pt "
                              "of a prior's training)")
-        stored = json.loads(config_path.read_text(encoding="utf-8"))
+        try:
+            stored = json.loads(config_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError) as err:
+            raise ValueError(f"{str(config_path)!r} is unreadable ({err}); it should record "
+                             "the prior's training settings") from None
+        if not isinstance(stored, dict):
+            raise ValueError(f"{str(config_path)!r} holds a JSON {type(stored).__name__}, not "
+                             "the record of a prior's training; it cannot be resumed")
         if stored.get("kind") != PRIOR_COMMAND:
             raise ValueError(f"{str(out)!r} holds another command's run, not a prior's")
         # A run recorded before a setting existed ran it at its default.

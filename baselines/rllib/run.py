@@ -15,12 +15,11 @@ import os
 import shutil
 import sys
 import time
-import uuid
 from pathlib import Path
 from typing import Any
 
 from ipp_toolkit.config.schema import EnvConfig
-from ipp_toolkit.io import write_json
+from ipp_toolkit.io import temporary_path, write_json
 from ipp_toolkit.runs.process_pool import limit_blas_threads
 from ipp_toolkit.runs.progress import progress_bar
 from ipp_toolkit.runs.ray_backend import session
@@ -86,7 +85,7 @@ def algorithm_config(config: RLlibTrainConfig, env_cfg: EnvConfig, base_seed: in
 def _swap_in(folder: Path, write: Any) -> None:
     """Write a checkpoint folder beside ``folder`` with ``write(tmp)``, then rename it into
     place (the old one is removed only once the new one is there)."""
-    tmp = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    tmp = temporary_path(folder)
     old = folder.with_name(f"{folder.name}.old")
     try:
         write(tmp)

@@ -23,12 +23,14 @@ from typing import Any, Protocol
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
 
+from ipp_toolkit.config.limits import check_mission, check_rollout
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.cli_flags import comm_range, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.sim.team import N_ACTIONS
 from ipp_toolkit.vec import make_sb3_vec_env
 
@@ -45,9 +47,9 @@ from .ppo import (
 )
 from .runner import RunFormat, run_sb3_training, same_run_check
 
-__all__ = ["TrainingWorld", "training_env_config", "train_ppo", "add_mission_flags",
-           "add_network_flags", "mission_config_from_args", "add_run_config_flags",
-           "run_config_from_args", "add_run_flags", "main"]
+__all__ = ["TrainingWorld", "training_env_config", "train_ppo", "check_training_memory",
+           "add_mission_flags", "add_network_flags", "mission_config_from_args",
+           "add_run_config_flags", "run_config_from_args", "add_run_flags", "main"]
 
 
 class TrainingWorld(Protocol):
@@ -73,6 +75,22 @@ def training_env_config(config: TrainingWorld, env_config: EnvConfig) -> EnvConf
 def _ppo_run_format() -> RunFormat:
     return RunFormat(algo_label="PPO", policy_kind=CHECKPOINT_KIND, training_kind=TRAINING_KIND,
                      metadata=policy_metadata, tb_log_name="ppo")
+
+
+def check_training_memory(env_cfg: EnvConfig, n_envs: int, n_steps: int,
+                          buffer_size: int | None = None) -> None:
+    """LimitError (a ValueError) when ``n_envs`` simulator copies, or a rollout of
+    ``n_steps`` x ``n_envs`` x UAVs observations (a replay buffer of ``buffer_size``), would
+    not fit its memory limit; checked before anything is built (``--n-envs 20000`` or
+    ``--n-steps 10000000`` would otherwise allocate until the machine swaps)."""
+    check_mission(env_cfg, at_once=n_envs)
+    n_agents = env_cfg.team.n_agents
+    what = f"a rollout of n_steps {n_steps} x n_envs {n_envs} x {n_agents} UAVs"
+    transitions = float(n_steps) * n_envs * n_agents
+    if buffer_size is not None:
+        what, transitions = f"a replay buffer of {buffer_size} transitions", float(buffer_size)
+    check_rollout(transitions, len(actor_plane_names(env_cfg.features)),
+                  env_cfg.world.grid_points, what)
 
 
 def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path,
@@ -112,6 +130,7 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
     if not isinstance(env_config, EnvConfig):
         raise ValueError(f"env_config must be an EnvConfig, got {type(env_config).__name__}")
     env_cfg = training_env_config(config, env_config)
+    check_training_memory(env_cfg, config.n_envs, config.n_steps)
 
     check_resume = same_run_check(config, env_cfg, "ppo_config", "PPO")
 

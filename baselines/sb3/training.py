@@ -62,6 +62,7 @@ from .ppo import (
 from .ppo_training import (
     add_run_config_flags,
     add_run_flags,
+    check_training_memory,
     run_config_from_args,
     train_ppo,
     training_env_config,
@@ -360,6 +361,11 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
     check_policy_size(len(actor_plane_names(env_cfg.features)), env_cfg.world.grid_points,
                       architecture.width, architecture.features_dim, architecture.hidden,
                       f"an {algo} policy")
+    # An on-policy rollout holds n_steps per slot; an off-policy replay buffer, buffer_size
+    # transitions in all.
+    hyper = config.hyperparameters
+    check_training_memory(env_cfg, config.n_envs, int(hyper.get("n_steps", 1)),
+                          hyper.get("buffer_size"))
 
     check_resume = same_run_check(config, env_cfg, "sb3_config", "SB3")
 

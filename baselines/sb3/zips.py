@@ -29,7 +29,8 @@ from sb3_contrib.qrdqn.policies import QRDQNPolicy
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.dqn.policies import DQNPolicy
 
-from ipp_toolkit.io import CheckpointError
+from ipp_toolkit.config.limits import LimitError, check_limit
+from ipp_toolkit.io import CheckpointError, check_regular_file
 
 from .policies import LoadedPolicy, PolicyArchitecture, check_shapes
 from .ppo import NoOptimizer, SmallCNN
@@ -60,13 +61,25 @@ _CLASS_NAME = re.compile(r"<class '([^']+)'>")
 
 
 def is_sb3_zip(path: str | Path) -> bool:
-    """Whether ``path`` is a zip with SB3's ``data`` and ``policy.pth`` members."""
+    """Whether ``path`` is a zip with SB3's ``data`` and ``policy.pth`` members (False for
+    anything but a regular file: the checkpoint loader then refuses it by name)."""
     try:
+        check_regular_file(path, "SB3 zip")
         with zipfile.ZipFile(path) as archive:
             names = set(archive.namelist())
-    except (OSError, zipfile.BadZipFile):
+    except (OSError, ValueError, zipfile.BadZipFile):
         return False
     return {"data", "policy.pth"} <= names
+
+
+def read_member(archive: zipfile.ZipFile, name: str, where: str) -> bytes:
+    """The bytes of member ``name``, refused (LimitError) above the ``zip_member_bytes``
+    limit before they are inflated: a few kilobytes of zip can inflate to gigabytes."""
+    check_limit("zip_member_bytes", archive.getinfo(name).file_size,
+                f"member {name!r} of {where}", estimate=False)
+    # zipfile inflates no more than the header's size (a header that understates it fails
+    # the member's CRC check): the check above bounds the memory.
+    return archive.read(name)
 
 
 def _class_name(text: Any) -> str:
@@ -166,10 +179,13 @@ def load_sb3_zip(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, Loa
     path = Path(path)
     where = f"SB3 zip {str(path)!r}"
     try:
+        check_regular_file(path, "SB3 zip")
         with zipfile.ZipFile(path) as archive:
-            data = json.loads(archive.read("data"))
-            weights = torch.load(io.BytesIO(archive.read("policy.pth")), map_location="cpu",
-                                 weights_only=True)
+            data = json.loads(read_member(archive, "data", where))
+            weights = torch.load(io.BytesIO(read_member(archive, "policy.pth", where)),
+                                 map_location="cpu", weights_only=True)
+    except LimitError as error:
+        raise CheckpointError(str(error)) from None
     except (OSError, zipfile.BadZipFile, KeyError, ValueError, RuntimeError) as error:
         raise CheckpointError(f"{where} cannot be read: "
                               f"{str(error).splitlines()[0][:200]}") from None

@@ -32,7 +32,12 @@ def _check_config_size(size: int, label: str) -> None:
 
 
 def _check_keys(values: Mapping[str, Any]) -> None:
-    """Refuse unknown sections, sections that are not mappings and unknown keys."""
+    """Refuse keys that are not strings, unknown sections, sections that are not mappings
+    and unknown keys."""
+    _check_string_keys(values, "")
+    for name, section in values.items():
+        if isinstance(section, Mapping):
+            _check_string_keys(section, f" in section {name!r}")
     unknown = sorted(set(values) - set(_SECTIONS))
     if unknown:
         raise ValueError(f"invalid config: unknown section(s) {unknown}; "
@@ -46,6 +51,15 @@ def _check_keys(values: Mapping[str, Any]) -> None:
         if unknown:
             raise ValueError(f"invalid config: unknown key(s) {unknown} in section {name!r}; "
                              f"known keys: {sorted(known)}")
+
+
+def _check_string_keys(values: Mapping[Any, Any], where: str) -> None:
+    """ValueError naming the first key of ``values`` that is not a string (``1: 2`` in YAML,
+    or mixed ``1`` and ``a`` keys, which cannot even be sorted for a message)."""
+    for key in values:
+        if not isinstance(key, str):
+            raise ValueError(f"invalid config: key {key!r:.80}{where} is not a name (a "
+                             f"string) but of type {type(key).__name__}")
 
 
 def config_from_dict(values: Mapping[str, Any] | None) -> EnvConfig:

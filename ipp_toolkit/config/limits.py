@@ -21,8 +21,8 @@ if TYPE_CHECKING:
     from .schema import EnvConfig
 
 __all__ = ["LimitError", "Limit", "LIMITS", "limit_value", "check_limit",
-           "mission_bytes", "check_mission", "check_result_rows", "check_layer_size",
-           "check_parameters", "check_raster_cells"]
+           "mission_bytes", "check_mission", "check_rollout", "check_result_rows",
+           "check_layer_size", "check_parameters", "check_raster_cells"]
 
 GIB = 1024 ** 3
 
@@ -52,8 +52,14 @@ LIMITS = {
                         "parameters of the networks of one policy or run"),
     "raster_cells": Limit("IPP_MAX_RASTER_CELLS", 100_000_000, "cells",
                           "cells of a raster file read as terrain"),
+    "rollout_memory": Limit("IPP_MAX_ROLLOUT_GB", 8.0, "GiB",
+                            "estimated memory of a trainer's rollout of observations"),
+    "mission_steps": Limit("IPP_MAX_MISSION_STEPS", 100_000, "UAV-steps",
+                           "steps of one mission times its UAVs: budget x n_agents"),
     "config_bytes": Limit("IPP_MAX_CONFIG_BYTES", 4 * 1024 ** 2, "bytes",
                           "size of a YAML config file"),
+    "zip_member_bytes": Limit("IPP_MAX_ZIP_MEMBER_BYTES", 2 * GIB, "bytes",
+                              "inflated size of one member of an SB3 zip or .npz file"),
 }
 
 # Bytes per map cell for each of the N + 1 maps (agents' and global: value index, gain
@@ -63,6 +69,9 @@ _BYTES_PER_MAP_CELL = 32
 _BYTES_PER_CELL = 32
 _BYTES_PER_AGENT_STEP = 4096  # planes, history and trajectory of one UAV step
 _BYTES_PER_WAYPOINT = 64  # per waypoint and altitude: footprints, blocks, gain totals
+# Measured: random actions with 4 UAVs at the default 0.1 m took 4.3 ms per step, ~1 ms per
+# UAV-step; a planner adds its own time on top.
+_SECONDS_PER_UAV_STEP = 1e-3
 
 
 def limit_value(name: str) -> float:
@@ -104,26 +113,55 @@ def mission_bytes(config: EnvConfig) -> float:
     """Estimated peak memory in bytes of one mission of ``config`` (map cells x maps x planes,
     waypoints x altitudes x maps, budget x agents); a float, so that absurd sizes do not
     overflow."""
-    cells = float(config.world.area_size / config.world.resolution) ** 2
+    side = _ratio(config.world.area_size, config.world.resolution)
+    cells = side * side  # not ** 2: a float power raises OverflowError past 1e308, * gives inf
     maps = config.team.n_agents + 1
     altitudes = len(config.world.altitudes)
     per_map = _BYTES_PER_MAP_CELL + 4 * max(0, altitudes - 3)
     steps = float(config.team.budget) * config.team.n_agents * _BYTES_PER_AGENT_STEP
-    waypoints = float(config.world.area_size / config.world.grid_spacing + 1) ** 2 * altitudes
+    grid = _ratio(config.world.area_size, config.world.grid_spacing) + 1
+    waypoints = grid * grid * altitudes
     return (cells * (per_map * maps + _BYTES_PER_CELL) + steps
             + waypoints * (_BYTES_PER_WAYPOINT + 16 * maps))
 
 
+def _ratio(size: float, step: float) -> float:
+    """``size / step`` as a float, inf where it overflows (1e200 m at 1e-300 m), never an
+    OverflowError: the estimates must refuse absurd sizes, not fail on them."""
+    try:
+        return float(size) / float(step)
+    except (OverflowError, ZeroDivisionError):
+        return math.inf
+
+
 def check_mission(config: EnvConfig, at_once: int = 1) -> None:
-    """LimitError when ``at_once`` missions of ``config`` would not fit the memory limit."""
+    """LimitError when ``at_once`` missions of ``config`` would not fit the memory limit, or
+    one mission would take more UAV-steps than the ``mission_steps`` limit."""
     estimate = mission_bytes(config) * max(1, at_once)
-    cells = config.world.area_size / config.world.resolution
-    grid = config.world.area_size / config.world.grid_spacing + 1
-    what = (f"a mission of {cells:.6g} x {cells:.6g} map cells, {grid:.6g} x {grid:.6g} "
-            f"waypoints, {config.team.n_agents} UAVs and a budget of {config.team.budget}")
+    cells = _ratio(config.world.area_size, config.world.resolution)
+    grid = _ratio(config.world.area_size, config.world.grid_spacing) + 1
+    what = (f"a mission of {cells:.6g} x {cells:.6g} map cells (area {config.world.area_size:g}"
+            f" m at r_M = {config.world.resolution:g} m), {grid:.6g} x {grid:.6g} waypoints, "
+            f"{config.team.n_agents} UAVs and a budget of {config.team.budget}")
     if at_once > 1:
         what += f", {at_once} at once,"
     check_limit("mission_memory", estimate / GIB, what)
+    uav_steps = float(config.team.budget) * config.team.n_agents
+    hours = uav_steps * _SECONDS_PER_UAV_STEP / 3600
+    check_limit("mission_steps", uav_steps,
+                f"a mission of budget {config.team.budget} with {config.team.n_agents} UAVs "
+                f"(about {hours:.2g} h per mission for the simulator alone, more with a "
+                "planner)")
+
+
+def check_rollout(transitions: float, channels: int, grid: int, what: str,
+                  copies: float = 2.0) -> None:
+    """LimitError when ``transitions`` stored observations of ``channels`` x ``grid`` x
+    ``grid`` float32 planes, ``copies`` times over (a buffer and the minibatches cut from it;
+    a critic's inputs beside the actor's), would not fit the ``rollout_memory`` limit; checked
+    before a trainer allocates them (``--n-steps 10000000`` asked for 505 GiB at once)."""
+    per_transition = float(channels) * float(grid) * float(grid) * 4.0 * copies + 64.0
+    check_limit("rollout_memory", float(transitions) * per_transition / GIB, what)
 
 
 def check_result_rows(budget: int, missions: int, planners: int) -> None:

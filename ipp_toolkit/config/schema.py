@@ -399,13 +399,16 @@ class TeamConfig:
         return bool(self.failures) or self.random_failures > 0
 
 
+MAX_REWARD_SCALE = 1e6  # the largest reward.alpha and |reward.beta|
+
+
 @dataclass(frozen=True)
 class RewardConfig:
     """Team reward and the class weights of the weighted entropy.
 
     Attributes:
-        alpha: scale of the relative weighted-entropy reduction (must be > 0).
-        beta: constant added every step (a time penalty when negative).
+        alpha: scale of the relative weighted-entropy reduction (in (0, 1e6]).
+        beta: constant added every step (a time penalty when negative; |beta| <= 1e6).
         weight_interesting: weight w1 of cells believed interesting (p > 0.5).
         weight_uninteresting: weight w2 of cells believed uninteresting (p < 0.5).
     """
@@ -418,8 +421,12 @@ class RewardConfig:
     def __post_init__(self) -> None:
         check_field_types(self, "reward")
         _positive("reward", "alpha", self.alpha)
-        if not math.isfinite(self.beta):
-            _fail("reward", "beta", self.beta, "must be finite")
+        # Bounded: a return sums budget x (alpha + |beta|), and 1e308 overflows to inf.
+        if self.alpha > MAX_REWARD_SCALE:
+            _fail("reward", "alpha", self.alpha, f"must be at most {MAX_REWARD_SCALE:g}")
+        if not math.isfinite(self.beta) or abs(self.beta) > MAX_REWARD_SCALE:
+            _fail("reward", "beta", self.beta,
+                  f"must be finite, between -{MAX_REWARD_SCALE:g} and {MAX_REWARD_SCALE:g}")
         for name in ("weight_interesting", "weight_uninteresting"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:

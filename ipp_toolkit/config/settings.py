@@ -193,6 +193,9 @@ def _given_sections(config: EnvConfig | str | os.PathLike[str] | None
     if isinstance(config, EnvConfig):
         return config_to_dict(config), "the given config"
     if config is not None:
+        if not isinstance(config, str | os.PathLike):
+            raise TypeError(f"config must be an EnvConfig, a YAML file path or None, got "
+                            f"{type(config).__name__} {config!r:.80}")
         return read_config_file(config), f"config file {os.fspath(config)!r}"
     return {}, ""
 
@@ -205,6 +208,10 @@ def _flag_sections(layered: dict[str, Any], *, agents: int | None, comm: float |
                    grid_spacing: float | None) -> dict[str, dict[str, Any]]:
     """The sections the explicit keywords of :func:`build_env_config` set, checked; the
     terrain's read against ``layered`` (the defaults under the config)."""
+    if terrain is not None and not isinstance(terrain, str | os.PathLike):
+        raise TypeError(f"terrain must be a terrain kind or a raster file path, got "
+                        f"{type(terrain).__name__}; to fly an array, save it with numpy.save "
+                        "and give the .npy file")
     if agents is not None and (isinstance(agents, bool) or int(agents) != agents or agents < 1):
         raise ValueError(f"agents must be an integer >= 1, got {agents!r}")
     if comm is not None:
@@ -258,7 +265,10 @@ def _with_team_rules(layered: dict[str, Any], team_from_flag: bool,
             rules["team"] = {"start": fitted}
     features = layered.get("features", {})
     scale = features.get("agent_id_scale", FeatureConfig.agent_id_scale)
-    if features.get("agent_id", True) and isinstance(scale, int) and n_agents > scale:
+    # Only a valid scale is raised to fit the team: 0 or -1 is refused by the config's own
+    # validation, not silently replaced.
+    if features.get("agent_id", True) and isinstance(scale, int) and not isinstance(scale, bool) \
+            and 1 <= scale < n_agents:
         rules["features"] = {"agent_id_scale": n_agents}
     return merge_sections(layered, rules)
 

@@ -291,17 +291,32 @@ PlannerFactory = Callable[..., Planner]
 _REGISTRY: dict[str, PlannerFactory] = {}
 
 
-def register_planner(name: str) -> Callable[[PlannerFactory], PlannerFactory]:
-    """Class/function decorator registering a planner factory under ``name``."""
+def register_planner(name: str, replace: bool = False
+                     ) -> Callable[[PlannerFactory], PlannerFactory]:
+    """Class/function decorator registering a planner factory under ``name``.
+
+    Args:
+        name: the planner's name (no spaces, commas or ``=``).
+        replace: replace a planner registered under ``name`` before (in this process) or
+            installed under it (a built-in such as ``ig``, an entry point); without it, a
+            taken name is refused instead of silently flying another planner.
+    """
     if not isinstance(name, str) or not name or any(c in name for c in " ,="):
         raise ValueError(f"invalid planner name {name!r}: use a non-empty word without "
                          "spaces, commas or '='")
 
     def decorator(factory: PlannerFactory) -> PlannerFactory:
         existing = _REGISTRY.get(name)
-        if existing is not None and existing is not factory:
+        if existing is not None and existing is not factory and not replace:
             raise ValueError(f"planner name {name!r} is already registered by "
-                             f"{existing.__module__}.{existing.__qualname__}")
+                             f"{existing.__module__}.{existing.__qualname__}; pass "
+                             "replace=True to replace it")
+        entry = None if existing is not None or replace else _entry_points().get(name)
+        # The installed planner's own module may register it too: that is no replacement.
+        if entry is not None and entry.value.replace(" ", "") != \
+                f"{factory.__module__}:{factory.__qualname__}":
+            raise ValueError(f"planner name {name!r} is taken by the installed planner "
+                             f"{entry.value}; pass replace=True to replace it in this process")
         _REGISTRY[name] = factory
         return factory
 

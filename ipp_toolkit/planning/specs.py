@@ -49,6 +49,11 @@ class PlannerSpec:
         if self.label is not None and (not isinstance(self.label, str) or not self.label.strip()):
             raise ValueError(f"planner label must be a non-empty string or None, "
                              f"got {self.label!r}")
+        for text, what in ((self.label, "label"), (self.name, "name")):
+            # A newline or tab would break summary.md's table and results.csv's rows.
+            if isinstance(text, str) and any(ord(c) < 32 or 127 <= ord(c) < 160 for c in text):
+                raise ValueError(f"planner {what} {text!r} holds a control character (a "
+                                 "newline, a tab, ...); labels name table rows and files")
 
     def __hash__(self) -> int:
         return hash((self.name, json.dumps(self.options, sort_keys=True), self.label))

@@ -12,7 +12,8 @@ trainers (:mod:`coma.cli`, :mod:`baselines.sb3.ppo_training` for ``ppo``, ``sb3`
   bad item in the same words as the single value would;
 * the flags themselves where both command modules parse them: where the missions fly
   (:func:`add_compute_flags`: ``--workers``, ``--backend``, ``--address``), ``--set
-  FIELD=VALUE`` (:func:`add_set_flag`) and ``--no-progress`` (:func:`add_progress_flag`).
+  FIELD=VALUE`` (:func:`add_set_flag`), ``--no-progress`` (:func:`add_progress_flag`) and
+  ``--force`` (:func:`add_force_flag`).
 
 Each command keeps its own help text, since the same flag does a different job in each
 (``--workers`` flies an evaluation's missions, or a training's updates).
@@ -29,7 +30,8 @@ from ..config.settings import parse_comm
 from .ray_backend import add_backend_flags
 
 __all__ = ["positive_int", "positive_float", "finite_float", "comm_range", "int_list",
-           "comm_range_list", "add_compute_flags", "add_set_flag", "add_progress_flag"]
+           "comm_range_list", "add_compute_flags", "add_set_flag", "add_progress_flag",
+           "add_force_flag", "FORCE_HELP"]
 
 
 def _integer(text: str, minimum: int) -> int:
@@ -168,3 +170,13 @@ def add_progress_flag(parser: argparse.ArgumentParser, help: str | None) -> None
     """``--no-progress``: no progress bar (``args.no_progress``)."""
     kwargs: dict[str, Any] = {} if help is None else {"help": help}
     parser.add_argument("--no-progress", action="store_true", **kwargs)
+
+
+FORCE_HELP = ("write into --out even when it holds files the toolkit did not write (they may "
+              "be overwritten); without it such a folder is refused")
+
+
+def add_force_flag(parser: argparse.ArgumentParser) -> None:
+    """``--force`` (``args.force``): accept an ``--out`` folder holding files of its own
+    (:func:`ipp_toolkit.runs.run_folder.allow_foreign_files`)."""
+    parser.add_argument("--force", action="store_true", default=False, help=FORCE_HELP)

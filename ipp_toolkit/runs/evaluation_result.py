@@ -21,6 +21,7 @@ from ..config.files import config_from_dict
 from ..config.schema import EnvConfig
 from .result_store import (
     EvaluationError,
+    check_finite_row,
     read_identity,
     read_results_csv,
     read_trajectory,
@@ -106,6 +107,16 @@ def load_results(out_dir: str | os.PathLike[str]) -> EvaluationResult:
     except (TypeError, ValueError) as err:
         raise EvaluationError(f"{str(folder / 'config.json')!r} is malformed: {err}") from None
     rows = read_results_csv(folder / "results.csv")
+    for line, row in enumerate(rows, start=2):
+        try:
+            if row["seed"] != seed:
+                raise ValueError(f"is of seed {row['seed']}, the folder's config.json says "
+                                 f"{seed}")
+            check_finite_row(row, "it")
+        except ValueError as err:
+            raise EvaluationError(f"{str(folder / 'results.csv')!r} line {line} ({row['planner']}"
+                                  f", mission {row['mission']}, step {row['step']}) {err}; "
+                                  "run the evaluation again into a new folder") from None
     labels: list[str] = []
     missions: dict[str, set[int]] = {}
     for row in rows:

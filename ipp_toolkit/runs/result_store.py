@@ -22,6 +22,8 @@ import io
 import json
 import math
 import warnings
+import zipfile
+import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,16 +31,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..config.files import config_from_dict, config_to_dict
+from ..config.limits import check_limit
 from ..config.schema import EnvConfig
 from ..config.settings import safe_name
-from ..io import atomic_write, write_json
+from ..io import atomic_write, check_regular_file, write_json
 
 if TYPE_CHECKING:
     from ..planning.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
-           "check_folder", "check_label", "run_key", "shard_path", "trajectory_path",
-           "stored_planners", "read_shard", "read_stored_missions",
+           "check_folder", "check_label", "check_finite_row", "run_key", "shard_path",
+           "trajectory_path", "stored_planners", "read_shard", "read_stored_missions",
            "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
            "read_results_csv"]
 
@@ -195,7 +198,20 @@ def _check_rows(rows: Any, label: str, mission: int, budget: int,
             raise ValueError(f"row {step} belongs to another planner, mission or step")
         if row["seed"] != seed:
             raise ValueError(f"row {step} is of seed {row['seed']!r}, the folder's is {seed}")
+        check_finite_row(row, f"row {step}")
     return rows
+
+
+def check_finite_row(row: Mapping[str, Any], where: str) -> None:
+    """ValueError naming ``where`` when a metric of ``row`` is not a finite number: its
+    entropy, F1 or RMSE, or (after step 0, where both are NaN) its reward or planning time.
+    A NaN would flow into every mean of the tables without a word."""
+    columns = ("entropy", "f1", "rmse") + (("reward", "plan_ms") if row["step"] else ())
+    for column in columns:
+        value = row[column]
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value):
+            raise ValueError(f"{where} has {column} = {value!r}, not a finite number")
 
 
 def stored_planners(folder: Path, exclude: Sequence[str], missions: int, budget: int,
@@ -310,20 +326,38 @@ def write_trajectory(path: Path, trajectory: Mapping[str, Any]) -> None:
 
 
 def read_trajectory(path: Path) -> dict[str, Any]:
-    """A recorded mission back from its npz (ValueError when arrays are missing)."""
-    with np.load(path, allow_pickle=False) as data:
-        missing = {"ground_truth", "final_prob", "positions", "footprints", "area_size",
-                   "resolution"} - set(data.files)
-        if missing:
-            raise ValueError(f"missing arrays {sorted(missing)}")
-        return {
-            "ground_truth": data["ground_truth"].astype(bool),
-            "final_prob": data["final_prob"],
-            "positions": data["positions"],
-            "footprints": data["footprints"],
-            "area_size": float(data["area_size"]),
-            "resolution": float(data["resolution"]),
-        }
+    """A recorded mission back from its npz.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not a regular file, is corrupt (truncated, not a zip, a
+            damaged member), lacks arrays, or has a member over the ``zip_member_bytes``
+            limit (checked before it is inflated).
+    """
+    check_regular_file(path, "trajectory")
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise ValueError("not an npz archive")
+        with loaded as data:
+            for info in data.zip.infolist():  # before any member is inflated
+                check_limit("zip_member_bytes", info.file_size,
+                            f"member {info.filename!r} of {str(path)!r}", estimate=False)
+            missing = {"ground_truth", "final_prob", "positions", "footprints", "area_size",
+                       "resolution"} - set(data.files)
+            if missing:
+                raise ValueError(f"missing arrays {sorted(missing)}")
+            return {
+                "ground_truth": data["ground_truth"].astype(bool),
+                "final_prob": data["final_prob"],
+                "positions": data["positions"],
+                "footprints": data["footprints"],
+                "area_size": float(data["area_size"]),
+                "resolution": float(data["resolution"]),
+            }
+    except (zipfile.BadZipFile, zlib.error, EOFError, KeyError) as err:
+        # numpy and zipfile raise these for a truncated or damaged archive
+        raise ValueError(f"corrupt npz file ({type(err).__name__}: {err})") from None
 
 
 def _format_cell(value: Any) -> str:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -406,17 +405,10 @@ def save_png(rgb: np.ndarray, path: str | os.PathLike[str]) -> None:
     arr = np.asarray(rgb)
     if arr.ndim != 3 or arr.shape[2] != 3 or arr.dtype != np.uint8:
         raise ValueError(f"rgb must be an (h, w, 3) uint8 array, got {arr.dtype} {_shape(arr)}")
-    target = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(target))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".png", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            Image.fromarray(np.ascontiguousarray(arr)).save(fh, format="PNG")
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    from ..io import atomic_write
+
+    image = Image.fromarray(np.ascontiguousarray(arr))
+    atomic_write(path, lambda handle: image.save(handle, format="PNG"))
 
 
 def render_state(state: MissionState, panel_px: int = 240) -> np.ndarray:
