@@ -38,7 +38,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .config.schema import EnvConfig
+from .config.files import ConfigLike, as_env_config
 from .sim.features import (
     actor_observations,
     actor_plane_names,
@@ -82,7 +82,8 @@ class IPPEnv(ParallelEnv):
     """Multi-UAV informative path planning as a PettingZoo parallel environment.
 
     Args:
-        config: the mission configuration (defaults reproduce the paper).
+        config: the mission configuration (defaults reproduce the paper): an ``EnvConfig``, a
+            plain dict of sections (``{"team": {"n_agents": 2}}``) or a YAML file's path.
         render_mode: ``None`` or ``"rgb_array"``.
         namespace: random-stream namespace: ``train``, ``validation`` or ``test``.
         ground_truth: (H, W) bool terrain used for every mission instead of the generator.
@@ -97,13 +98,11 @@ class IPPEnv(ParallelEnv):
     metadata = {"name": "ipp_v0", "render_modes": ["rgb_array"], "is_parallelizable": True,
                 "render_fps": 2}
 
-    def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
+    def __init__(self, config: ConfigLike = None, *, render_mode: str | None = None,
                  namespace: str = "train", ground_truth: np.ndarray | None = None,
                  raster: np.ndarray | None = None, keep_failed: bool = False,
                  invalid_action: str = "hold"):
-        self.config = config if config is not None else EnvConfig()
-        if not isinstance(self.config, EnvConfig):
-            raise ValueError(f"config must be an EnvConfig, got {type(self.config).__name__}")
+        self.config = as_env_config(config)
         if invalid_action not in INVALID_ACTION_POLICIES:
             raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
                              f"{invalid_action!r}")
@@ -304,6 +303,6 @@ class IPPEnv(ParallelEnv):
         """Nothing to release; present for the PettingZoo API."""
 
 
-def parallel_env(config: EnvConfig | None = None, **kwargs: Any) -> IPPEnv:
+def parallel_env(config: ConfigLike = None, **kwargs: Any) -> IPPEnv:
     """PettingZoo-style factory: ``parallel_env(config, render_mode=...)``."""
     return IPPEnv(config, **kwargs)

@@ -28,6 +28,7 @@ import warnings
 from collections.abc import Sequence
 from typing import Any
 
+from .config.files import ConfigLike, as_env_config
 from .config.schema import EnvConfig, check_int
 from .env import IPPEnv
 from .extras import install_command, require_extra
@@ -51,14 +52,15 @@ def _one_copy(config: EnvConfig, seed: int, namespace: str, invalid_action: str,
             return_state=True, categorical_actions=True, seed=seed, device=device)
 
 
-def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed: int = 0,
+def make_torchrl_env(config: ConfigLike = None, *, num_envs: int = 1, seed: int = 0,
                      parallel: bool = False, transforms: Sequence[Any] = (),
                      namespace: str = "train", invalid_action: str = "hold",
                      device: str = "cpu") -> Any:
     """A ``TransformedEnv`` over one or ``num_envs`` copies of the simulator, masks kept.
 
     Args:
-        config: the mission configuration (default: the paper's).
+        config: the mission configuration (default: the paper's): an ``EnvConfig``, a dict
+            of sections or a YAML file's path.
         num_envs: copies; more than one are batched (batch size ``(num_envs,)``).
         seed: run seed; copy c flies missions 0, 1, ... of run ``seed + c``.
         parallel: batch the copies in worker processes (``ParallelEnv``) instead of in this
@@ -79,7 +81,7 @@ def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed
     """
     envs = require_extra("torchrl.envs", "make_torchrl_env", install_command("torchrl"),
                          package="torchrl")
-    config = config if config is not None else EnvConfig()
+    config = as_env_config(config)
     num_envs = check_int("num_envs", num_envs, 1)
     seed = check_int("seed", seed, 0)
     makers = [functools.partial(_one_copy, config, seed + copy, namespace, invalid_action,

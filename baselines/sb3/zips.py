@@ -142,8 +142,12 @@ def _spaces(data: dict[str, Any], where: str) -> tuple[tuple[int, ...], int]:
                               "planner feeds Box (C, G, G) planes (MultiInputPolicy models "
                               "of Dict observations are not flown)")
     if not act_type.endswith(".Discrete"):
+        hint = (" (a model of the whole team, ipp_toolkit/UAVTeam-v0: the sb3 planner flies "
+                "one shared policy of one UAV's moves; train on gymnasium.make("
+                "'ipp_toolkit/UAV-v0') or make_sb3_vec_env)") if act_type.endswith(
+                    ".MultiDiscrete") else ""
         raise CheckpointError(f"{where} has a {act_type} action space; the UAVs take one of "
-                              "6 discrete moves")
+                              f"6 discrete moves{hint}")
     try:
         shape = tuple(int(d) for d in obs["_shape"])
         n_actions = int(act["n"])

@@ -23,7 +23,10 @@ from .limits import check_limit
 from .schema import _SECTIONS, EnvConfig, _build
 
 __all__ = ["read_config_file", "load_config", "save_config", "config_from_dict",
-           "config_to_dict"]
+           "config_to_dict", "as_env_config", "ConfigLike"]
+
+ConfigLike = EnvConfig | Mapping[str, Any] | str | os.PathLike[str] | None
+"""What an env constructor takes as its config (:func:`as_env_config`)."""
 
 
 def _check_config_size(size: int, label: str) -> None:
@@ -97,6 +100,31 @@ def load_config(path: str | os.PathLike[str]) -> EnvConfig:
         return config_from_dict(values)
     except ValueError as err:
         raise ValueError(f"{err} (in config file {os.fspath(path)!r})") from None
+
+
+def as_env_config(config: ConfigLike, name: str = "config") -> EnvConfig:
+    """The :class:`EnvConfig` that ``config`` stands for, as every env constructor reads it.
+
+    Args:
+        config: an ``EnvConfig``; a plain dict of sections (``{"team": {"n_agents": 2}}``,
+            missing sections and keys take their defaults); the path of a YAML config file; or
+            None (the paper's defaults).
+        name: the argument's name in messages.
+
+    Raises:
+        ValueError: another type (named), or a dict or file with an unknown section or key
+            or a bad value (named).
+    """
+    if config is None:
+        return EnvConfig()
+    if isinstance(config, EnvConfig):
+        return config
+    if isinstance(config, Mapping):
+        return config_from_dict(config)
+    if isinstance(config, str | os.PathLike):
+        return load_config(config)
+    raise ValueError(f"{name} must be an EnvConfig, a dict of config sections or the path of a "
+                     f"YAML config file, got {type(config).__name__}")
 
 
 def save_config(config: EnvConfig, path: str | os.PathLike[str]) -> None:
