@@ -35,9 +35,11 @@ from .config.files import ConfigLike
 from .env import IPPEnv
 from .sim.team import N_ACTIONS
 
-__all__ = ["ENV_ID", "IPPTeamEnv", "TeamShell", "register_envs"]
+__all__ = ["ENV_ID", "UAV_ENV_ID", "IPPTeamEnv", "TeamShell", "register_envs"]
 
 ENV_ID = "ipp_toolkit/UAVTeam-v0"
+UAV_ENV_ID = "ipp_toolkit/UAV-v0"
+"""The per-UAV id (:class:`ipp_toolkit.uav_env.IPPUAVEnv`), registered here with the team's."""
 
 
 class TeamShell(gymnasium.Env):
@@ -146,8 +148,6 @@ def register_envs() -> None:
     :class:`~ipp_toolkit.uav_env.IPPUAVEnv`; ``config`` is an ``EnvConfig``, a dict of
     sections or a YAML file's path. Importing :mod:`ipp_toolkit` calls this.
     """
-    from .uav_env import UAV_ENV_ID
-
     # No max_episode_steps: the budget end is the env's own true terminal.
     if ENV_ID not in gymnasium.registry:
         gymnasium.register(ENV_ID, entry_point="ipp_toolkit.team_env:IPPTeamEnv")

@@ -36,11 +36,9 @@ from .config.files import ConfigLike
 from .env import action_index
 from .sim.mission import InvalidActionError
 from .sim.team import ACTION_NAMES, N_ACTIONS
-from .team_env import TeamShell
+from .team_env import UAV_ENV_ID, TeamShell
 
 __all__ = ["UAV_ENV_ID", "IPPUAVEnv"]
-
-UAV_ENV_ID = "ipp_toolkit/UAV-v0"
 
 
 class IPPUAVEnv(TeamShell):
