@@ -58,8 +58,9 @@ class TeamShell(gymnasium.Env):
 
     def __init__(self, config: ConfigLike = None, *, render_mode: str | None = None,
                  namespace: str = "train", invalid_action: str = "hold"):
+        # The Dict observation, whatever features.observation says: the mask is read from it.
         self._env = IPPEnv(config, render_mode=render_mode, namespace=namespace,
-                           keep_failed=True, invalid_action=invalid_action)
+                           keep_failed=True, invalid_action=invalid_action, observation="dict")
         self.config = self._env.config
         self.render_mode = render_mode
         self.invalid_action = invalid_action

@@ -48,7 +48,7 @@ def _one_copy(config: EnvConfig, seed: int, namespace: str, invalid_action: str,
         warnings.filterwarnings("ignore", message="PettingZoo in TorchRL", category=UserWarning)
         return PettingZooWrapper(
             env=IPPEnv(config, namespace=namespace, keep_failed=True,
-                       invalid_action=invalid_action),
+                       invalid_action=invalid_action, observation="dict"),
             return_state=True, categorical_actions=True, seed=seed, device=device)
 
 

@@ -331,7 +331,7 @@ def make_sb3_vec_env(config: ConfigLike, n_envs: int = 1, seed: int = 0, num_cpu
                          f"{invalid_action!r}")
     # Fixed slots: a failed UAV stays as an inert agent (black death) until the mission ends.
     env = _SlotEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action,
-                   render_mode=render_mode)
+                   render_mode=render_mode, observation="dict")  # the masks are read from it
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),

@@ -82,7 +82,7 @@ def simulate_main(argv: list[str] | None = None) -> int:
             if target.exists() and not target.is_file():
                 raise ValueError(f"{str(target)!r} exists and is not a file; it would be "
                                  "written after the mission")
-        env = IPPEnv(config, render_mode="rgb_array", namespace="test")
+        env = IPPEnv(config, render_mode="rgb_array", namespace="test", observation="dict")
         observations, infos = env.reset(seed=args.seed, options={"mission": args.mission})
         args.out.mkdir(parents=True, exist_ok=True)  # after the mission is built: no litter
     except ValueError as err:

@@ -115,7 +115,8 @@ def evaluate_missions(model: Any, config: ConfigLike, missions: int = 10, seed: 
     seed = check_int("seed", seed, 0)
     normalize = vec_normalize if vec_normalize is not None else model.get_vec_normalize_env()
     # Masked moves hold (counted), whatever the algorithm: a model that cannot mask still flies.
-    env = IPPEnv(config, namespace=namespace, keep_failed=True, invalid_action="hold")
+    env = IPPEnv(config, namespace=namespace, keep_failed=True, invalid_action="hold",
+                 observation="dict")
     return [_fly(model, env, seed, mission, normalize, deterministic)
             for mission in range(missions)]
 
