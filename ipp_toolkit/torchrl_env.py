@@ -13,7 +13,10 @@ longer takes. :func:`make_torchrl_env` builds the env so that neither happens:
   ``uav`` keeps N agents;
 * TorchRL's ``ActionMask`` transform comes first on top of everything (the batched env
   included), so the action spec seen by policies, collectors and ``rand_action`` follows
-  ``("uav", "action_mask")`` at every step; the caller's transforms follow it.
+  ``("uav", "action_mask")`` at every step; the caller's transforms follow it. TorchRL's
+  ``RandomPolicy`` (a collector's ``policy=None``) samples from a copy of the action spec
+  made when the collector starts; here every copy of the UAVs' action spec is that spec
+  itself, so random collection follows the masks too.
 
 Keys (group ``uav``, N agents): ``("uav", "observation", "observation")`` (C, G, G) planes,
 ``("uav", "action_mask")`` (6,) bool, ``("uav", "action")``, ``("uav", "reward")``,
@@ -90,5 +93,41 @@ def make_torchrl_env(config: ConfigLike = None, *, num_envs: int = 1, seed: int 
         base = makers[0]()
     else:
         base = (envs.ParallelEnv if parallel else envs.SerialEnv)(num_envs, makers, device=device)
-    mask = envs.ActionMask(action_key=(GROUP, "action"), mask_key=(GROUP, "action_mask"))
-    return envs.TransformedEnv(base, envs.Compose(mask, *transforms))
+    mask = _following_action_mask(envs)
+    env = envs.TransformedEnv(base, envs.Compose(mask, *transforms))
+    mask.action_spec  # noqa: B018  (makes the spec follow the masks before any collector)
+    return env
+
+
+def _following_action_mask(envs: Any) -> Any:
+    """TorchRL's ``ActionMask`` on the UAVs' actions, whose masked spec every copy shares.
+
+    TorchRL's ``RandomPolicy`` (what a collector flies with ``policy=None``) samples from a
+    copy of the env's action spec made when the collector starts, so ``ActionMask``'s updates
+    of the env's spec never reach it and it draws masked actions. Here the action spec's
+    ``clone()`` returns the spec itself, so those copies follow the masks too.
+    """
+    from torchrl.data import Categorical
+
+    class SharedMaskCategorical(Categorical):
+        """A ``Categorical`` whose copies are itself: they follow its mask."""
+
+        def clone(self) -> SharedMaskCategorical:
+            return self
+
+    class FollowingActionMask(envs.ActionMask):
+        @property
+        def action_spec(self) -> Any:
+            spec = super().action_spec
+            if type(spec) is Categorical:  # rebuilt specs (a transform added) are shared again
+                spec.__class__ = SharedMaskCategorical
+            return spec
+
+        def transform_input_spec(self, input_spec: Any) -> Any:
+            input_spec = super().transform_input_spec(input_spec)
+            spec = input_spec["full_action_spec"][self.in_keys[0]]
+            if type(spec) is Categorical:
+                spec.__class__ = SharedMaskCategorical
+            return input_spec
+
+    return FollowingActionMask(action_key=(GROUP, "action"), mask_key=(GROUP, "action_mask"))
