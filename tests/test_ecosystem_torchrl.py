@@ -38,3 +38,35 @@ def test_a_collector_without_a_policy_draws_only_valid_actions(num_envs):
         assert drawn == 2 * 120 * num_envs
     finally:
         collector.shutdown()  # closes the env too
+
+
+def test_the_mappo_actor_is_saved_and_flies_as_the_torchrl_planner(tmp_path):
+    from torch import nn
+    from torchrl.modules import MultiAgentMLP
+
+    from baselines.torchrl.planner import TorchRLPlanner
+    from baselines.torchrl.policy import save_torchrl_policy
+    from ipp_toolkit import EnvConfig
+    from ipp_toolkit.io import CheckpointError
+    from ipp_toolkit.runs.evaluation import evaluate
+
+    config = EnvConfig().replace(**SMALL)
+    torch.manual_seed(0)
+    actor = MultiAgentMLP(7 * 11 * 11, 6, 2, centralized=False, share_params=True, depth=2,
+                          num_cells=16, activation_class=nn.Tanh)
+    path = save_torchrl_policy(tmp_path / "policy.pt", actor, config, iterations=0)
+    planner = TorchRLPlanner(path)
+    planes = torch.rand(2, 7, 11, 11)
+    expected = actor(planes.flatten(1)).detach().numpy()
+    got = planner.scores(planes.numpy(), torch.ones(2, 6, dtype=torch.bool).numpy())
+    assert abs(expected - got).max() < 1e-5
+    result = evaluate(config, f"ig,mine:torchrl={path}", missions=2, seed=0, progress=False)
+    assert {row["planner"] for row in result.rows} == {"ig", "mine"}
+    with pytest.raises(ValueError, match="centralized"):
+        save_torchrl_policy(tmp_path / "c.pt", MultiAgentMLP(
+            7 * 11 * 11, 6, 2, centralized=True, share_params=True, depth=1, num_cells=8),
+            config)
+    with pytest.raises(CheckpointError, match="another planning grid"):
+        planner.reset(config.replace(world={"grid_spacing": 10.0}), 0)
+    with pytest.raises(CheckpointError, match="torchrl planner needs a policy file"):
+        TorchRLPlanner()
