@@ -40,7 +40,8 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrapper
 
 from .config.files import ConfigLike, as_env_config
 from .config.schema import OBSERVATION_KINDS
@@ -62,7 +63,7 @@ from .sim.mission import (
 from .sim.team import ACTION_NAMES, N_ACTIONS
 from .world.seeding import check_namespace
 
-__all__ = ["INVALID_ACTION_POLICIES", "IPPEnv", "parallel_env"]
+__all__ = ["INVALID_ACTION_POLICIES", "IPPEnv", "env", "parallel_env", "raw_env"]
 
 INVALID_ACTION_POLICIES = ("hold", "raise")
 
@@ -89,7 +90,8 @@ class IPPEnv(ParallelEnv):
     Args:
         config: the mission configuration (defaults reproduce the paper): an ``EnvConfig``, a
             plain dict of sections (``{"team": {"n_agents": 2}}``) or a YAML file's path.
-        render_mode: ``None`` or ``"rgb_array"``.
+        render_mode: ``None``, ``"rgb_array"`` (``render()`` returns the frame) or
+            ``"human"`` (a matplotlib window shows it at reset and every step).
         namespace: random-stream namespace: ``train``, ``validation`` or ``test``.
         ground_truth: (H, W) bool terrain used for every mission instead of the generator.
         raster: (h, w) array for ``terrain.kind = "raster"`` instead of the file.
@@ -102,8 +104,8 @@ class IPPEnv(ParallelEnv):
             config's ``features.observation``.
     """
 
-    metadata = {"name": "ipp_v0", "render_modes": ["rgb_array"], "is_parallelizable": True,
-                "render_fps": 2}
+    metadata = {"name": "ipp_v0", "render_modes": ["human", "rgb_array"],
+                "is_parallelizable": True, "render_fps": 2}
 
     def __init__(self, config: ConfigLike = None, *, render_mode: str | None = None,
                  namespace: str = "train", ground_truth: np.ndarray | None = None,
@@ -143,6 +145,7 @@ class IPPEnv(ParallelEnv):
         self._action_space = spaces.Discrete(N_ACTIONS)
         self.state_space = spaces.Box(0.0, 1.0, (len(state_plane_names(features)), g, g),
                                       dtype=np.float32)
+        self._window: Any = None  # the human render mode's FrameWindow
         self._seed: int | None = None
         self._mission_index = -1
         self.mission: MissionState | None = None
@@ -199,6 +202,8 @@ class IPPEnv(ParallelEnv):
                                      self.namespace, self.geometry, self._ground_truth,
                                      self._raster)
         self.agents = list(self.possible_agents)
+        if self.render_mode == "human":
+            self.render()
         return self._observe(self.agents), self._infos(self.agents)
 
     def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
@@ -243,6 +248,8 @@ class IPPEnv(ParallelEnv):
         truncations = dict.fromkeys(agents, False)
         infos = self._infos(agents)
         self.agents = [agent for agent in agents if not terminations[agent]]
+        if self.render_mode == "human":
+            self.render()
         return observations, rewards, terminations, truncations, infos
 
     def _observe(self, agents: list[str] | None = None) -> dict[str, dict[str, np.ndarray]]:
@@ -309,19 +316,46 @@ class IPPEnv(ParallelEnv):
         return self._masks()[self._agent_index(agent)]
 
     def render(self) -> np.ndarray | None:
-        """An RGB frame (h, w, 3) uint8: terrain, global map, UAVs, footprints, local maps."""
+        """An RGB frame (h, w, 3) uint8 (``rgb_array``): terrain, global map, UAVs,
+        footprints, local maps; ``human`` shows it in a window (and returns None), as reset
+        and every step then do."""
         if self.render_mode is None:
             return None
         if self.mission is None:
             raise RuntimeError("call reset() before render()")
         from .sim.rendering import render_state
 
-        return render_state(self.mission)
+        frame = render_state(self.mission)
+        if self.render_mode != "human":
+            return frame
+        if self._window is None:
+            from .sim.window import FrameWindow
+
+            self._window = FrameWindow(f"ipp-toolkit: {len(self.possible_agents)} UAVs",
+                                       self.metadata["render_fps"])
+        self._window.show(frame)
+        return None
 
     def close(self) -> None:
-        """Nothing to release; present for the PettingZoo API."""
+        """Close the ``human`` window, if any (idempotent)."""
+        if self._window is not None:
+            self._window.close()
 
 
 def parallel_env(config: ConfigLike = None, **kwargs: Any) -> IPPEnv:
     """PettingZoo-style factory: ``parallel_env(config, render_mode=...)``."""
     return IPPEnv(config, **kwargs)
+
+
+def raw_env(config: ConfigLike = None, **kwargs: Any) -> AECEnv:
+    """The env as a PettingZoo AEC env (agents act in turn), without the order-enforcing
+    wrapper: PettingZoo's ``parallel_to_aec_wrapper`` over :class:`IPPEnv`; the arguments are
+    :class:`IPPEnv`'s."""
+    return parallel_to_aec_wrapper(IPPEnv(config, **kwargs))
+
+
+def env(config: ConfigLike = None, **kwargs: Any) -> AECEnv:
+    """PettingZoo-style AEC factory: ``env(config, render_mode=...)`` is
+    ``pettingzoo.utils.parallel_to_aec(IPPEnv(config, ...))`` (agents act in turn, the team
+    moves once every live agent has acted; the order is enforced)."""
+    return parallel_to_aec(IPPEnv(config, **kwargs))

@@ -49,12 +49,13 @@ class TeamShell(gymnasium.Env):
     Args:
         config: the mission configuration: an ``EnvConfig``, a dict of sections or a YAML
             file's path (defaults reproduce the paper: 4 UAVs).
-        render_mode: ``None`` or ``"rgb_array"``.
+        render_mode: ``None``, ``"rgb_array"`` or ``"human"`` (a window, updated at every
+            team step).
         namespace: random-stream namespace: ``train``, ``validation`` or ``test``.
         invalid_action: ``hold`` (default: a masked move holds that UAV) or ``raise``.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 2}
 
     def __init__(self, config: ConfigLike = None, *, render_mode: str | None = None,
                  namespace: str = "train", invalid_action: str = "hold"):
@@ -66,7 +67,8 @@ class TeamShell(gymnasium.Env):
         self.invalid_action = invalid_action
 
     def render(self) -> np.ndarray | None:
-        """An RGB frame (h, w, 3) uint8 with ``render_mode="rgb_array"``, else None."""
+        """An RGB frame (h, w, 3) uint8 with ``render_mode="rgb_array"``, else None (``human``:
+        shown in the window)."""
         return self._env.render()
 
     def close(self) -> None:

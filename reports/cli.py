@@ -152,9 +152,12 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "--config file's, else 25)")
     parser.add_argument("--planners", default="default", metavar="LIST",
                         help="comma-separated planners: registered names (ig, coverage, "
-                             "random, ...) or NAME=CHECKPOINT items (coma=PATH, "
-                             "coma=shipped:NAME), each with an optional LABEL: prefix "
-                             f"(mine:coma=PATH); 'default' = {','.join(DEFAULT_PLANNERS)}; "
+                             "random, ...) or NAME=CHECKPOINT items: coma=PATH, "
+                             "coma=shipped:NAME, ppo=PATH, ppo=shipped:NAME, sb3=PATH "
+                             "(an ipp-train sb3/ppo policy.pt or an SB3 model.zip), "
+                             "rllib=RUN, torchrl=PATH, ig_learned=PATH; each with an "
+                             "optional LABEL: prefix (mine:sb3=model.zip); "
+                             f"'default' = {','.join(DEFAULT_PLANNERS)}; "
                              "'all' = every registered planner that can be built")
     parser.add_argument("--trials", type=positive_int("trials"), default=50, metavar="N",
                         help="number of test missions (the same missions for every planner)")
