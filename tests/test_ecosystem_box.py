@@ -3,6 +3,8 @@ observation wrapper takes the env."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import supersuit as ss
@@ -35,7 +37,9 @@ def test_the_box_observation_is_the_planes_with_the_mask_in_the_infos():
         np.testing.assert_array_equal(infos[agent]["action_mask"], env.action_mask(agent))
         np.testing.assert_array_equal(infos[agent]["action_mask"],
                                       planes[agent]["action_mask"])
-    parallel_api_test(IPPEnv(BOX), num_cycles=20)
+    with warnings.catch_warnings():  # the test passes an unknown reset option on purpose
+        warnings.simplefilter("ignore", UserWarning)
+        parallel_api_test(IPPEnv(BOX), num_cycles=20)
     with pytest.raises(ValueError, match=r"features.observation = 'image'"):
         EnvConfig().replace(features={"observation": "image"})
     with pytest.raises(ValueError, match=r"observation must be one of \('dict', 'box'\)"):
