@@ -35,7 +35,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.files import changed_fields, config_to_dict, env_config_changes
 from ipp_toolkit.config.limits import check_rollout
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_weights, write_json
@@ -157,15 +157,15 @@ def _resumable(last_path: Path, coma_config: COMAConfig, env_config: EnvConfig
                               "resumed")
     stored, wanted = resume_fields(networks.coma_config), resume_fields(coma_config)
     if stored != wanted:
-        changed = ", ".join(f"{name} = {stored.get(name)!r} in the run, {wanted.get(name)!r} now"
-                            for name in sorted(set(stored) | set(wanted))
-                            if stored.get(name) != wanted.get(name))
+        changed = ", ".join(changed_fields(stored, wanted))
         raise CheckpointError(f"checkpoint {str(last_path)!r} belongs to a run with other "
                               f"COMA settings ({changed}); give the run's settings, or start "
                               "a new folder instead")
-    if config_to_dict(networks.env_config) != config_to_dict(env_config):
+    changes = env_config_changes(networks.env_config, env_config)
+    if changes:
         raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
-                              "mission config; start a new folder instead")
+                              f"mission config ({', '.join(changes)}); start a new folder "
+                              "instead")
     # A damaged or missing history is refused now, before any worker starts.
     read_progress(last_path.parent / "progress.csv", int(progress["update"]))
     return networks, data

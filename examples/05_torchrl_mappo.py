@@ -11,16 +11,20 @@ end the episode; this example flies one failure per mission to show it.
 Every iteration collects one mission per copy (all UAVs are done together after ``budget``
 steps), trains a few epochs on it and prints the final entropy and F1 of the global map.
 Each UAV gets the team reward (a failed one 0), so a sum of rewards over the UAVs would count
-the team's return once per UAV.
+the team's return once per UAV. At the end the shared actor is saved to ``OUT/policy.pt``
+(:func:`baselines.torchrl.policy.save_torchrl_policy`: plain weights and the mission config),
+which the ``torchrl`` planner flies beside the others.
 
     pip install -c constraints.txt -e ".[torchrl]"
-    python examples/05_torchrl_mappo.py            # 4 UAVs, 8 copies, 60 iterations (minutes)
-    python examples/05_torchrl_mappo.py --quick    # what the test suite runs (seconds)
+    python examples/05_torchrl_mappo.py --out runs/mappo   # 4 UAVs, 8 copies, 60 iterations
+    ipp-compare --agents 4 --resolution 0.5 --planners ig,torchrl=runs/mappo/policy.pt
+    python examples/05_torchrl_mappo.py --quick --out /tmp/mappo   # what the tests run
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import torch
 from tensordict.nn import TensorDictModule
@@ -29,6 +33,7 @@ from torchrl.envs import FlattenObservation
 from torchrl.modules import MaskedCategorical, MultiAgentMLP, ProbabilisticActor
 from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
+from baselines.torchrl.policy import save_torchrl_policy
 from ipp_toolkit import EnvConfig
 from ipp_toolkit.torchrl_env import GROUP, make_torchrl_env
 
@@ -70,6 +75,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--iterations", type=int, default=60)
     parser.add_argument("--resolution", type=float, default=0.5)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=Path("runs/torchrl-mappo"),
+                        help="folder of the saved actor, OUT/policy.pt (the torchrl planner "
+                             "flies it)")
     args = parser.parse_args(argv)
     if args.quick:
         args.agents, args.envs, args.iterations, args.resolution = 2, 2, 2, 1.0
@@ -109,6 +117,11 @@ def main(argv: list[str] | None = None) -> None:
                   f"F1 {final['f1'].mean():.3f}")
     finally:
         env.close()
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = save_torchrl_policy(args.out / "policy.pt", actor.module[0].module, config,
+                               iterations=args.iterations, seed=args.seed)
+    print(f"saved the actor to {path}: ipp-compare --agents {args.agents} --resolution "
+          f"{args.resolution:g} --planners ig,torchrl={path}")
 
 
 if __name__ == "__main__":

@@ -8,9 +8,10 @@ subpackages are its layers, and imports flow down this list only:
 - :mod:`ipp_toolkit.belief`: occupancy maps, entropy, expected gain, the prior of interest;
 - :mod:`ipp_toolkit.sim`: the mission core (team rules, reset, step, driver), feature planes,
   rendering;
-- :mod:`ipp_toolkit.env`, :mod:`ipp_toolkit.vec` and :mod:`ipp_toolkit.team_env`: the
-  PettingZoo view, its SB3 view and the team as one Gymnasium agent (registered on import as
-  ``ipp_toolkit/UAVTeam-v0``);
+- :mod:`ipp_toolkit.env`, :mod:`ipp_toolkit.vec`, :mod:`ipp_toolkit.team_env` and
+  :mod:`ipp_toolkit.uav_env`: the PettingZoo view, its SB3 view, the team as one Gymnasium
+  agent and one UAV at a time as a Gymnasium agent (registered on import as
+  ``ipp_toolkit/UAVTeam-v0`` and ``ipp_toolkit/UAV-v0``);
 - :mod:`ipp_toolkit.planning`: the planner interface, the per-UAV view and the registry;
 - :mod:`ipp_toolkit.runs`: the evaluation runner, result store, process pool and Ray backend.
 
@@ -28,8 +29,9 @@ from .config.schema import EnvConfig
 from .env import IPPEnv, parallel_env
 from .sim.mission import InvalidActionError, MissionState, reset_mission, step_mission
 from .team_env import IPPTeamEnv, register_envs
+from .uav_env import IPPUAVEnv
 
-register_envs()  # gymnasium.make("ipp_toolkit/UAVTeam-v0") after `import ipp_toolkit`
+register_envs()  # gymnasium.make("ipp_toolkit/UAVTeam-v0" or "ipp_toolkit/UAV-v0")
 
 __version__ = "0.1.0"
 
@@ -37,6 +39,7 @@ __all__ = [
     "EnvConfig",
     "IPPEnv",
     "IPPTeamEnv",
+    "IPPUAVEnv",
     "InvalidActionError",
     "MissionState",
     "load_config",

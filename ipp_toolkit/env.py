@@ -4,7 +4,11 @@ Spaces per agent (G = 11 at the defaults, C = number of actor planes switched on
 default):
 
 * observation: ``Dict(observation=Box(-1, 1, (C, G, G), float32),
-  action_mask=Box(0, 1, (6,), int8))``; the mask is there only, not in the infos.
+  action_mask=Box(0, 1, (6,), int8))``; the mask is there only, not in the infos. With
+  ``features.observation = "box"`` (or ``IPPEnv(observation="box")``) it is the
+  ``Box(-1, 1, (C, G, G), float32)`` planes alone, which SuperSuit's observation wrappers
+  (``black_death_v3``, ``frame_stack_v1``, ``normalize_obs_v0``, ``flatten_v0``, ...) take,
+  and the mask is in ``info["action_mask"]`` ((6,) int8) and :meth:`IPPEnv.action_mask`.
 * infos: flat, numeric and with the same keys at reset and at every step (so TorchRL's
   ``PettingZooWrapper`` and BenchMARL can turn them into tensors): ``step`` (int),
   ``blocked`` (bool, held back by the same-target rule this step), ``invalid_action`` (bool,
@@ -37,9 +41,11 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrapper
 
-from .config.schema import EnvConfig
+from .config.files import ConfigLike, as_env_config
+from .config.schema import OBSERVATION_KINDS
 from .sim.features import (
     actor_observations,
     actor_plane_names,
@@ -58,7 +64,7 @@ from .sim.mission import (
 from .sim.team import ACTION_NAMES, N_ACTIONS
 from .world.seeding import check_namespace
 
-__all__ = ["INVALID_ACTION_POLICIES", "IPPEnv", "parallel_env"]
+__all__ = ["INVALID_ACTION_POLICIES", "IPPEnv", "env", "parallel_env", "raw_env"]
 
 INVALID_ACTION_POLICIES = ("hold", "raise")
 
@@ -83,8 +89,10 @@ class IPPEnv(ParallelEnv):
     """Multi-UAV informative path planning as a PettingZoo parallel environment.
 
     Args:
-        config: the mission configuration (defaults reproduce the paper).
-        render_mode: ``None`` or ``"rgb_array"``.
+        config: the mission configuration (defaults reproduce the paper): an ``EnvConfig``, a
+            plain dict of sections (``{"team": {"n_agents": 2}}``) or a YAML file's path.
+        render_mode: ``None``, ``"rgb_array"`` (``render()`` returns the frame) or
+            ``"human"`` (a matplotlib window shows it at reset and every step).
         namespace: random-stream namespace: ``train``, ``validation`` or ``test``.
         ground_truth: (H, W) bool terrain used for every mission instead of the generator.
         raster: (h, w) array for ``terrain.kind = "raster"`` instead of the file.
@@ -93,18 +101,18 @@ class IPPEnv(ParallelEnv):
         invalid_action: what a masked action does: ``hold`` (default: the UAV stays for the
             step, ``info["invalid_action"]`` is True) or ``raise`` (an ``InvalidActionError``,
             for strict use). A config that says ``team.invalid_action="hold"`` holds either way.
+        observation: ``dict`` or ``box`` (see the module docstring); None (default): the
+            config's ``features.observation``.
     """
 
-    metadata = {"name": "ipp_v0", "render_modes": ["rgb_array"], "is_parallelizable": True,
-                "render_fps": 2}
+    metadata = {"name": "ipp_v0", "render_modes": ["human", "rgb_array"],
+                "is_parallelizable": True, "render_fps": 2}
 
-    def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
+    def __init__(self, config: ConfigLike = None, *, render_mode: str | None = None,
                  namespace: str = "train", ground_truth: np.ndarray | None = None,
                  raster: np.ndarray | None = None, keep_failed: bool = False,
-                 invalid_action: str = "hold"):
-        self.config = config if config is not None else EnvConfig()
-        if not isinstance(self.config, EnvConfig):
-            raise ValueError(f"config must be an EnvConfig, got {type(self.config).__name__}")
+                 invalid_action: str = "hold", observation: str | None = None):
+        self.config = as_env_config(config)
         if invalid_action not in INVALID_ACTION_POLICIES:
             raise ValueError(f"invalid_action must be one of {INVALID_ACTION_POLICIES}, got "
                              f"{invalid_action!r}")
@@ -128,14 +136,17 @@ class IPPEnv(ParallelEnv):
         self._index = {agent: k for k, agent in enumerate(self.possible_agents)}
         g = self.geometry.grid_points
         features = self.config.features
-        self._observation_space = spaces.Dict({
-            "observation": spaces.Box(-1.0, 1.0, (len(actor_plane_names(features)), g, g),
-                                      dtype=np.float32),
-            "action_mask": spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8),
-        })
+        self.observation_kind = features.observation if observation is None else observation
+        if self.observation_kind not in OBSERVATION_KINDS:
+            raise ValueError(f"observation must be one of {OBSERVATION_KINDS}, got "
+                             f"{self.observation_kind!r}")
+        planes = spaces.Box(-1.0, 1.0, (len(actor_plane_names(features)), g, g), dtype=np.float32)
+        self._observation_space = planes if self.observation_kind == "box" else spaces.Dict({
+            "observation": planes, "action_mask": spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8)})
         self._action_space = spaces.Discrete(N_ACTIONS)
         self.state_space = spaces.Box(0.0, 1.0, (len(state_plane_names(features)), g, g),
                                       dtype=np.float32)
+        self._window: Any = None  # the human render mode's FrameWindow
         self._seed: int | None = None
         self._mission_index = -1
         self.mission: MissionState | None = None
@@ -195,6 +206,8 @@ class IPPEnv(ParallelEnv):
                                      self.namespace, self.geometry, self._ground_truth,
                                      self._raster)
         self.agents = list(self.possible_agents)
+        if self.render_mode == "human":
+            self.render()
         return self._observe(self.agents), self._infos(self.agents)
 
     def step(self, actions: dict[str, int]) -> tuple[dict, dict, dict, dict, dict]:
@@ -242,28 +255,40 @@ class IPPEnv(ParallelEnv):
         truncations = dict.fromkeys(agents, False)
         infos = self._infos(agents)
         self.agents = [agent for agent in agents if not terminations[agent]]
+        if self.render_mode == "human":
+            self.render()
         return observations, rewards, terminations, truncations, infos
 
     def _observe(self, agents: list[str] | None = None) -> dict[str, dict[str, np.ndarray]]:
         agents = self.agents if agents is None else agents
         planes = actor_observations(self.mission, self.config.features)
-        masks = self.mission.masks()
-        failed = ~self.mission.alive
-        if failed.any():  # a failed UAV observes nothing; its (ignored) action may be any
-            planes[failed] = 0.0
-            masks[failed] = 1
+        masks = self._masks()
+        planes[~self.mission.alive] = 0.0  # a failed UAV observes nothing
+        if self.observation_kind == "box":
+            return {agent: planes[self._index[agent]] for agent in agents}
         return {agent: {"observation": planes[self._index[agent]],
                         "action_mask": masks[self._index[agent]]} for agent in agents}
+
+    def _masks(self) -> np.ndarray:
+        """(N, 6) int8 valid actions now; a failed UAV's (ignored) action may be any."""
+        masks = self.mission.masks()
+        masks[~self.mission.alive] = 1
+        return masks
 
     def _infos(self, agents: list[str]) -> dict[str, dict[str, Any]]:
         # Flat scalars with fixed keys: TorchRL builds its info spec from the reset infos and
         # writes every step's values into it (a nested dict or a key missing at reset breaks it).
         metrics = {key: float(value) for key, value in self.mission.history[-1].as_dict().items()}
-        return {agent: {"step": int(self.mission.step),
-                        "blocked": bool(self.mission.blocked[self._index[agent]]),
-                        "invalid_action": bool(self.mission.held_invalid[self._index[agent]]),
-                        **metrics}
-                for agent in agents}
+        infos = {agent: {"step": int(self.mission.step),
+                         "blocked": bool(self.mission.blocked[self._index[agent]]),
+                         "invalid_action": bool(self.mission.held_invalid[self._index[agent]]),
+                         **metrics}
+                 for agent in agents}
+        if self.observation_kind == "box":  # the mask is not in the observation: here
+            masks = self._masks()
+            for agent in agents:
+                infos[agent]["action_mask"] = masks[self._index[agent]]
+        return infos
 
     def state(self) -> np.ndarray:
         """(C_state, G, G) float32 global planes for the centralised critic, within
@@ -292,25 +317,52 @@ class IPPEnv(ParallelEnv):
         return critic_observations(self.mission, self.config.features, joint)
 
     def action_mask(self, agent: str) -> np.ndarray:
-        """(6,) int8 valid actions of ``agent`` now."""
+        """(6,) int8 valid actions of ``agent`` now (all valid for a failed UAV)."""
         if self.mission is None:
             raise RuntimeError("call reset() before action_mask()")
-        return self.mission.masks()[self._agent_index(agent)]
+        return self._masks()[self._agent_index(agent)]
 
     def render(self) -> np.ndarray | None:
-        """An RGB frame (h, w, 3) uint8: terrain, global map, UAVs, footprints, local maps."""
+        """An RGB frame (h, w, 3) uint8 (``rgb_array``): terrain, global map, UAVs,
+        footprints, local maps; ``human`` shows it in a window (and returns None), as reset
+        and every step then do."""
         if self.render_mode is None:
             return None
         if self.mission is None:
             raise RuntimeError("call reset() before render()")
         from .sim.rendering import render_state
 
-        return render_state(self.mission)
+        frame = render_state(self.mission)
+        if self.render_mode != "human":
+            return frame
+        if self._window is None:
+            from .sim.window import FrameWindow
+
+            self._window = FrameWindow(f"ipp-toolkit: {len(self.possible_agents)} UAVs",
+                                       self.metadata["render_fps"])
+        self._window.show(frame)
+        return None
 
     def close(self) -> None:
-        """Nothing to release; present for the PettingZoo API."""
+        """Close the ``human`` window, if any (idempotent)."""
+        if self._window is not None:
+            self._window.close()
 
 
-def parallel_env(config: EnvConfig | None = None, **kwargs: Any) -> IPPEnv:
+def parallel_env(config: ConfigLike = None, **kwargs: Any) -> IPPEnv:
     """PettingZoo-style factory: ``parallel_env(config, render_mode=...)``."""
     return IPPEnv(config, **kwargs)
+
+
+def raw_env(config: ConfigLike = None, **kwargs: Any) -> AECEnv:
+    """The env as a PettingZoo AEC env (agents act in turn), without the order-enforcing
+    wrapper: PettingZoo's ``parallel_to_aec_wrapper`` over :class:`IPPEnv`; the arguments are
+    :class:`IPPEnv`'s."""
+    return parallel_to_aec_wrapper(IPPEnv(config, **kwargs))
+
+
+def env(config: ConfigLike = None, **kwargs: Any) -> AECEnv:
+    """PettingZoo-style AEC factory: ``env(config, render_mode=...)`` is
+    ``pettingzoo.utils.parallel_to_aec(IPPEnv(config, ...))`` (agents act in turn, the team
+    moves once every live agent has acted; the order is enforced)."""
+    return parallel_to_aec(IPPEnv(config, **kwargs))

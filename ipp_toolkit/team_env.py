@@ -1,5 +1,8 @@
 """The whole UAV team as one Gymnasium agent, registered as ``ipp_toolkit/UAVTeam-v0``.
 
+(``ipp_toolkit/UAV-v0``, :mod:`ipp_toolkit.uav_env`, is the other registered id: one shared
+policy choosing one UAV's move at a time, whose SB3 zips the ``sb3`` planner flies.)
+
 Single-agent tools (``gymnasium.make``, Gymnasium's and SB3's ``check_env``, any
 single-agent learner) see the team of N UAVs as one agent that picks every UAV's move at
 once. With ``team.n_agents = 1`` it is the single-UAV problem.
@@ -28,34 +31,62 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from .config.schema import EnvConfig
+from .config.files import ConfigLike
 from .env import IPPEnv
 from .sim.team import N_ACTIONS
 
-__all__ = ["ENV_ID", "IPPTeamEnv", "register_envs"]
+__all__ = ["ENV_ID", "UAV_ENV_ID", "IPPTeamEnv", "TeamShell", "register_envs"]
 
 ENV_ID = "ipp_toolkit/UAVTeam-v0"
+UAV_ENV_ID = "ipp_toolkit/UAV-v0"
+"""The per-UAV id (:class:`ipp_toolkit.uav_env.IPPUAVEnv`), registered here with the team's."""
 
 
-class IPPTeamEnv(gymnasium.Env):
-    """The UAV team of an :class:`~ipp_toolkit.env.IPPEnv` as one Gymnasium agent.
+class TeamShell(gymnasium.Env):
+    """What both registered Gymnasium envs share: an :class:`~ipp_toolkit.env.IPPEnv` whose
+    failed UAVs keep their slots, inert (``keep_failed=True``), its rendering and closing.
 
     Args:
-        config: the mission configuration (defaults reproduce the paper: 4 UAVs).
-        render_mode: ``None`` or ``"rgb_array"``.
+        config: the mission configuration: an ``EnvConfig``, a dict of sections or a YAML
+            file's path (defaults reproduce the paper: 4 UAVs).
+        render_mode: ``None``, ``"rgb_array"`` or ``"human"`` (a window, updated at every
+            team step).
         namespace: random-stream namespace: ``train``, ``validation`` or ``test``.
         invalid_action: ``hold`` (default: a masked move holds that UAV) or ``raise``.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 2}
 
-    def __init__(self, config: EnvConfig | None = None, *, render_mode: str | None = None,
+    def __init__(self, config: ConfigLike = None, *, render_mode: str | None = None,
                  namespace: str = "train", invalid_action: str = "hold"):
-        # Fixed slots: a failed UAV stays in the joint action and observation, inert.
+        # The Dict observation, whatever features.observation says: the mask is read from it.
         self._env = IPPEnv(config, render_mode=render_mode, namespace=namespace,
-                           keep_failed=True, invalid_action=invalid_action)
+                           keep_failed=True, invalid_action=invalid_action, observation="dict")
         self.config = self._env.config
         self.render_mode = render_mode
+        self.invalid_action = invalid_action
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame (h, w, 3) uint8 with ``render_mode="rgb_array"``, else None (``human``:
+        shown in the window)."""
+        return self._env.render()
+
+    def close(self) -> None:
+        """Nothing to release; may be called more than once."""
+        self._env.close()
+
+
+class IPPTeamEnv(TeamShell):
+    """The UAV team of an :class:`~ipp_toolkit.env.IPPEnv` as one Gymnasium agent.
+
+    Args: as :class:`TeamShell`'s. Fixed slots: a failed UAV stays in the joint action and
+    observation, inert.
+    """
+
+    def __init__(self, config: ConfigLike = None, *, render_mode: str | None = None,
+                 namespace: str = "train", invalid_action: str = "hold"):
+        super().__init__(config, render_mode=render_mode, namespace=namespace,
+                         invalid_action=invalid_action)
         n = self.config.team.n_agents
         planes = self._env.observation_space(self._env.possible_agents[0])["observation"]
         self.plane_shape: tuple[int, ...] = (n, *planes.shape)
@@ -111,21 +142,17 @@ class IPPTeamEnv(gymnasium.Env):
         """(N * 6,) bool valid moves now, UAV by UAV (MaskablePPO's MultiDiscrete layout)."""
         return self._masks.astype(bool).reshape(-1)
 
-    def render(self) -> np.ndarray | None:
-        """An RGB frame (h, w, 3) uint8 with ``render_mode="rgb_array"``, else None."""
-        return self._env.render()
-
-    def close(self) -> None:
-        """Nothing to release; may be called more than once."""
-        self._env.close()
-
-
 def register_envs() -> None:
-    """Register ``ipp_toolkit/UAVTeam-v0`` with Gymnasium (idempotent).
+    """Register ``ipp_toolkit/UAVTeam-v0`` and ``ipp_toolkit/UAV-v0`` with Gymnasium
+    (idempotent).
 
     ``gymnasium.make(ENV_ID, config=..., render_mode=...)`` then builds an
-    :class:`IPPTeamEnv`; importing :mod:`ipp_toolkit` calls this.
+    :class:`IPPTeamEnv`, ``gymnasium.make(UAV_ENV_ID, ...)`` an
+    :class:`~ipp_toolkit.uav_env.IPPUAVEnv`; ``config`` is an ``EnvConfig``, a dict of
+    sections or a YAML file's path. Importing :mod:`ipp_toolkit` calls this.
     """
+    # No max_episode_steps: the budget end is the env's own true terminal.
     if ENV_ID not in gymnasium.registry:
-        # No max_episode_steps: the budget end is the env's own true terminal.
         gymnasium.register(ENV_ID, entry_point="ipp_toolkit.team_env:IPPTeamEnv")
+    if UAV_ENV_ID not in gymnasium.registry:
+        gymnasium.register(UAV_ENV_ID, entry_point="ipp_toolkit.uav_env:IPPUAVEnv")

@@ -13,7 +13,10 @@ longer takes. :func:`make_torchrl_env` builds the env so that neither happens:
   ``uav`` keeps N agents;
 * TorchRL's ``ActionMask`` transform comes first on top of everything (the batched env
   included), so the action spec seen by policies, collectors and ``rand_action`` follows
-  ``("uav", "action_mask")`` at every step; the caller's transforms follow it.
+  ``("uav", "action_mask")`` at every step; the caller's transforms follow it. TorchRL's
+  ``RandomPolicy`` (a collector's ``policy=None``) samples from a copy of the action spec
+  made when the collector starts; here every copy of the UAVs' action spec is that spec
+  itself, so random collection follows the masks too.
 
 Keys (group ``uav``, N agents): ``("uav", "observation", "observation")`` (C, G, G) planes,
 ``("uav", "action_mask")`` (6,) bool, ``("uav", "action")``, ``("uav", "reward")``,
@@ -28,6 +31,7 @@ import warnings
 from collections.abc import Sequence
 from typing import Any
 
+from .config.files import ConfigLike, as_env_config
 from .config.schema import EnvConfig, check_int
 from .env import IPPEnv
 from .extras import install_command, require_extra
@@ -47,18 +51,19 @@ def _one_copy(config: EnvConfig, seed: int, namespace: str, invalid_action: str,
         warnings.filterwarnings("ignore", message="PettingZoo in TorchRL", category=UserWarning)
         return PettingZooWrapper(
             env=IPPEnv(config, namespace=namespace, keep_failed=True,
-                       invalid_action=invalid_action),
+                       invalid_action=invalid_action, observation="dict"),
             return_state=True, categorical_actions=True, seed=seed, device=device)
 
 
-def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed: int = 0,
+def make_torchrl_env(config: ConfigLike = None, *, num_envs: int = 1, seed: int = 0,
                      parallel: bool = False, transforms: Sequence[Any] = (),
                      namespace: str = "train", invalid_action: str = "hold",
                      device: str = "cpu") -> Any:
     """A ``TransformedEnv`` over one or ``num_envs`` copies of the simulator, masks kept.
 
     Args:
-        config: the mission configuration (default: the paper's).
+        config: the mission configuration (default: the paper's): an ``EnvConfig``, a dict
+            of sections or a YAML file's path.
         num_envs: copies; more than one are batched (batch size ``(num_envs,)``).
         seed: run seed; copy c flies missions 0, 1, ... of run ``seed + c``.
         parallel: batch the copies in worker processes (``ParallelEnv``) instead of in this
@@ -79,7 +84,7 @@ def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed
     """
     envs = require_extra("torchrl.envs", "make_torchrl_env", install_command("torchrl"),
                          package="torchrl")
-    config = config if config is not None else EnvConfig()
+    config = as_env_config(config)
     num_envs = check_int("num_envs", num_envs, 1)
     seed = check_int("seed", seed, 0)
     makers = [functools.partial(_one_copy, config, seed + copy, namespace, invalid_action,
@@ -88,5 +93,41 @@ def make_torchrl_env(config: EnvConfig | None = None, *, num_envs: int = 1, seed
         base = makers[0]()
     else:
         base = (envs.ParallelEnv if parallel else envs.SerialEnv)(num_envs, makers, device=device)
-    mask = envs.ActionMask(action_key=(GROUP, "action"), mask_key=(GROUP, "action_mask"))
-    return envs.TransformedEnv(base, envs.Compose(mask, *transforms))
+    mask = _following_action_mask(envs)
+    env = envs.TransformedEnv(base, envs.Compose(mask, *transforms))
+    mask.action_spec  # noqa: B018  (makes the spec follow the masks before any collector)
+    return env
+
+
+def _following_action_mask(envs: Any) -> Any:
+    """TorchRL's ``ActionMask`` on the UAVs' actions, whose masked spec every copy shares.
+
+    TorchRL's ``RandomPolicy`` (what a collector flies with ``policy=None``) samples from a
+    copy of the env's action spec made when the collector starts, so ``ActionMask``'s updates
+    of the env's spec never reach it and it draws masked actions. Here the action spec's
+    ``clone()`` returns the spec itself, so those copies follow the masks too.
+    """
+    from torchrl.data import Categorical
+
+    class SharedMaskCategorical(Categorical):
+        """A ``Categorical`` whose copies are itself: they follow its mask."""
+
+        def clone(self) -> SharedMaskCategorical:
+            return self
+
+    class FollowingActionMask(envs.ActionMask):
+        @property
+        def action_spec(self) -> Any:
+            spec = super().action_spec
+            if type(spec) is Categorical:  # rebuilt specs (a transform added) are shared again
+                spec.__class__ = SharedMaskCategorical
+            return spec
+
+        def transform_input_spec(self, input_spec: Any) -> Any:
+            input_spec = super().transform_input_spec(input_spec)
+            spec = input_spec["full_action_spec"][self.in_keys[0]]
+            if type(spec) is Categorical:
+                spec.__class__ = SharedMaskCategorical
+            return input_spec
+
+    return FollowingActionMask(action_key=(GROUP, "action"), mask_key=(GROUP, "action_mask"))

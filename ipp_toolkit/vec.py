@@ -49,7 +49,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from .config.schema import EnvConfig, check_int
+from .config.files import ConfigLike, as_env_config
+from .config.schema import check_int
 from .env import INVALID_ACTION_POLICIES, IPPEnv, action_index
 from .sim.team import N_ACTIONS
 from .world.seeding import check_namespace
@@ -282,14 +283,15 @@ class _SlotEnv(IPPEnv):
         return observations, rewards, terminations, truncations, infos
 
 
-def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus: int = 0,
+def make_sb3_vec_env(config: ConfigLike, n_envs: int = 1, seed: int = 0, num_cpus: int = 0,
                      namespace: str = "train", invalid_action: str = "hold",
                      invalid_penalty: float = 0.0,
                      render_mode: str | None = None) -> IPPVecEnv:
     """SB3 vector env over ``n_envs`` copies of the simulator, one slot per agent.
 
     Args:
-        config: the mission configuration; every copy has its team of N agents.
+        config: the mission configuration (an ``EnvConfig``, a dict of sections or a YAML
+            file's path); every copy has its team of N agents.
         n_envs: copies of the simulator (>= 1, default 1); SB3 sees ``n_envs * N`` envs.
         seed: run seed (>= 0, default 0); copy c starts on run ``seed + c`` at the first
             reset (an SB3 model's ``seed`` replaces it).
@@ -319,8 +321,7 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus
                        key=str)
         raise ValueError(f"config must be one EnvConfig: one vec env holds one team size, got "
                          f"{len(config)} configs with n_agents {sizes}")
-    if not isinstance(config, EnvConfig):
-        raise ValueError(f"config must be an EnvConfig, got {type(config).__name__}")
+    config = as_env_config(config)
     n_envs = check_int("n_envs", n_envs, 1)
     seed = check_int("seed", seed, 0)
     num_cpus = check_int("num_cpus", num_cpus, 0)
@@ -330,7 +331,7 @@ def make_sb3_vec_env(config: EnvConfig, n_envs: int = 1, seed: int = 0, num_cpus
                          f"{invalid_action!r}")
     # Fixed slots: a failed UAV stays as an inert agent (black death) until the mission ends.
     env = _SlotEnv(config, namespace=namespace, keep_failed=True, invalid_action=invalid_action,
-                   render_mode=render_mode)
+                   render_mode=render_mode, observation="dict")  # the masks are read from it
     markov = ss.pettingzoo_env_to_vec_env_v1(env)
     # base_class "gymnasium" keeps terminations and truncations apart; IPPVecEnv is the SB3 side.
     venv = ss.concat_vec_envs_v1(markov, n_envs, num_cpus=min(num_cpus, n_envs),

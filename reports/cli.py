@@ -85,7 +85,7 @@ def simulate_main(argv: list[str] | None = None) -> int:
             if target.exists() and not target.is_file():
                 raise ValueError(f"{str(target)!r} exists and is not a file; it would be "
                                  "written after the mission")
-        env = IPPEnv(config, render_mode="rgb_array", namespace="test")
+        env = IPPEnv(config, render_mode="rgb_array", namespace="test", observation="dict")
         observations, infos = env.reset(seed=args.seed, options={"mission": args.mission})
         with allow_foreign_files(args.force), claim(args.out, "ipp-simulate"):
             # Held from the mission to the files: a run writing the folder is not mixed in.
@@ -160,9 +160,12 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "--config file's, else 25)")
     parser.add_argument("--planners", default="default", metavar="LIST",
                         help="comma-separated planners: registered names (ig, coverage, "
-                             "random, ...) or NAME=CHECKPOINT items (coma=PATH, "
-                             "coma=shipped:NAME), each with an optional LABEL: prefix "
-                             f"(mine:coma=PATH); 'default' = {','.join(DEFAULT_PLANNERS)}; "
+                             "random, ...) or NAME=CHECKPOINT items: coma=PATH, "
+                             "coma=shipped:NAME, ppo=PATH, ppo=shipped:NAME, sb3=PATH "
+                             "(an ipp-train sb3/ppo policy.pt or an SB3 model.zip), "
+                             "rllib=RUN, torchrl=PATH, ig_learned=PATH; each with an "
+                             "optional LABEL: prefix (mine:sb3=model.zip); "
+                             f"'default' = {','.join(DEFAULT_PLANNERS)}; "
                              "'all' = every registered planner that can be built")
     parser.add_argument("--trials", type=positive_int("trials"), default=50, metavar="N",
                         help="number of test missions (the same missions for every planner)")

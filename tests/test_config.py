@@ -75,8 +75,10 @@ def test_invalid_config_names_field_and_value(sections, match):
 
 
 def test_env_rejects_non_config():
-    with pytest.raises(ValueError, match="config must be an EnvConfig"):
-        IPPEnv({"team": {}})
+    with pytest.raises(ValueError, match="config must be an EnvConfig, a dict .* got list"):
+        IPPEnv([{"team": {}}])
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['agents'\] in section 'team'"):
+        IPPEnv({"team": {"agents": 2}})
 
 
 def test_altitudes_are_independent_of_the_waypoint_spacing_and_fixed_starts_snap():

@@ -296,5 +296,5 @@ def test_render_rgb_array():
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
     assert IPPEnv(small_config()).render() is None
-    with pytest.raises(ValueError, match="render_mode 'human'"):
-        IPPEnv(small_config(), render_mode="human")
+    with pytest.raises(ValueError, match="render_mode 'ansi'"):
+        IPPEnv(small_config(), render_mode="ansi")

@@ -64,10 +64,12 @@ def test_real_terrain_example(tmp_path, monkeypatch, capsys, placeholder_figures
     assert (tmp_path / "compare" / "summary.md").exists()
 
 
-def test_torchrl_mappo_trains_with_masks_and_a_failure(monkeypatch, capsys):
+def test_torchrl_mappo_trains_with_masks_and_a_failure(tmp_path, monkeypatch, capsys):
     pytest.importorskip("torchrl", reason="torchrl is not installed (optional extra 'torchrl')")
     # The example flies with invalid_action="raise": a masked action would stop it.
-    out = run_example("05_torchrl_mappo.py", ["--quick"], monkeypatch, capsys)
+    out = run_example("05_torchrl_mappo.py", ["--quick", "--out", str(tmp_path)], monkeypatch,
+                      capsys)
+    assert (tmp_path / "policy.pt").is_file() and f"torchrl={tmp_path}" in out
     lines = [line for line in out.splitlines() if line.startswith("iteration ")]
     assert len(lines) == 2
     for line in lines:

@@ -16,7 +16,7 @@ LAYERS = {
     "world": 2,
     "belief": 3,
     "sim": 4,
-    "env": 5, "vec": 5, "team_env": 5, "torchrl_env": 5,
+    "env": 5, "vec": 5, "team_env": 5, "uav_env": 5, "torchrl_env": 5,
     "planning": 6,
     "runs": 7,
     "data": 0,

@@ -116,6 +116,7 @@ INFERENCE_ONLY = {
     "baselines.sb3.ppo": ("baselines.sb3.ppo_training", "ipp_toolkit.vec"),
     "baselines.sb3.planner": ("baselines.sb3.training", "baselines.sb3.runner",
                               "baselines.sb3.ppo_training", "ipp_toolkit.vec"),
+    "baselines.torchrl.planner": ("torchrl", "ipp_toolkit.torchrl_env"),
 }
 
 

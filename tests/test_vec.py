@@ -164,8 +164,8 @@ def test_bad_arguments():
         make_sb3_vec_env(small_config(), 1, seed=0, num_cpus=-2)
     with pytest.raises(ValueError, match=r"one team size.*n_agents \[2, 4\]"):
         make_sb3_vec_env([small_config(2), small_config(4)], 2, seed=0)
-    with pytest.raises(ValueError, match="config must be an EnvConfig, got dict"):
-        make_sb3_vec_env({}, 1, seed=0)
+    with pytest.raises(ValueError, match="config must be an EnvConfig, a dict .* got int"):
+        make_sb3_vec_env(3, 1, seed=0)
 
 
 def test_adapter_refuses_mixed_team_sizes():

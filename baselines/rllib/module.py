@@ -65,7 +65,8 @@ class IPPMultiAgentEnv(MultiAgentEnv):
         copy = next(_COPIES[worker])
         self.run_seed = (int(env_config["base_seed"])
                          + worker * int(env_config["envs_per_runner"]) + copy)
-        self.env = IPPEnv(config_from_dict(env_config["env"]))
+        # The masked RLModule reads the Dict observation, whatever features.observation says.
+        self.env = IPPEnv(config_from_dict(env_config["env"]), observation="dict")
         self.possible_agents = list(self.env.possible_agents)
         self.agents = list(self.possible_agents)
         self.observation_spaces = {a: self.env.observation_space(a) for a in self.agents}

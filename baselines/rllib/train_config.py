@@ -9,10 +9,10 @@ run itself (:mod:`baselines.rllib.run`, which does).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from typing import Any
 
-from ipp_toolkit.config.files import config_from_dict, config_to_dict
+from ipp_toolkit.config.files import check_same_run, config_from_dict, config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.sim.features import actor_plane_names
 
@@ -111,12 +111,8 @@ def same_run(config: RLlibTrainConfig, env_cfg: EnvConfig, record: dict[str, Any
              where: str) -> None:
     """ValueError unless ``record`` (``checkpoint.json``) is a run of ``config`` (except its
     ``iterations``) on ``env_cfg``."""
-    stored = RLlibTrainConfig.from_dict(record["rllib_config"])
-    if replace(stored, iterations=config.iterations) != config:
-        raise ValueError(f"cannot resume {where!r}: its RLlib config {stored} differs from the "
-                         f"given {config} (only iterations may change)")
-    if config_from_dict(record["env_config"]) != env_cfg:
-        raise ValueError(f"cannot resume {where!r}: it was trained on another env config")
+    check_same_run(where, "RLlib", RLlibTrainConfig.from_dict(record["rllib_config"]), config,
+                   "iterations", config_from_dict(record["env_config"]), env_cfg)
 
 
 def env_record(env_cfg: EnvConfig) -> dict[str, Any]:

@@ -155,7 +155,9 @@ class SB3Planner(Planner):
         states = self._lstm_states
         if states is not None and states[0].shape[1] != len(views):
             states = None  # another team: a new mission without reset()
-        scores, states = action_scores(self.policy, self.algo, observations, states)
+        inputs = observations if self.meta.normalization is None \
+            else self.meta.normalization.apply(observations)  # as VecNormalize fed it
+        scores, states = action_scores(self.policy, self.algo, inputs, states)
         self._lstm_states = states if self.algo in RECURRENT_ALGORITHMS else None
         if self.in_order:
             rescore = None

@@ -238,6 +238,8 @@ class LoadedPolicy:
         num_timesteps: agent-transitions it was trained for.
         format: the file's format tag.
         record: the file's other records (hyper-parameters, ...), JSON-safe.
+        normalization: the ``VecNormalize`` observation statistics of an SB3 zip trained
+            under it (:class:`~baselines.sb3.normalization.ObsNormalization`), else None.
     """
 
     algo: str
@@ -248,6 +250,7 @@ class LoadedPolicy:
     num_timesteps: int
     format: str
     record: dict[str, Any] = field(default_factory=dict)
+    normalization: Any = None
 
 
 def sb3_policy_metadata(payload: dict[str, Any], **extra: Any) -> dict[str, Any]:

@@ -274,6 +274,48 @@ def add_run_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+PPO_SET_NAMES = {"learning_rate": "lr", "gamma": "gamma", "n_steps": "n_steps",
+                 "batch_size": "batch_size", "n_epochs": "n_epochs", "gae_lambda": "gae_lambda",
+                 "clip_range": "clip_range", "ent_coef": "ent_coef", "vf_coef": "vf_coef",
+                 "max_grad_norm": "max_grad_norm"}
+"""``--set NAME=VALUE`` of PPO runs: SB3's name -> the :class:`PPOTrainConfig` field."""
+_FLAG_OF = {"n_steps": "--n-steps", "batch_size": "--batch-size", "lr": "--lr",
+            "ent_coef": "--ent-coef"}
+
+
+def ppo_overrides(items: list[str], argv: list[str]) -> dict[str, int | float]:
+    """The :class:`PPOTrainConfig` fields ``--set NAME=VALUE`` items give (the config checks
+    the values).
+
+    Raises:
+        ValueError: a malformed item, an unknown name (the known ones listed), a name given
+            twice or with its own flag (``--n-steps``, ``--batch-size``, ``--lr``,
+            ``--ent-coef``), or a value that is not a number.
+    """
+    given: dict[str, int | float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ValueError(f"--set expects NAME=VALUE, got {item!r}")
+        if name not in PPO_SET_NAMES:
+            raise ValueError(f"--set {name}: not a PPO hyper-parameter; known: "
+                             f"{', '.join(PPO_SET_NAMES)}")
+        field = PPO_SET_NAMES[name]
+        flag = _FLAG_OF.get(field)
+        if field in given or (flag is not None and any(a == flag or a.startswith(flag + "=")
+                                                       for a in argv)):
+            raise ValueError(f"--set {name} is given twice (or with {flag})")
+        try:
+            given[field] = int(text) if field in ("n_steps", "batch_size", "n_epochs") \
+                else float(text)
+        except ValueError:
+            raise ValueError(f"--set {name}={text}: not a "
+                             f"{'whole ' if field in ('n_steps', 'batch_size', 'n_epochs') else ''}"
+                             "number") from None
+    return given
+
+
 def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.ArgumentParser:
     defaults = PPOTrainConfig()
     parser = argparse.ArgumentParser(
@@ -299,6 +341,9 @@ def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.Ar
                              "in --config); 0: the plain policy")
     parser.add_argument("--masked", action=argparse.BooleanOptionalAction,
                         default=defaults.masked, help="MaskablePPO (default) or plain PPO")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="any PPO hyper-parameter by its SB3 name: "
+                             f"{', '.join(PPO_SET_NAMES)} (each once; not with its own flag)")
     add_run_flags(parser)
     parser.set_defaults(**PPO_PRESETS[preset])
     return parser
@@ -322,9 +367,10 @@ def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
     args = _parser(known.preset, prog).parse_args(argv)
     try:
         env_config, run_fields = run_config_from_args(args, PPOTrainConfig())
-        config = PPOTrainConfig(
-            **run_fields, n_steps=args.n_steps, batch_size=args.batch_size, lr=args.lr,
-            ent_coef=args.ent_coef, masked=args.masked, gain_prior=args.gain_prior)
+        hyper = {"n_steps": args.n_steps, "batch_size": args.batch_size, "lr": args.lr,
+                 "ent_coef": args.ent_coef, **ppo_overrides(args.set, argv)}
+        config = PPOTrainConfig(**run_fields, **hyper, masked=args.masked,
+                                gain_prior=args.gain_prior)
         policy_kwargs(config, training_env_config(config, env_config))  # validate before work
         path = train_ppo(config, env_config, args.out, progress=not args.no_progress,
                          resume=args.resume, announce=setting_line(env_config, args.config),

@@ -23,7 +23,6 @@ imported by the planners.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import time
 from collections.abc import Callable
@@ -32,10 +31,11 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from sb3_contrib import ARS
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
-from ipp_toolkit.config.files import config_from_dict
+from ipp_toolkit.config.files import check_same_run, config_from_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import load_torch, save_checkpoint
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
@@ -80,8 +80,9 @@ def task_metrics_callback() -> BaseCallback:
     class TaskMetrics(BaseCallback):
         def _on_step(self) -> bool:
             infos, dones = self.locals.get("infos"), self.locals.get("dones")
-            if infos is None or dones is None:  # ARS steps its candidates on its own
-                return True
+            if infos is None or dones is None:  # ARS: one slot's (info, done) at a time
+                info, done = self.locals.get("info"), self.locals.get("done")
+                infos, dones = ([], []) if info is None else ([info], [done])
             for info, done in zip(infos, dones, strict=False):
                 if done and "entropy" in info:
                     self.logger.record_mean("rollout/final_entropy", float(info["entropy"]))
@@ -89,6 +90,18 @@ def task_metrics_callback() -> BaseCallback:
             return True
 
     return TaskMetrics()
+
+
+class ReportingARS(ARS):
+    """sb3-contrib's ARS whose candidate evaluations hand each step's locals (the slot's
+    ``info`` and ``done``) to the callbacks, as the other algorithms' rollouts do, so
+    :func:`task_metrics_callback` logs ARS's final entropy and F1 too (ARS alone steps its
+    callbacks without them)."""
+
+    def _trigger_callback(self, _locals: dict[str, Any], _globals: dict[str, Any],
+                          callback: BaseCallback, n_envs: int) -> None:
+        callback.update_locals(_locals)
+        super()._trigger_callback(_locals, _globals, callback, n_envs)
 
 
 def time_limit_callback(deadline: float) -> BaseCallback:
@@ -158,14 +171,8 @@ def same_run_check(config: Any, env_config: EnvConfig, key: str, what: str
     same env config; otherwise ValueError naming the file.
     """
     def check(state: dict[str, Any], ckpt_path: Path) -> None:
-        stored = type(config).from_dict(state[key])
-        if dataclasses.replace(stored, total_timesteps=config.total_timesteps) != config:
-            raise ValueError(f"cannot resume {str(ckpt_path)!r}: its {what} config {stored} "
-                             f"differs from the given {config} (only total_timesteps may "
-                             "change)")
-        if config_from_dict(state["env_config"]) != env_config:
-            raise ValueError(f"cannot resume {str(ckpt_path)!r}: it was trained on another "
-                             "env config")
+        check_same_run(str(ckpt_path), what, type(config).from_dict(state[key]), config,
+                       "total_timesteps", config_from_dict(state["env_config"]), env_config)
     return check
 
 

@@ -68,7 +68,7 @@ from .ppo_training import (
     training_env_config,
 )
 from .ppo_training import main as ppo_main
-from .runner import RunFormat, run_sb3_training, same_run_check
+from .runner import ReportingARS, RunFormat, run_sb3_training, same_run_check
 
 __all__ = ["SB3TrainConfig", "ALGORITHM_DEFAULTS", "PPO_ALGORITHMS", "algorithm_class",
            "coerce_hyperparameter", "sb3_model_payload", "make_sb3_model", "save_sb3_policy",
@@ -122,7 +122,9 @@ _POSITIVE = ("learning_rate", "clip_range", "max_grad_norm", "cg_damping", "targ
 def algorithm_class(algo: str) -> type:
     """The SB3 / sb3-contrib algorithm class of ``algo`` (any case)."""
     algo = canonical_algo(algo)
-    if algo in ("MaskablePPO", "QRDQN", "RecurrentPPO", "TRPO", "ARS"):
+    if algo == "ARS":
+        return ReportingARS  # ARS that logs the task metrics
+    if algo in ("MaskablePPO", "QRDQN", "RecurrentPPO", "TRPO"):
         import sb3_contrib
 
         return getattr(sb3_contrib, algo)

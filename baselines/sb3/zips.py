@@ -8,7 +8,9 @@ the classes it knows by name (SB3's and sb3-contrib's policies of the algorithms
 :data:`~baselines.sb3.policies.ALGORITHMS`, their default ``MlpPolicy``, and the toolkit's
 :class:`~baselines.sb3.ppo.SmallCNN`), and everything else is refused by name: a custom features
 extractor, ``MultiInputPolicy`` or ``CnnPolicy`` (they need other observations than the
-(C, G, G) planes the planner feeds), another action space, an unknown ``policy_kwargs`` key.
+(C, G, G) planes the planner feeds), another action space, an unknown ``policy_kwargs`` key,
+frame-stacked observations. A zip trained under ``VecNormalize`` flies with the statistics
+beside it (:mod:`baselines.sb3.normalization`) and is refused without them.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from stable_baselines3.dqn.policies import DQNPolicy
 from ipp_toolkit.config.limits import LimitError, check_limit
 from ipp_toolkit.io import CheckpointError, check_regular_file
 
+from .normalization import zip_normalization
 from .policies import LoadedPolicy, PolicyArchitecture, check_shapes
 from .ppo import NoOptimizer, SmallCNN
 
@@ -155,14 +158,38 @@ def _spaces(data: dict[str, Any], where: str) -> tuple[tuple[int, ...], int]:
                               "planner feeds Box (C, G, G) planes (MultiInputPolicy models "
                               "of Dict observations are not flown)")
     if not act_type.endswith(".Discrete"):
+        hint = (" (a model of the whole team, ipp_toolkit/UAVTeam-v0: the sb3 planner flies "
+                "one shared policy of one UAV's moves; train on gymnasium.make("
+                "'ipp_toolkit/UAV-v0') or make_sb3_vec_env)") if act_type.endswith(
+                    ".MultiDiscrete") else ""
         raise CheckpointError(f"{where} has a {act_type} action space; the UAVs take one of "
-                              "6 discrete moves")
+                              f"6 discrete moves{hint}")
     try:
         shape = tuple(int(d) for d in obs["_shape"])
         n_actions = int(act["n"])
     except (KeyError, TypeError, ValueError):
         raise CheckpointError(f"{where}: unreadable observation or action space") from None
+    _check_frame_stack(shape, where)
     return shape, n_actions
+
+
+def _check_frame_stack(shape: tuple[int, ...], where: str) -> None:
+    """CheckpointError naming frame stacking for the shapes it gives the (C, G, G) planes:
+    (C, G, k G) from SB3's ``VecFrameStack``, (k, C, G, G) from Gymnasium's
+    ``FrameStackObservation``."""
+    frames = None
+    if len(shape) == 3 and shape[1] != shape[2] and shape[2] % shape[1] == 0:
+        frames, one = shape[2] // shape[1], (shape[0], shape[1], shape[1])
+        how = "stacked on the last axis: SB3's VecFrameStack"
+    elif len(shape) == 4 and shape[2] == shape[3]:
+        frames, one = shape[0], shape[1:]
+        how = "on a new first axis: Gymnasium's FrameStackObservation"
+    if frames is not None and frames > 1:
+        raise CheckpointError(f"{where} was trained on frame-stacked observations {shape} "
+                              f"({frames} frames of {one} planes {how}); the sb3 planner "
+                              "feeds one step's planes and does not stack frames: train "
+                              "without frame stacking (a RecurrentPPO policy keeps a memory "
+                              "and flies)")
 
 
 def load_sb3_zip(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, LoadedPolicy]:
@@ -174,7 +201,9 @@ def load_sb3_zip(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, Loa
         observes with the mission's own and checks only the plane shape).
 
     Raises:
-        CheckpointError: an unreadable zip, or a policy the planner cannot rebuild (named).
+        CheckpointError: an unreadable zip, a policy the planner cannot rebuild (named),
+            frame-stacked observations, or a zip trained under ``VecNormalize`` without its
+            statistics beside it.
     """
     path = Path(path)
     where = f"SB3 zip {str(path)!r}"
@@ -213,6 +242,7 @@ def load_sb3_zip(path: str | Path, device: str = "cpu") -> tuple[BasePolicy, Loa
     meta = LoadedPolicy(algo=_algorithm(data, label), obs_shape=obs_shape,  # type: ignore[arg-type]
                         n_actions=n_actions, architecture=PolicyArchitecture(),
                         env_config=None, num_timesteps=int(data.get("num_timesteps", 0)),
-                        format="sb3-zip", record={"policy_class": policy_cls.__name__})
+                        format="sb3-zip", record={"policy_class": policy_cls.__name__},
+                        normalization=zip_normalization(path, data, obs_shape))
     check_shapes(path, meta)
     return policy, meta

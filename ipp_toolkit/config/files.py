@@ -23,7 +23,11 @@ from .limits import check_limit
 from .schema import _SECTIONS, EnvConfig, _build
 
 __all__ = ["read_config_file", "load_config", "save_config", "config_from_dict",
-           "config_to_dict"]
+           "config_to_dict", "as_env_config", "ConfigLike", "changed_fields",
+           "env_config_changes", "check_same_run"]
+
+ConfigLike = EnvConfig | Mapping[str, Any] | str | os.PathLike[str] | None
+"""What an env constructor takes as its config (:func:`as_env_config`)."""
 
 
 def _check_config_size(size: int, label: str) -> None:
@@ -111,6 +115,78 @@ def load_config(path: str | os.PathLike[str]) -> EnvConfig:
         return config_from_dict(values)
     except ValueError as err:
         raise ValueError(f"{err} (in config file {os.fspath(path)!r})") from None
+
+
+def as_env_config(config: ConfigLike, name: str = "config") -> EnvConfig:
+    """The :class:`EnvConfig` that ``config`` stands for, as every env constructor reads it.
+
+    Args:
+        config: an ``EnvConfig``; a plain dict of sections (``{"team": {"n_agents": 2}}``,
+            missing sections and keys take their defaults); the path of a YAML config file; or
+            None (the paper's defaults).
+        name: the argument's name in messages.
+
+    Raises:
+        ValueError: another type (named), or a dict or file with an unknown section or key
+            or a bad value (named).
+    """
+    if config is None:
+        return EnvConfig()
+    if isinstance(config, EnvConfig):
+        return config
+    if isinstance(config, Mapping):
+        return config_from_dict(config)
+    if isinstance(config, str | os.PathLike):
+        return load_config(config)
+    raise ValueError(f"{name} must be an EnvConfig, a dict of config sections or the path of a "
+                     f"YAML config file, got {type(config).__name__}")
+
+
+def changed_fields(stored: Mapping[str, Any], given: Mapping[str, Any],
+                   prefix: str = "") -> list[str]:
+    """``"NAME = STORED in the run, GIVEN now"`` for every field that differs, nested
+    mappings (config sections) as ``section.name``; what a refused resume names instead of
+    printing two whole configs."""
+    changes = []
+    for name in sorted(set(stored) | set(given), key=str):
+        old, new = stored.get(name), given.get(name)
+        if isinstance(old, Mapping) and isinstance(new, Mapping):
+            changes += changed_fields(old, new, f"{prefix}{name}.")
+        elif old != new:
+            changes.append(f"{prefix}{name} = {old!r} in the run, {new!r} now")
+    return changes
+
+
+def env_config_changes(stored: EnvConfig, given: EnvConfig) -> list[str]:
+    """:func:`changed_fields` of two mission configs (``team.n_agents = 4 in the run, ...``)."""
+    return changed_fields(config_to_dict(stored), config_to_dict(given))
+
+
+def check_same_run(where: str, what: str, stored: Any, given: Any, free: str,
+                   stored_env: EnvConfig, given_env: EnvConfig) -> None:
+    """Refuse to resume a run of other settings, naming each differing field.
+
+    Args:
+        where: the checkpoint, as the message names it.
+        what: the learner (``PPO``, ``RLlib``, ...).
+        stored, given: the run's config dataclass in the checkpoint and the one given now.
+        free: the one field that may change (``total_timesteps``, ``iterations``).
+        stored_env, given_env: the mission configs.
+
+    Raises:
+        ValueError: ``cannot resume WHERE: its WHAT config differs (n_steps = 32 in the run,
+            16 now); ...`` or ``... another env config (team.n_agents = ...)``.
+    """
+    changes = changed_fields(
+        dataclasses.asdict(dataclasses.replace(stored, **{free: getattr(given, free)})),
+        dataclasses.asdict(given))
+    if changes:
+        raise ValueError(f"cannot resume {where!r}: its {what} config differs "
+                         f"({'; '.join(changes)}); only {free} may change")
+    changes = env_config_changes(stored_env, given_env)
+    if changes:
+        raise ValueError(f"cannot resume {where!r}: it was trained on another env config "
+                         f"({'; '.join(changes)})")
 
 
 def save_config(config: EnvConfig, path: str | os.PathLike[str]) -> None:

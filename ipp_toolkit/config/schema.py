@@ -440,6 +440,7 @@ class RewardConfig:
 GAIN_INTEREST_SMOOTHED = "smoothed"
 #: ``features.gain_interest``: the packaged learned field prior.
 GAIN_INTEREST_LEARNED = "learned"
+OBSERVATION_KINDS = ("dict", "box")  # IPPEnv's observation per agent (features.observation)
 
 
 @dataclass(frozen=True)
@@ -491,6 +492,8 @@ class FeatureConfig:
             (``false_positive_steps``); 0 (default): at every step.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
+        observation: what ``IPPEnv`` observes per agent: ``dict`` (``{observation, action_mask}``)
+            or ``box`` (the planes alone; the mask in ``info["action_mask"]``). Planes unchanged.
     """
 
     budget: bool = True
@@ -513,9 +516,12 @@ class FeatureConfig:
     gain_false_positive: float = 0.0
     gain_false_positive_steps: int = 0
     agent_id_scale: int = 8
+    observation: str = "dict"
 
     def __post_init__(self) -> None:
         check_field_types(self, "features")
+        if self.observation not in OBSERVATION_KINDS:
+            _fail("features", "observation", self.observation, f"one of {OBSERVATION_KINDS}")
         for name, meaning in (("gain_smoothing", "of metres >= 0 (0: ig's objective)"),
                               ("gain_false_positive", ">= 0 (0: no false-positive term)")):
             value = getattr(self, name)
