@@ -20,6 +20,10 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .schema import EnvConfig
 
+#: The largest ``reward.alpha`` and ``|reward.beta|``: a return sums budget x (alpha + |beta|),
+#: and 1e308 overflows to inf.
+MAX_REWARD_SCALE = 1e6
+
 __all__ = ["LimitError", "Limit", "LIMITS", "limit_value", "check_limit",
            "mission_bytes", "check_mission", "check_rollout", "check_result_rows",
            "check_layer_size", "check_parameters", "check_raster_cells"]

@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 
 from .field_types import check_field_types, short_repr
+from .limits import MAX_REWARD_SCALE
+from .starts import START_POSITIONS, fixed_start_waypoints, fixed_starts_fit
 
 __all__ = ["WorldConfig", "SensorConfig", "TerrainConfig", "TeamConfig", "RewardConfig",
            "FeatureConfig", "EnvConfig", "terrain_kinds", "start_for_team_size",
@@ -27,6 +29,7 @@ REAL_SOURCES = ("mission", "train", "validation", "test", "all")
 DEFAULT_MIXTURE = (("split", 1.0), ("blobs", 1.0), ("fractal", 1.0), ("real", 1.0))
 NAN_POLICIES = ("raise", "min", "max", "mean")
 _NO_QUANTILE = ("split", "split-axis", "blobs")  # kinds that draw their own share
+OBSERVATION_KINDS = ("dict", "box")  # IPPEnv's observation per agent (features.observation)
 
 
 def check_int(name: str, value: Any, minimum: int) -> int:
@@ -271,38 +274,6 @@ def _range_of(name: str, value: Any, low: float, high: float,
     return lo, hi
 
 
-START_POSITIONS: dict[int, tuple[tuple[float, float], ...]] = {
-    2: ((10, 10), (40, 40)),
-    4: ((10, 10), (40, 10), (40, 40), (10, 40)),
-    8: ((10, 10), (40, 10), (40, 40), (10, 40), (25, 10), (40, 25), (25, 40), (10, 25)),
-}
-
-
-def fixed_start_waypoints(world: WorldConfig, n_agents: int) -> np.ndarray | None:
-    """(n_agents, 2) int waypoint indices (ix, iy) of the fixed starts in ``world``.
-
-    The starts of :data:`START_POSITIONS` are metres of the paper's 50 m field; each
-    coordinate snaps to the nearest waypoint of ``world`` (halves round up) inside its area,
-    so they are unchanged where they are waypoints (the paper's worlds), and in the paper's
-    real-world field (40 m, waypoints every 4 m) (10, 10) becomes (12, 12) and 40 stays 40.
-    None when the team size has no fixed starts or two starts snap to the same waypoint.
-    """
-    starts = START_POSITIONS.get(n_agents)
-    if starts is None:
-        return None
-    metres = np.asarray(starts, dtype=np.float64)
-    waypoints = np.clip(np.floor(metres / world.grid_spacing + 0.5), 0,
-                        world.grid_points - 1).astype(np.int64)
-    if len({tuple(w) for w in waypoints.tolist()}) < n_agents:
-        return None
-    return waypoints
-
-
-def fixed_starts_fit(world: WorldConfig, n_agents: int) -> bool:
-    """Whether ``n_agents`` has fixed starts in ``world`` (:func:`fixed_start_waypoints`)."""
-    return fixed_start_waypoints(world, n_agents) is not None
-
-
 def start_for_team_size(start: str, n_agents: int, world: WorldConfig | None = None) -> str:
     """``start`` for a team of ``n_agents``: ``fixed`` falls back to ``random`` for team sizes
     without documented fixed starts (:data:`START_POSITIONS`) or, given ``world``, whose fixed
@@ -399,9 +370,6 @@ class TeamConfig:
         return bool(self.failures) or self.random_failures > 0
 
 
-MAX_REWARD_SCALE = 1e6  # the largest reward.alpha and |reward.beta|
-
-
 @dataclass(frozen=True)
 class RewardConfig:
     """Team reward and the class weights of the weighted entropy.
@@ -421,7 +389,6 @@ class RewardConfig:
     def __post_init__(self) -> None:
         check_field_types(self, "reward")
         _positive("reward", "alpha", self.alpha)
-        # Bounded: a return sums budget x (alpha + |beta|), and 1e308 overflows to inf.
         if self.alpha > MAX_REWARD_SCALE:
             _fail("reward", "alpha", self.alpha, f"must be at most {MAX_REWARD_SCALE:g}")
         if not math.isfinite(self.beta) or abs(self.beta) > MAX_REWARD_SCALE:
@@ -440,7 +407,6 @@ class RewardConfig:
 GAIN_INTEREST_SMOOTHED = "smoothed"
 #: ``features.gain_interest``: the packaged learned field prior.
 GAIN_INTEREST_LEARNED = "learned"
-OBSERVATION_KINDS = ("dict", "box")  # IPPEnv's observation per agent (features.observation)
 
 
 @dataclass(frozen=True)
@@ -492,8 +458,8 @@ class FeatureConfig:
             (``false_positive_steps``); 0 (default): at every step.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
-        observation: what ``IPPEnv`` observes per agent: ``dict`` (``{observation, action_mask}``)
-            or ``box`` (the planes alone; the mask in ``info["action_mask"]``). Planes unchanged.
+        observation: ``IPPEnv``'s per-agent observation: ``dict`` (planes and mask) or ``box``
+            (the planes alone; the mask in ``info["action_mask"]``).
     """
 
     budget: bool = True
