@@ -4,9 +4,10 @@ COMA update counter on resume, terrain lattices too fine or too coarse, thin ras
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
-from reports.cli import study_main
+from reports.cli import compare_main, study_main
 
 
 @pytest.mark.parametrize("flag", ["--families", "--team-families"])
@@ -21,3 +22,22 @@ def test_an_unknown_study_family_is_refused_before_anything_flies(tmp_path, caps
     assert "Traceback" not in err
     assert f"{flag}: unknown terrain kind 'nope'" in err and "blobs" in err
     assert not out.exists()
+
+
+def test_a_raster_file_replaced_between_two_runs_into_one_folder_is_refused(tmp_path,
+                                                                            capsys):
+    raster, out = tmp_path / "field.npy", tmp_path / "out"
+    argv = ["--terrain", str(raster), "--threshold", "0.5", "--planners", "random",
+            "--trials", "1", "--agents", "2", "--budget", "2", "--resolution", "2",
+            "--out", str(out), "--no-progress"]
+    field = np.zeros((8, 8))
+    field[:, 4:] = 1.0
+    np.save(raster, field)
+    assert compare_main(argv) == 0
+    assert compare_main(argv) == 0  # the same content: its missions are reused
+    np.save(raster, field[::-1].T)  # another content under the same name
+    capsys.readouterr()
+    assert compare_main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and str(raster) in err and "another content" in err
+
