@@ -4,9 +4,13 @@ COMA update counter on resume, terrain lattices too fine or too coarse, thin ras
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.runs.evaluation import evaluate
 from reports.cli import compare_main, study_main
 
 
@@ -41,3 +45,17 @@ def test_a_raster_file_replaced_between_two_runs_into_one_folder_is_refused(tmp_
     err = capsys.readouterr().err
     assert "Traceback" not in err and str(raster) in err and "another content" in err
 
+
+def test_a_hand_edited_shard_is_warned_about_and_flown_again(tmp_path):
+    config = EnvConfig().replace(world={"resolution": 1.0}, team={"n_agents": 2, "budget": 2})
+    out = tmp_path / "out"
+    first = evaluate(config, ["random"], missions=2, seed=3, progress=False, out_dir=out)
+    shard = out / "shards" / "random" / "mission_00001.json"
+    data = json.loads(shard.read_text())
+    flown = data["rows"][2]["entropy"]
+    data["rows"][2]["entropy"] = flown / 2  # finite, plausible, and not what was flown
+    shard.write_text(json.dumps(data))
+    with pytest.warns(UserWarning, match="checksum does not match its content"):
+        result = evaluate(config, ["random"], missions=2, seed=3, progress=False, out_dir=out)
+    assert [r["entropy"] for r in result.rows] == [r["entropy"] for r in first.rows]
+    assert json.loads(shard.read_text())["rows"][2]["entropy"] == flown

@@ -40,8 +40,8 @@ if TYPE_CHECKING:
     from ..planning.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity", "check_folder",
-           "check_label", "check_finite_row", "raster_digest", "run_key", "shard_path",
-           "trajectory_path", "stored_planners", "read_shard", "read_stored_missions",
+           "check_label", "check_finite_row", "raster_digest", "run_key", "shard_checksum",
+           "shard_path", "trajectory_path", "stored_planners", "read_shard", "read_stored_missions",
            "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
            "read_results_csv"]
 
@@ -284,7 +284,12 @@ def read_shard(path: Path, label: str, mission: int, budget: int,
     if "run" in shard and shard["run"] != run_key(identity):
         raise ValueError("the shard belongs to another run (config, seed or namespace) than "
                          "the folder's config.json")
-    return _check_rows(shard.get("rows"), label, mission, budget, identity["seed"])
+    rows = _check_rows(shard.get("rows"), label, mission, budget, identity["seed"])
+    # Shards written before the checksum existed carry none.
+    if "checksum" in shard and shard["checksum"] != shard_checksum(shard):
+        raise ValueError("its checksum does not match its content (edited since it was "
+                         "written)")
+    return rows
 
 
 def read_stored_missions(folder: Path, labels: Sequence[str], missions: int,
@@ -325,6 +330,13 @@ def read_stored_missions(folder: Path, labels: Sequence[str], missions: int,
     return done, trajectories
 
 
+def shard_checksum(shard: Mapping[str, Any]) -> str:
+    """The sha256 of a shard's content (its run key included, its checksum left out), stored
+    in it so that a shard edited by hand is recognised when it is read."""
+    content = {key: value for key, value in shard.items() if key != "checksum"}
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode("utf-8")).hexdigest()
+
+
 def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any],
                 identity: Mapping[str, Any]) -> None:
     """Store the rows (and the path) of one flown mission of the run ``identity`` (the
@@ -343,6 +355,7 @@ def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str,
             "footprints": np.asarray(trajectory["footprints"]).tolist(),
         },
     }
+    shard["checksum"] = shard_checksum(shard)
     write_json(shard_path(folder, spec.effective_label, mission), shard)
 
 
