@@ -5,6 +5,7 @@ COMA update counter on resume, terrain lattices too fine or too coarse, thin ras
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -59,3 +60,27 @@ def test_a_hand_edited_shard_is_warned_about_and_flown_again(tmp_path):
         result = evaluate(config, ["random"], missions=2, seed=3, progress=False, out_dir=out)
     assert [r["entropy"] for r in result.rows] == [r["entropy"] for r in first.rows]
     assert json.loads(shard.read_text())["rows"][2]["entropy"] == flown
+
+
+@pytest.mark.parametrize("counters, shown", [
+    ({"update": 10**9, "missions": 2 * 10**9}, "update = 1000000000"),
+    ({"update": -1, "missions": -2}, "update = -1"),
+    ({"update": 1.5, "missions": 3}, "update = 1.5"),
+    ({"update": 1, "missions": 3}, "missions = 3"),
+    ({"update": 3, "missions": 6}, "update = 3 and missions = 6"),
+])
+def test_a_resumed_coma_checkpoint_with_inconsistent_counters_is_refused(tmp_path, counters,
+                                                                        shown):
+    import torch
+    from helpers import tiny_coma, tiny_env
+
+    from coma.learner import train
+    from ipp_toolkit.io import CheckpointError
+
+    out = tmp_path / "run"
+    train(tiny_coma(), tiny_env(), out, progress=False, tensorboard=False, max_updates=1)
+    data = torch.load(out / "last.pt", weights_only=True)
+    data["progress"].update(counters)
+    torch.save(data, out / "last.pt")
+    with pytest.raises(CheckpointError, match=re.escape(shown)):
+        train(tiny_coma(), tiny_env(), out, resume=True, progress=False, tensorboard=False)
