@@ -84,3 +84,29 @@ def test_a_resumed_coma_checkpoint_with_inconsistent_counters_is_refused(tmp_pat
     torch.save(data, out / "last.pt")
     with pytest.raises(CheckpointError, match=re.escape(shown)):
         train(tiny_coma(), tiny_env(), out, resume=True, progress=False, tensorboard=False)
+
+
+@pytest.mark.parametrize("kind", ["blobs", "mixture"])
+@pytest.mark.parametrize("scale", [1e-6, 0.002, 1e6, 1e300])
+def test_a_blob_scale_whose_lattice_is_too_fine_or_too_coarse_is_refused(kind, scale):
+    with pytest.raises(ValueError, match=re.escape(f"terrain.blob_scale = {scale!r}")) as err:
+        EnvConfig().replace(terrain={"kind": kind, "blob_scale": scale})
+    assert "choose one in [0.0124, 806] m for this 50 m area" in str(err.value)
+
+
+def test_the_allowed_blob_scales_are_accepted_and_named_by_the_cli(tmp_path, capsys):
+    from ipp_toolkit.config.terrain_checks import blob_scale_range
+
+    for area in (10.0, 50.0, 1000.0):
+        low, high = blob_scale_range(area)
+        for scale in (low, high):
+            EnvConfig().replace(world={"area_size": area}, team={"start": "random"},
+                                terrain={"kind": "blobs", "blob_scale": scale})
+    EnvConfig().replace(terrain={"kind": "split", "blob_scale": 1e-6})  # blobs not drawn
+    config = tmp_path / "config.yaml"
+    config.write_text("terrain: {kind: blobs, blob_scale: 1.0e-6}\n")
+    out = tmp_path / "out"
+    assert compare_main(["--config", str(config), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "terrain.blob_scale = 1e-06" in err
+    assert not out.exists()

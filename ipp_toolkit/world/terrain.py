@@ -27,6 +27,7 @@ import numpy as np
 
 from ..config.limits import LimitError, check_raster_cells
 from ..config.schema import NAN_POLICIES, TerrainConfig, WorldConfig
+from ..config.terrain_checks import blob_lattice
 from . import registry
 from .registry import (
     ENTRY_POINT_GROUP,
@@ -62,11 +63,6 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 TIFF_SUFFIXES = (".tif", ".tiff")
 RASTER_SUFFIXES = (".npy", *IMAGE_SUFFIXES, *TIFF_SUFFIXES)
 
-_BLOB_LATTICE_SPACING = 1.0
-"""Spacing (m) of the white-noise lattice of ``blobs``: fixed so the field ignores r_M."""
-
-_BLOB_PADDING_SIGMAS = 5.0
-"""Lattice margin around the area, in kernel stds: keeps the FFT's wrap-around below 1e-5."""
 
 
 def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Generator,
@@ -203,11 +199,9 @@ def blob_field(config: TerrainConfig, world: WorldConfig,
     interpolated bilinearly at the cell centres. The lattice ignores r_M, so one stream gives
     the same field at every resolution.
     """
-    spacing = min(_BLOB_LATTICE_SPACING, config.blob_scale / 2)
-    sigma = config.blob_scale / spacing  # kernel std in lattice steps
-    inside = math.ceil(world.area_size / spacing - 1e-9) + 1  # nodes covering [0, area]
-    pad = math.ceil(_BLOB_PADDING_SIGMAS * sigma)
-    nodes = inside + 2 * pad
+    # The 5-std padding keeps the FFT's wrap-around below 1e-5; the lattice spacing is fixed
+    # so the field ignores r_M (bounded by the config: ipp_toolkit.config.terrain_checks).
+    spacing, sigma, pad, nodes = blob_lattice(config.blob_scale, world.area_size)
     noise = rng.standard_normal((nodes, nodes))
     fy = np.fft.fftfreq(nodes)[:, np.newaxis]
     fx = np.fft.rfftfreq(nodes)[np.newaxis, :]
