@@ -110,3 +110,28 @@ def test_the_allowed_blob_scales_are_accepted_and_named_by_the_cli(tmp_path, cap
     err = capsys.readouterr().err
     assert "Traceback" not in err and "terrain.blob_scale = 1e-06" in err
     assert not out.exists()
+
+
+def _refused_thin_raster(tmp_path, capsys, shape, extra=()):
+    raster, out = tmp_path / "thin.npy", tmp_path / "out"
+    thin = np.zeros(shape, dtype=bool)
+    thin.flat[: thin.size // 2] = True
+    np.save(raster, thin)
+    argv = ["--terrain", str(raster), "--threshold", "0.5", "--planners", "random",
+            "--trials", "1", "--out", str(out), "--no-progress", *extra]
+    assert compare_main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and str(raster) in err
+    assert "IPP_MAX_RESAMPLE_WEIGHTS" in err and " x ".join(map(str, shape)) in err
+    assert not out.exists()
+
+
+def test_a_thin_raster_is_bounded_by_its_resampling(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("IPP_MAX_RESAMPLE_WEIGHTS", "10000")
+    _refused_thin_raster(tmp_path, capsys, (1, 5000), ["--resolution", "2"])
+
+
+@pytest.mark.parametrize("shape", [(1, 10_000_000), (3_000_000, 1)])
+def test_a_raster_of_one_row_or_column_is_refused_before_its_resampling(tmp_path, capsys,
+                                                                        shape):
+    _refused_thin_raster(tmp_path, capsys, shape)
