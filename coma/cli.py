@@ -103,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter)
     add_version(parser)
     parser.add_argument("--preset", type=_preset_name,
-                        choices=sorted(PRESETS) + sorted(RECIPES), default="cpu",
+                        choices=sorted(set(PRESETS) | set(RECIPES)), default="cpu",
                         help="hyper-parameter preset (default: cpu), or the recipe of a "
                              "shipped policy (its name in coma=shipped:NAME; every stage, "
                              "see coma/recipes.py)")

@@ -64,6 +64,7 @@ from .persistence import (
 )
 from .run_files import (
     TrainResult,
+    check_counters,
     read_progress,
     resume_fields,
     saved_update,
@@ -166,6 +167,8 @@ def _resumable(last_path: Path, coma_config: COMAConfig, env_config: EnvConfig
         raise CheckpointError(f"checkpoint {str(last_path)!r} was trained on another "
                               f"mission config ({', '.join(changes)}); start a new folder "
                               "instead")
+    check_counters(last_path, progress, max(coma_config.missions, networks.coma_config.missions),
+                   coma_config.missions_per_update)
     # A damaged or missing history is refused now, before any worker starts.
     read_progress(last_path.parent / "progress.csv", int(progress["update"]))
     return networks, data

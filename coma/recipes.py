@@ -19,6 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from .config import PRESETS
+
 __all__ = ["Stage", "RECIPES", "recipe"]
 
 
@@ -78,6 +80,12 @@ RECIPES: dict[str, tuple[Stage, ...]] = {
                           "lr_actor": 1e-4, "seed": 0},
               {"features": {"gain": True, "gain_interest": "learned"},
                "terrain": {"kind": "mixture"}}),
+    ),
+    # The paper's learner from random networks (the scratch preset, the paper's inputs): the
+    # best of three training seeds on validation missions.
+    "scratch": (
+        Stage("scratch", {**PRESETS["scratch"], "seed": 0},
+              {"features": {"own_position": False}}),
     ),
 }
 

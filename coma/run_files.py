@@ -23,7 +23,7 @@ from .config import COMAConfig
 from .persistence import load_policy
 
 __all__ = ["CSV_COLUMNS", "TrainResult", "write_progress", "read_progress", "resume_fields",
-           "saved_update"]
+           "saved_update", "check_counters"]
 
 
 CSV_COLUMNS = ["update", "missions", "transitions", "eps", "return_mean", "final_entropy_mean",
@@ -72,6 +72,24 @@ def resume_fields(config: COMAConfig) -> dict[str, Any]:
     values = config.to_dict()
     values.pop("missions")
     return values
+
+
+def check_counters(path: Path, progress: dict[str, Any], total_missions: int,
+                   missions_per_update: int) -> None:
+    """Refuse (CheckpointError naming the value) a checkpoint's update and mission counters
+    that no run of this config reaches: not an integer, negative, more missions than
+    ``total_missions``, or missions that are not ``update`` x ``missions_per_update``. Read
+    as they are, 10^9 updates would build a history of 10^9 rows."""
+    update, missions = progress["update"], progress["missions"]
+    for name, value in (("update", update), ("missions", missions)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise CheckpointError(f"checkpoint {str(path)!r} has {name} = {value!r}, not an "
+                                  "integer >= 0: it is damaged; start a new folder")
+    if missions > total_missions or missions != update * missions_per_update:
+        raise CheckpointError(
+            f"checkpoint {str(path)!r} has update = {update!r} and missions = {missions!r}, "
+            f"which no run of {total_missions} missions ({missions_per_update} per update) "
+            "reaches: it is damaged; start a new folder")
 
 
 def read_progress(path: Path, up_to_update: int) -> list[dict[str, Any]]:

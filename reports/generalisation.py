@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ipp_toolkit.config.schema import EnvConfig
+from ipp_toolkit.config.schema import EnvConfig, terrain_kinds
 from ipp_toolkit.config.settings import comm_label, format_comm
 from ipp_toolkit.planning.specs import PlannerSpec, as_specs
 from ipp_toolkit.runs.ray_backend import check_backend
@@ -41,7 +41,8 @@ from .plots import _colour, _new_figure, save_figure
 from .studies import backend_session
 from .tables import DEFAULT_REFERENCES, Paired, Summary, atomic_write_text, flown_references
 
-__all__ = ["Cell", "GeneralisationStudy", "generalisation_study", "study_cells"]
+__all__ = ["Cell", "GeneralisationStudy", "check_families", "generalisation_study",
+           "study_cells"]
 
 NINE_SETTINGS = tuple((a, c) for a in (2, 4, 8) for c in (0.0, 25.0, math.inf))
 
@@ -85,12 +86,31 @@ class GeneralisationStudy:
     references: tuple[str, ...] = ()
 
 
+def study_families() -> tuple[str, ...]:
+    """The terrain families a cell can fly: every terrain kind but ``raster`` (which needs a
+    file)."""
+    return tuple(kind for kind in terrain_kinds() if kind != "raster")
+
+
+def check_families(families: Sequence[str], what: str = "families") -> None:
+    """Refuse (ValueError, naming ``what`` and the value) a family that is no terrain kind a
+    cell can fly, before anything flies or is written."""
+    known = study_families()
+    for family in families:
+        if family not in known:
+            raise ValueError(f"{what}: unknown terrain kind {family!r}; known families: "
+                             f"{', '.join(known)}")
+
+
 def study_cells(families: Sequence[str] = ("split", "blobs", "fractal", "real"),
                 team_families: Sequence[str] = ("split", "blobs"),
                 settings: Sequence[tuple[int, float]] = NINE_SETTINGS,
                 family_setting: tuple[int, float] = (4, 25.0)) -> list[Cell]:
     """The cells: every family at ``family_setting`` (``real``: one cell per test raster),
-    then every team setting on each of ``team_families`` (the family cell not repeated)."""
+    then every team setting on each of ``team_families`` (the family cell not repeated).
+    ValueError on an unknown family (:func:`check_families`)."""
+    check_families(families, "families")
+    check_families(team_families, "team_families")
     cells: list[Cell] = []
     agents, comm = family_setting
     for family in families:
@@ -226,6 +246,7 @@ def generalisation_study(planners: str | Sequence[str | PlannerSpec]
         reference, planners, [spec.effective_label for spec in as_specs(planners)])
     out = Path(out)
     cells = list(study_cells() if cells is None else cells)
+    check_families([cell.terrain for cell in cells], "cells")
     if backend == "ray":
         from .compare import resolve_planners
 

@@ -66,6 +66,12 @@ def _check_flags(args: argparse.Namespace) -> None:
     check_backend_flags(args.backend, args.address)
     if args.sweep and args.study != "sweep":
         raise ValueError(f"--sweep is for ipp-study sweep, not {args.study}")
+    if args.study == "generalisation":
+        from .generalisation import check_families
+
+        for flag, value in (("--families", args.families),
+                            ("--team-families", args.team_families)):
+            check_families([f for f in value.split(",") if f], flag)
     if args.seeds is not None and len(args.seeds) > 1:
         given = " and ".join(",".join(map(str, seeds)) for seeds in args.seeds)
         raise ValueError(f"--seeds is given {len(args.seeds)} times ({given}); give all seeds "

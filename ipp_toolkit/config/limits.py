@@ -26,7 +26,7 @@ MAX_REWARD_SCALE = 1e6
 
 __all__ = ["LimitError", "Limit", "LIMITS", "limit_value", "check_limit",
            "mission_bytes", "check_mission", "check_rollout", "check_result_rows",
-           "check_layer_size", "check_parameters", "check_raster_cells"]
+           "check_layer_size", "check_parameters", "check_raster_cells", "check_resampling"]
 
 GIB = 1024 ** 3
 
@@ -56,6 +56,9 @@ LIMITS = {
                         "parameters of the networks of one policy or run"),
     "raster_cells": Limit("IPP_MAX_RASTER_CELLS", 100_000_000, "cells",
                           "cells of a raster file read as terrain"),
+    "resample_weights": Limit("IPP_MAX_RESAMPLE_WEIGHTS", 100_000_000, "weights",
+                              "overlap weights of resampling a raster of h x w pixels onto "
+                              "the H x W map: H x h + W x w"),
     "rollout_memory": Limit("IPP_MAX_ROLLOUT_GB", 8.0, "GiB",
                             "estimated memory of a trainer's rollout of observations"),
     "mission_steps": Limit("IPP_MAX_MISSION_STEPS", 100_000, "UAV-steps",
@@ -191,3 +194,13 @@ def check_raster_cells(shape: tuple[int, ...], where: str) -> None:
     """LimitError when a raster of ``shape`` exceeds the limit (checked before reading it)."""
     cells = float(math.prod(int(s) for s in shape))
     check_limit("raster_cells", cells, f"raster {where} ({' x '.join(map(str, shape))})")
+
+
+def check_resampling(source: tuple[int, int], target: tuple[int, int], where: str) -> None:
+    """LimitError when resampling a raster of ``source`` (h, w) pixels onto a map of ``target``
+    (H, W) cells needs more overlap weights (H x h + W x w, 8 B each and their temporaries)
+    than the limit: a thin raster (1 x 10,000,000) passes the cell limit but not this one."""
+    (h, w), (height, width) = source, target
+    weights = float(height) * float(h) + float(width) * float(w)
+    check_limit("resample_weights", weights,
+                f"resampling raster {where} ({h} x {w}) onto the {height} x {width} map")

@@ -20,6 +20,7 @@ import numpy as np
 from .field_types import check_field_types, short_repr
 from .limits import MAX_REWARD_SCALE
 from .starts import START_POSITIONS, fixed_start_waypoints, fixed_starts_fit
+from .terrain_checks import check_blob_lattice, terrain_range
 
 __all__ = ["WorldConfig", "SensorConfig", "TerrainConfig", "TeamConfig", "RewardConfig",
            "FeatureConfig", "EnvConfig", "terrain_kinds", "start_for_team_size",
@@ -204,14 +205,14 @@ class TerrainConfig:
                   f"terrain kind {self.kind!r} does not use it (fractal, real, raster and "
                   "mixture do)")
         if self.threshold_quantile is not None:
-            object.__setattr__(self, "threshold_quantile", _range_of(
+            object.__setattr__(self, "threshold_quantile", terrain_range(
                 "threshold_quantile", self.threshold_quantile, 0.0, 1.0, open_ends=True))
             if self.threshold is not None:
                 _fail("terrain", "threshold_quantile", self.threshold_quantile,
                       "give either threshold (raster units) or threshold_quantile, not both")
-        object.__setattr__(self, "spectral_exponent", _range_of(
+        object.__setattr__(self, "spectral_exponent", terrain_range(
             "spectral_exponent", self.spectral_exponent, 0.0, 8.0, open_ends=False))
-        object.__setattr__(self, "crop_fraction", _range_of(
+        object.__setattr__(self, "crop_fraction", terrain_range(
             "crop_fraction", self.crop_fraction, 0.0, 1.0, open_ends=False))
         if self.crop_fraction[0] <= 0.0:
             _fail("terrain", "crop_fraction", self.crop_fraction, "must lie in (0, 1]")
@@ -256,22 +257,6 @@ class TerrainConfig:
     def mixture_weights(self) -> tuple[tuple[str, float], ...]:
         """The ``mixture`` pairs in force (the default four kinds when it is empty)."""
         return self.mixture or DEFAULT_MIXTURE
-
-
-def _range_of(name: str, value: Any, low: float, high: float,
-              open_ends: bool) -> tuple[float, float]:
-    """``value`` (a number or a pair) as an ordered (lo, hi) pair inside [low, high]."""
-    pair = (value, value) if isinstance(value, int | float) and not isinstance(value, bool) \
-        else value
-    try:
-        lo, hi = (float(v) for v in pair)
-    except (TypeError, ValueError):
-        _fail("terrain", name, value, "must be a number or a pair [min, max]")
-    inside = (low < lo <= hi < high) if open_ends else (low <= lo <= hi <= high)
-    if not inside:
-        bounds = f"({low:g}, {high:g})" if open_ends else f"[{low:g}, {high:g}]"
-        _fail("terrain", name, value, f"needs min <= max inside {bounds}")
-    return lo, hi
 
 
 def start_for_team_size(start: str, n_agents: int, world: WorldConfig | None = None) -> str:
@@ -548,6 +533,7 @@ class EnvConfig:
         if self.features.agent_id and self.team.n_agents > self.features.agent_id_scale:
             _fail("features", "agent_id_scale", self.features.agent_id_scale,
                   f"smaller than the team ({self.team.n_agents} agents)")
+        check_blob_lattice(self.terrain, self.world)
 
     def replace(self, **sections: Any) -> EnvConfig:
         """Copy with some fields replaced, e.g. ``cfg.replace(team={"n_agents": 8})``.

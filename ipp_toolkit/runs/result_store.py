@@ -39,9 +39,9 @@ from ..io import atomic_write, check_regular_file, write_json
 if TYPE_CHECKING:
     from ..planning.specs import PlannerSpec
 
-__all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity",
-           "check_folder", "check_label", "check_finite_row", "run_key", "shard_path",
-           "trajectory_path", "stored_planners", "read_shard", "read_stored_missions",
+__all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity", "check_folder",
+           "check_label", "check_finite_row", "raster_digest", "run_key", "shard_checksum",
+           "shard_path", "trajectory_path", "stored_planners", "read_shard", "read_stored_missions",
            "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
            "read_results_csv"]
 
@@ -68,9 +68,30 @@ def folder_identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, A
     from .. import __version__
 
     # Through JSON so that it compares equal to what is read back from config.json.
-    return json.loads(json.dumps({"format": _FORMAT, "config": config_to_dict(config),
-                                  "seed": int(seed), "namespace": namespace,
-                                  "version": __version__}))
+    identity = json.loads(json.dumps({"format": _FORMAT, "config": config_to_dict(config),
+                                      "seed": int(seed), "namespace": namespace,
+                                      "version": __version__}))
+    digest = raster_digest(config)
+    if digest is not None:
+        identity["raster_sha256"] = digest
+    return identity
+
+
+def raster_digest(config: EnvConfig) -> str | None:
+    """The sha256 of the raster file the terrain reads (``raster``, or a ``mixture`` with
+    it), so that a folder refuses missions of another content under the same file name;
+    None when no raster file is read. ValueError/OSError naming an unreadable file."""
+    terrain = config.terrain
+    kinds = [kind for kind, _ in terrain.mixture_weights()] if terrain.kind == "mixture" \
+        else [terrain.kind]
+    if "raster" not in kinds or not isinstance(terrain.raster, str):
+        return None
+    check_regular_file(terrain.raster, "terrain.raster")
+    digest = hashlib.sha256()
+    with open(terrain.raster, "rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def _flat_differences(old: Any, new: Any, prefix: str) -> list[str]:
@@ -142,6 +163,7 @@ def check_folder(folder: Path, identity: dict[str, Any],
         raise EvaluationError(
             f"out_dir {str(folder)!r} holds results of another configuration (differing: "
             f"{', '.join(differing)}); use another folder or the same configuration")
+    _check_raster(folder, stored, identity)
     if stored.get("version") != identity["version"]:
         warnings.warn(f"{str(folder)!r} was written by ipp-toolkit {stored.get('version')}, "
                       f"this is {identity['version']}: stored missions are reused",
@@ -160,6 +182,18 @@ def check_folder(folder: Path, identity: dict[str, Any],
                 f"{spec.effective_label!r} made with {stored_spec!r}, not {spec.to_dict()!r}; "
                 "give this planner another label or use another folder")
     return True
+
+
+def _check_raster(folder: Path, stored: Mapping[str, Any], identity: Mapping[str, Any]) -> None:
+    """Refuse a folder made with another content of the same raster file (a folder written
+    before the digest was recorded is not checked)."""
+    old, new = stored.get("raster_sha256"), identity.get("raster_sha256")
+    if old is not None and new is not None and old != new:
+        raster = identity["config"]["terrain"]["raster"]
+        raise EvaluationError(
+            f"out_dir {str(folder)!r} holds results of another content of the raster file "
+            f"{raster!r} (sha256 {str(old)[:12]}..., the file's now {new[:12]}...): the file "
+            "was replaced since; use another folder or the file it was made with")
 
 
 _MAX_LABEL_BYTES = 120  # of the file-name stem; trajectories add "_mission<k>.png"
@@ -250,7 +284,12 @@ def read_shard(path: Path, label: str, mission: int, budget: int,
     if "run" in shard and shard["run"] != run_key(identity):
         raise ValueError("the shard belongs to another run (config, seed or namespace) than "
                          "the folder's config.json")
-    return _check_rows(shard.get("rows"), label, mission, budget, identity["seed"])
+    rows = _check_rows(shard.get("rows"), label, mission, budget, identity["seed"])
+    # Shards written before the checksum existed carry none.
+    if "checksum" in shard and shard["checksum"] != shard_checksum(shard):
+        raise ValueError("its checksum does not match its content (edited since it was "
+                         "written)")
+    return rows
 
 
 def read_stored_missions(folder: Path, labels: Sequence[str], missions: int,
@@ -291,6 +330,13 @@ def read_stored_missions(folder: Path, labels: Sequence[str], missions: int,
     return done, trajectories
 
 
+def shard_checksum(shard: Mapping[str, Any]) -> str:
+    """The sha256 of a shard's content (its run key included, its checksum left out), stored
+    in it so that a shard edited by hand is recognised when it is read."""
+    content = {key: value for key, value in shard.items() if key != "checksum"}
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode("utf-8")).hexdigest()
+
+
 def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str, Any],
                 identity: Mapping[str, Any]) -> None:
     """Store the rows (and the path) of one flown mission of the run ``identity`` (the
@@ -309,6 +355,7 @@ def write_shard(folder: Path, spec: PlannerSpec, mission: int, result: dict[str,
             "footprints": np.asarray(trajectory["footprints"]).tolist(),
         },
     }
+    shard["checksum"] = shard_checksum(shard)
     write_json(shard_path(folder, spec.effective_label, mission), shard)
 
 

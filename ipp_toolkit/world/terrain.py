@@ -25,8 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from ..config.limits import LimitError, check_raster_cells
+from ..config.limits import LimitError, check_raster_cells, check_resampling
 from ..config.schema import NAN_POLICIES, TerrainConfig, WorldConfig
+from ..config.terrain_checks import blob_lattice
 from . import registry
 from .registry import (
     ENTRY_POINT_GROUP,
@@ -62,11 +63,6 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 TIFF_SUFFIXES = (".tif", ".tiff")
 RASTER_SUFFIXES = (".npy", *IMAGE_SUFFIXES, *TIFF_SUFFIXES)
 
-_BLOB_LATTICE_SPACING = 1.0
-"""Spacing (m) of the white-noise lattice of ``blobs``: fixed so the field ignores r_M."""
-
-_BLOB_PADDING_SIGMAS = 5.0
-"""Lattice margin around the area, in kernel stds: keeps the FFT's wrap-around below 1e-5."""
 
 
 def generate_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Generator,
@@ -203,11 +199,9 @@ def blob_field(config: TerrainConfig, world: WorldConfig,
     interpolated bilinearly at the cell centres. The lattice ignores r_M, so one stream gives
     the same field at every resolution.
     """
-    spacing = min(_BLOB_LATTICE_SPACING, config.blob_scale / 2)
-    sigma = config.blob_scale / spacing  # kernel std in lattice steps
-    inside = math.ceil(world.area_size / spacing - 1e-9) + 1  # nodes covering [0, area]
-    pad = math.ceil(_BLOB_PADDING_SIGMAS * sigma)
-    nodes = inside + 2 * pad
+    # The 5-std padding keeps the FFT's wrap-around below 1e-5; the lattice spacing is fixed
+    # so the field ignores r_M (bounded by the config: ipp_toolkit.config.terrain_checks).
+    spacing, sigma, pad, nodes = blob_lattice(config.blob_scale, world.area_size)
     noise = rng.standard_normal((nodes, nodes))
     fy = np.fft.fftfreq(nodes)[:, np.newaxis]
     fx = np.fft.rfftfreq(nodes)[np.newaxis, :]
@@ -394,7 +388,8 @@ def _range_reduce(values: np.ndarray, first: np.ndarray, stop: np.ndarray,
     return out
 
 
-def resample_area_average(values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+def resample_area_average(values: np.ndarray, shape: tuple[int, int],
+                          name: str = "array") -> np.ndarray:
     """Exact area-weighted average of a raster stretched over a grid of ``shape``.
 
     Each target cell gets the mean of the source over its footprint, source pixels weighted
@@ -403,10 +398,14 @@ def resample_area_average(values: np.ndarray, shape: tuple[int, int]) -> np.ndar
     Args:
         values: (h, w) finite source raster.
         shape: (H, W) target grid.
+        name: how a refusal names the raster.
 
     Returns:
         (H, W) float64 array, ``R @ values @ C.T`` with overlap matrices R (H, h), C (W, w),
         clipped to the range of the pixels under each cell.
+
+    Raises:
+        LimitError: the overlap matrices exceed ``IPP_MAX_RESAMPLE_WEIGHTS`` (a thin raster).
     """
     values = np.asarray(values, dtype=np.float64)
     if values.ndim != 2 or values.size == 0:
@@ -414,6 +413,7 @@ def resample_area_average(values: np.ndarray, shape: tuple[int, int]) -> np.ndar
     if len(shape) != 2 or any(int(n) != n or n < 1 for n in shape):
         raise ValueError(f"shape must be two positive integers, got {shape!r}")
     (height, width), (h, w) = (int(shape[0]), int(shape[1])), values.shape
+    check_resampling((h, w), (height, width), name)
     rows = _overlap_weights(height, h)
     cols = _overlap_weights(width, w)
     # Multiply in the order with fewer operations (a large source shrinks first).
@@ -441,8 +441,8 @@ class _Resampled:
     source_max: float
 
 
-def _resample(source: np.ndarray, shape: tuple[int, int]) -> _Resampled:
-    averaged = resample_area_average(source, shape)
+def _resample(source: np.ndarray, shape: tuple[int, int], name: str) -> _Resampled:
+    averaged = resample_area_average(source, shape, name)
     averaged.setflags(write=False)
     return _Resampled(averaged, source.shape, float(source.min()), float(source.max()))
 
@@ -452,7 +452,7 @@ def _cached_file(path: str, mtime_ns: int, size: int, shape: tuple[int, int],
                  nan_policy: str) -> _Resampled:
     # mtime and size are part of the key only so that a rewritten file misses the cache.
     source = prepare_raster(load_raster(path), nan_policy, repr(path))
-    return _resample(source, shape)
+    return _resample(source, shape, repr(path))
 
 
 def _file_entry(path: str | os.PathLike[str], shape: tuple[int, int],
@@ -495,7 +495,7 @@ def _raster_terrain(config: TerrainConfig, world: WorldConfig, rng: np.random.Ge
     shape = (world.map_cells, world.map_cells)
     if raster is not None:
         name = "array"
-        entry = _resample(prepare_raster(raster, config.nan_policy, name), shape)
+        entry = _resample(prepare_raster(raster, config.nan_policy, name), shape, name)
     elif config.raster is not None:
         name = repr(config.raster)
         entry = _file_entry(config.raster, shape, config.nan_policy)
