@@ -59,14 +59,17 @@ SHIPPED_PRIOR_POLICY = "coma_prior_4agents_d25.pt"
 #: (``features.gain_smoothing`` = 5 m), its residual trained by COMA on the terrain mixture.
 #: ``learned-mixture``: the same recipe over ``ig_learned``'s objective
 #: (``features.gain_interest = learned``: the learned field prior in the gain planes).
+#: ``scratch``: the paper's learner from random networks on the paper's inputs (the
+#: ``scratch`` preset: no imitation, no IG-derived planes or logits).
 #: Removed names (``mixed``) are refused with a hint: ``ipp_toolkit.planning.REMOVED_NAMES``.
 SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "prior": SHIPPED_PRIOR_POLICY,
                     "prior-mixture": "coma_prior_mixture_4agents_d25.pt",
                     "spatial-mixture": "coma_spatial_mixture_4agents_d25.pt",
-                    "learned-mixture": "coma_learned_mixture_4agents_d25.pt"}
+                    "learned-mixture": "coma_learned_mixture_4agents_d25.pt",
+                    "scratch": "coma_scratch_4agents_d25.pt"}
 #: The shipped policy the ``coma`` planner flies by default: a policy COMA's training moved
 #: (:func:`untrained_reason`), chosen on validation missions (docs/training.md).
-DEFAULT_SHIPPED = "paper-actor"
+DEFAULT_SHIPPED = "scratch"
 
 
 @dataclass

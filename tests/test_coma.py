@@ -458,7 +458,7 @@ def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
     with pytest.raises(ValueError, match="unknown shipped policy 'nope'; shipped policies: "
                                          "shipped:paper-actor, shipped:prior, "
                                          "shipped:prior-mixture, shipped:spatial-mixture, "
-                                         "shipped:learned-mixture"):
+                                         "shipped:learned-mixture, shipped:scratch"):
         resolve_policy("shipped:nope")
     default = make_planner("coma")
     assert Path(default.checkpoint) == resolve_policy(f"shipped:{DEFAULT_SHIPPED}")
