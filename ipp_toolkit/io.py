@@ -15,6 +15,7 @@ import json
 import os
 import re
 import stat
+import sys
 import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -111,8 +112,25 @@ def save_torch(path: str | os.PathLike[str], payload: Mapping[str, Any], kind: s
     """
     import torch
 
-    data = {"format": kind, **payload}
+    data = _interned({"format": kind, **payload})
     atomic_write(path, lambda handle: torch.save(data, handle))
+
+
+def _interned(value: Any) -> Any:
+    """``value`` with every string in its dicts, lists and tuples interned.
+
+    Pickle writes a string it has seen as a reference to the same object, so equal strings
+    that are one object in one process and two in another (a config sent to a worker) would
+    give files of the same content but other bytes; interned, equal strings are one object in
+    every process and the same run saves the same bytes wherever it ran.
+    """
+    if isinstance(value, str):
+        return sys.intern(value)
+    if isinstance(value, dict):
+        return {_interned(k): _interned(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(_interned(v) for v in value)
+    return value
 
 
 def load_torch(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:

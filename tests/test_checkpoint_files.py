@@ -65,3 +65,16 @@ def test_progress_rows_are_parsed_and_a_damaged_file_is_refused_when_strict(tmp_
         read_progress_csv(path)
     assert read_progress_csv(path, strict=False) == [
         {"update": 1, "loss": 0.5}, {"update": 2, "loss": None}, {"update": 3, "loss": 0.1}]
+
+
+def test_equal_contents_save_the_same_bytes_whatever_the_string_objects(tmp_path):
+    # A value equal to a key is one string object in one process and two in another (a
+    # config sent to a worker); the saved bytes must not depend on it.
+    from ipp_toolkit.io import save_torch
+
+    key = "td_lambda"
+    shared = {key: 0.8, "targets": key}
+    separate = {"td_lambda": 0.8, "targets": "".join(["td_", "lambda"])}
+    save_torch(tmp_path / "a.pt", shared, "test/kind")
+    save_torch(tmp_path / "b.pt", separate, "test/kind")
+    assert (tmp_path / "a.pt").read_bytes() == (tmp_path / "b.pt").read_bytes()

@@ -178,3 +178,23 @@ def test_simulate_into_a_folder_another_run_holds_is_refused(tmp_path, capsys, h
         _end(child)
     assert simulate_main(["--resolution", "1", "--out", str(tmp_path / "sim")]) == 0
     assert json.loads((tmp_path / "sim" / "run.json").read_text())["command"] == "ipp-simulate"
+
+
+def test_the_workers_a_run_starts_may_claim_inside_its_folder(tmp_path):
+    # A study's training runs go to worker processes (a process pool, a local Ray): they
+    # inherit the study's folder as one they may nest in; an unrelated process may not.
+    import subprocess
+    import sys
+
+    inner = tmp_path / "study" / "runs" / "a"
+    code = ("from ipp_toolkit.runs.run_folder import claim\n"
+            f"with claim({str(inner)!r}, 'ipp-train coma'):\n    pass\nprint('claimed')")
+    with claim(tmp_path / "study", "ipp-study credit"):
+        started = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                 timeout=60)
+        assert started.stdout.strip() == "claimed", started.stderr
+        unrelated = subprocess.run([sys.executable, "-c", code], capture_output=True,
+                                   text=True, timeout=60,
+                                   env={k: v for k, v in os.environ.items()
+                                        if k != "IPP_TOOLKIT_HOSTING_RUNS"})
+        assert "the folder of another run" in unrelated.stderr

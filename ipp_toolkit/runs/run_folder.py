@@ -199,12 +199,39 @@ def _open_folder(folder: Path) -> int:
     return os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
 
 
+#: The folders the runs of a process hold, for the processes it starts (a study's training
+#: workers, a local Ray's workers inherit its environment): a run one of them claims inside
+#: such a folder is part of that run, not another run's.
+HOSTING_ENV = "IPP_TOOLKIT_HOSTING_RUNS"
+
+
+def _hosting_folders() -> set[Path]:
+    """The run folders held by the process that started this one (:data:`HOSTING_ENV`)."""
+    return {Path(p) for p in os.environ.get(HOSTING_ENV, "").split(os.pathsep) if p}
+
+
+@contextlib.contextmanager
+def _hosting(key: Path) -> Iterator[None]:
+    """Name ``key`` in :data:`HOSTING_ENV` while the run holds it, for its workers."""
+    previous = os.environ.get(HOSTING_ENV)
+    os.environ[HOSTING_ENV] = os.pathsep.join([*([previous] if previous else []), str(key)])
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop(HOSTING_ENV, None)
+        else:
+            os.environ[HOSTING_ENV] = previous
+
+
 def _lock_parents(folder: Path, key: Path, run: RunFolder) -> None:
     """Share-lock every folder above ``key`` (``folder`` resolved) but those this process
-    holds; refuse when another run holds one of them (``folder`` would be inside it)."""
+    holds or the process that started it holds; refuse when another run holds one of them
+    (``folder`` would be inside it)."""
+    hosting = _hosting_folders()
     for parent in key.parents:
-        if parent in _HELD:
-            continue  # this process's own run: its nested runs share its claim
+        if parent in _HELD or parent in hosting:
+            continue  # this process's own run, or its starter's: nested runs share its claim
         try:
             fd = _open_folder(parent)
         except OSError:
@@ -400,7 +427,8 @@ def claim(folder: str | os.PathLike[str], command: str, what: str = "--out",
         _write_record(path, command, run)
         _HELD[key] = run
         try:
-            yield run
+            with _hosting(key):
+                yield run
         finally:
             del _HELD[key]
         failed = False
