@@ -6,7 +6,8 @@ Prints a large float32 matrix product's GFLOP/s (the core's practical peak) and 
 of one forward and backward pass of the ``cpu`` preset's actor (7 planes) and critic (17
 planes) networks on a mini-batch of 600 (channels-last, as the trainer runs them), plus the
 floating-point work of one update per agent-transition and the update rate the peak would
-allow. docs/performance.md ("COMA training's update: the floor on this CPU") has the figures.
+allow. experiments/performance/README.md ("COMA training's update: the floor on this CPU")
+has the figures.
 """
 
 from __future__ import annotations

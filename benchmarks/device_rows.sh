@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Issue 14's rows that need the accelerator machine, in one call (run by hand; figures go
-# to docs/performance.md): COMA's update of the `paper` preset on the GPU, in float32 and
+# to experiments/performance/README.md): COMA's update of the `paper` preset on the GPU, in float32 and
 # in bfloat16 (benchmarks/coma_throughput.py).
 #
 #   bash benchmarks/device_rows.sh                                  # there: cuda, paper preset

@@ -8,7 +8,7 @@ policies that were removed, so that asking for one says what to use instead
 from ipp_toolkit.planning import register_removed_name
 
 _MIXED_GONE = ("removed 2026-12-01: dominated by the default coma on validation missions, "
-               "see docs/generalisation.md; use coma (its default policy)")
+               "see experiments/generalisation/README.md; use coma (its default policy)")
 
 # The mixed-team fine-tuning: its planner alias and its shipped policy (and so its recipe).
 register_removed_name("coma_mixed", _MIXED_GONE)

@@ -58,8 +58,8 @@ class COMAPlanner(Planner):
             each option's best continuation along the agent's own path, as the ``ig``
             planners with these options do (:mod:`ipp_toolkit.planning.lookahead`); 1 step:
             the planes' one-step values; by default three steps, greedy without
-            communication unless ``lookahead_silent`` (docs/lookahead.md). Other actors
-            ignore them.
+            communication unless ``lookahead_silent`` (experiments/lookahead/README.md).
+            Other actors ignore them.
     """
 
     name = "coma"

@@ -1,4 +1,5 @@
-"""Every relative link of the README and the pages under ``docs/`` leads somewhere: the file
+"""Every relative link of the README, the changelog, the manual (``docs/``) and the research
+record (``experiments/``) leads somewhere: the file
 exists and, for a ``page.md#anchor`` link, the page has that heading (GitHub's anchor
 rule: lower case, punctuation dropped, spaces as hyphens)."""
 
@@ -30,7 +31,8 @@ def test_heading_anchor_follows_github():
 
 
 def test_every_relative_link_of_the_readme_and_docs_resolves():
-    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    pages = [ROOT / "README.md", ROOT / "CHANGELOG.md", *sorted((ROOT / "docs").rglob("*.md")),
+             *sorted((ROOT / "experiments").rglob("*.md"))]
     broken = []
     for page in pages:
         for target in LINK.findall(FENCED.sub("", page.read_text(encoding="utf-8"))):

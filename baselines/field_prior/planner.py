@@ -10,7 +10,8 @@ shapes fields take (straight boundaries continue, hotspots have sizes) from simu
 truth (``ipp-train prior``). No policy is learned: the decision is an argmax of the
 objective, which, when the team communicates, also counts half the best value of the next
 two moves of the UAV's own path (``lookahead_steps`` 3, :mod:`ipp_toolkit.planning.lookahead`;
-greedy without communication, where the lookahead drew UAVs together; docs/lookahead.md).
+greedy without communication, where the lookahead drew UAVs together;
+experiments/lookahead/README.md).
 
 In the mission's last 10 steps (of 15 in the paper's missions) a cell the map holds above 0.5
 that the prior doubts is given value too (``false_positive_weight`` 0.5,
@@ -18,7 +19,8 @@ that the prior doubts is given value too (``false_positive_weight`` 0.5,
 :class:`~baselines.heuristics.spatial_gain.SpatialGainPlanner`): the entropy over interesting
 cells never counts such a false positive, the final F1 does. Cleaning up late keeps the F1 of
 ``ig_spatial`` at a small cost in entropy; the same term on every step cost split too much
-(docs/field-prior-cleanup.md). ``false_positive_weight=0`` flies the prior's objective alone.
+(experiments/field-prior-cleanup/README.md). ``false_positive_weight=0`` flies the prior's
+objective alone.
 
 ``ig_learned`` flies the shipped prior (``ipp_toolkit/data/field_prior.pt``, its JSON
 record beside it; the learned ``gain`` planes of ``features.gain_interest = "learned"`` read
@@ -64,7 +66,7 @@ class LearnedPriorPlanner(SpatialGainPlanner):
             up in the last 10 steps, weight 0 flies the prior's objective alone.
         lookahead_steps, lookahead_discount, lookahead_silent: as for
             :class:`~baselines.heuristics.information_gain.InformationGainPlanner`; by default three
-            steps, greedy without communication (docs/lookahead.md).
+            steps, greedy without communication (experiments/lookahead/README.md).
     """
 
     name = "ig_learned"

@@ -63,7 +63,8 @@ class SpatialGainPlanner(InformationGainPlanner):
     cells never counts such a cell, but the final F1 does: a single noisy reading from 10-15 m
     leaves one behind. 0 (default here) keeps the objective above. ``false_positive_steps``
     k applies the term only in the mission's last k steps (a clean-up before the final map;
-    None: every step): it buys back part of the F1 for less entropy (docs/field-prior-cleanup.md).
+    None: every step): it buys back part of the F1 for less entropy
+    (experiments/field-prior-cleanup/README.md).
 
     Args:
         sigma: standard deviation of the smoothing in metres (> 0).

@@ -203,7 +203,7 @@ class PPOPlanner(SB3Planner):
         device: torch device of the forward pass.
         in_order, overlap_discount, lookahead_steps, lookahead_discount, lookahead_silent:
             as in :class:`SB3Planner`; by default a gain-prior policy looks three steps
-            ahead with communication, as ``ig_learned`` does (docs/lookahead.md).
+            ahead with communication, as ``ig_learned`` does (experiments/lookahead/README.md).
 
     Raises:
         CheckpointError: no shipped policy, or a missing, corrupt or foreign file.

@@ -67,7 +67,7 @@ def mission_lookahead(steps: int, silent: bool, comm_range: float) -> int:
     Without communication no UAV hears where the others go, and the lookahead drew UAVs to
     the same promising ground: on validation missions (``split``, 4 and 8 UAVs, D = 0) the
     final entropy rose by 0.02-0.03 (2-4 standard errors) and the UAVs flew within one waypoint
-    of each other half as often again; with communication it fell (docs/lookahead.md).
+    of each other half as often again; with communication it fell (experiments/lookahead/README.md).
     """
     return steps if silent or comm_range > 0 else 1
 

@@ -67,7 +67,8 @@ def limit_blas_threads() -> Any:
 
     The toolkit's matrix products are small and many (footprint sums, smoothing): on a
     2-core machine OpenBLAS's threads made them ten times slower than one thread (measured
-    in docs/performance.md), and processes, not threads, are its parallelism. The CLI, the
+    in experiments/performance/README.md), and processes, not threads, are its parallelism.
+    The CLI, the
     trainers and the evaluation workers call this; :func:`ipp_toolkit.runs.evaluation.evaluate`
     uses it as a context manager in the calling process.
     """
@@ -91,7 +92,8 @@ def retain_freed_memory() -> bool:
     worker reuses the same memory mission after mission and keeps its peak size until it
     exits. The trainers call it too: it spares their first updates the page faults of their
     activations and planes (tens of MB each), though their steady rate moved by only about
-    3 %, within the machine's drift (docs/performance.md). Memory only: no number changes.
+    3 %, within the machine's drift (experiments/performance/README.md). Memory only: no
+    number changes.
 
     Returns:
         whether the allocator took the settings (False off glibc, e.g. macOS or musl).
