@@ -33,6 +33,8 @@ from .uav_env import IPPUAVEnv
 
 register_envs()  # gymnasium.make("ipp_toolkit/UAVTeam-v0" or "ipp_toolkit/UAV-v0")
 
+# The one definition of the version: setup.cfg reads it (``attr:``), which needs a plain string
+# literal here, as setuptools reads it from this file without importing the package.
 __version__ = "0.1.0"
 
 __all__ = [
