@@ -358,9 +358,8 @@ def _record_checkpoints(out: Path, checkpoints: dict[str, dict[str, str]], write
 
 
 def compare_planners(agents: int | None = None, comm: float | None = None,
-                     planners: str | Sequence[str | PlannerSpec] | None = None,
-                     trials: int = 50, seed: int = 0,
-                     terrain: str | os.PathLike[str] | None = None,
+                     planners: str | Sequence[str | PlannerSpec] | None = None, trials: int = 50,
+                     seed: int = 0, terrain: str | os.PathLike[str] | None = None,
                      threshold: float | None = None, workers: int = 1,
                      out: str | os.PathLike[str] | None = None,
                      config: EnvConfig | str | os.PathLike[str] | None = None,
