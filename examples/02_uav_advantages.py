@@ -9,7 +9,10 @@ draws them on the global map: one coloured arrow per horizontal alternative, a t
 up / down, the action actually chosen outlined.
 
     python examples/02_uav_advantages.py                        # shipped policy, step 3
-    python examples/02_uav_advantages.py --checkpoint RUN/best.pt --step 8 --out adv.png
+    python examples/02_uav_advantages.py --checkpoint RUN/best.pt --step 8 --out adv
+
+The figure is ``OUT/uav_advantages.png`` (``--out``, default
+``examples-output/02_uav_advantages``); its path is printed last.
 
 The advantage is the toolkit's own function (``coma.advantages.counterfactual_advantage``).
 """
@@ -17,6 +20,7 @@ The advantage is the toolkit's own function (``coma.advantages.counterfactual_ad
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import matplotlib
 
@@ -60,7 +64,7 @@ def advantages_at(networks, state) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return actions, table, q.numpy(), policy.numpy()
 
 
-def draw(state, actions: np.ndarray, table: np.ndarray, path: str) -> None:
+def draw(state, actions: np.ndarray, table: np.ndarray, path: Path) -> None:
     """Global map with each UAV's alternatives coloured by their advantage."""
     geometry = state.geometry
     area = state.config.world.area_size
@@ -103,7 +107,9 @@ def main() -> None:
     parser.add_argument("--checkpoint", default=None, help="COMA policy (default: shipped)")
     parser.add_argument("--step", type=int, default=3, help="steps to play before looking")
     parser.add_argument("--mission", type=int, default=0, help="test mission index")
-    parser.add_argument("--out", default="uav_advantages.png", help="figure to write")
+    parser.add_argument("--out", type=Path, default=Path("examples-output/02_uav_advantages"),
+                        help="folder of the figure, OUT/uav_advantages.png (default: "
+                             "examples-output/02_uav_advantages)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     networks, _ = load_policy(args.checkpoint or resolve_policy("shipped:paper-actor"))
@@ -130,8 +136,10 @@ def main() -> None:
           "chosen action scores about 0 and every other entry says how much better or worse\n"
           "the team would do had only this UAV chosen it. Where an alternative scores above 0,\n"
           f"the critic pushes the actor towards it: {pushes or 'none'}")
-    draw(state, actions, table, args.out)
-    print(f"figure: {args.out}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    figure = args.out / "uav_advantages.png"
+    draw(state, actions, table, figure)
+    print(f"figure: {figure}")
 
 
 if __name__ == "__main__":

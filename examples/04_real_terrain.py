@@ -11,9 +11,11 @@ policies were trained on synthetic split terrains only.
     python examples/04_real_terrain.py                   # 20 missions, r_M = 0.1 m
     python examples/04_real_terrain.py --quick --planners ig,coverage
 
-The same from the command line, once the .npy exists:
+It writes into ``--out`` (default ``examples-output/04_real_terrain``): the .npy, and the
+tables and figures in ``OUT/compare``, whose path is printed last. The same from the command
+line, once the .npy exists:
 
-    ipp-compare --terrain results/real-terrain/jacksboro_dem.npy --threshold 550
+    ipp-compare --terrain examples-output/04_real_terrain/jacksboro_dem.npy --threshold 550
 
 The raster is not square, so it is stretched onto the 50 m x 50 m area (a warning says so).
 """
@@ -27,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib import cbook
 
-from reports.compare import compare
+from reports import compare_planners
 
 
 def jacksboro_dem(folder: Path) -> Path:
@@ -47,7 +49,9 @@ def main() -> None:
                         help="metres above which ground counts as interesting (default 550)")
     parser.add_argument("--planners", default="coma,ppo,ig,coverage")
     parser.add_argument("--trials", type=int, default=20)
-    parser.add_argument("--out", default="results/real-terrain")
+    parser.add_argument("--out", default="examples-output/04_real_terrain",
+                        help="folder of the raster and, in OUT/compare, the tables and figures "
+                             "(default: examples-output/04_real_terrain)")
     parser.add_argument("--quick", action="store_true", help="2 missions at r_M = 1 m")
     args = parser.parse_args()
     out = Path(args.out)
@@ -56,10 +60,11 @@ def main() -> None:
     print(f"{dem}: {share:.0%} of the area lies above {args.threshold:g} m")
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*not square.*")
-        comparison = compare(agents=4, comm=25.0, planners=args.planners,
-                             trials=2 if args.quick else args.trials, terrain=dem,
-                             threshold=args.threshold, out=out / "compare",
-                             resolution=1.0 if args.quick else None, progress=False)
+        comparison = compare_planners(agents=4, comm=25.0, planners=args.planners,
+                                      trials=2 if args.quick else args.trials, terrain=dem,
+                                      threshold=args.threshold, out=out / "compare",
+                                      resolution=1.0 if args.quick else None,
+                                      progress=False)
     print(comparison.table)
     print(f"tables and figures: {out / 'compare'}")
 

@@ -75,9 +75,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--iterations", type=int, default=60)
     parser.add_argument("--resolution", type=float, default=0.5)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=Path("runs/torchrl-mappo"),
+    parser.add_argument("--out", type=Path, default=Path("examples-output/05_torchrl_mappo"),
                         help="folder of the saved actor, OUT/policy.pt (the torchrl planner "
-                             "flies it)")
+                             "flies it; default: examples-output/05_torchrl_mappo)")
     args = parser.parse_args(argv)
     if args.quick:
         args.agents, args.envs, args.iterations, args.resolution = 2, 2, 2, 1.0

@@ -17,11 +17,13 @@ subpackages are its layers, and imports flow down this list only:
 
 ``ipp_toolkit._native`` holds the compiled (Numba) inner loops, ``ipp_toolkit.io`` the files
 that must never be half-written, ``ipp_toolkit.probability`` the log-odds and entropy of
-one cell and ``ipp_toolkit.extras`` the import of an optional package (Ray, RLlib, TorchRL)
-with its install command; they are used at every layer (``ipp_toolkit.io`` imports nothing
-of the toolkit). One import still goes up the list, lazily: the config checks terrain names
-against the world's terrain registry (:mod:`ipp_toolkit.world.registry`, which imports nothing
-of the toolkit, so no import circle) when a config is built.
+one cell, ``ipp_toolkit.extras`` the import of an optional package (Ray, RLlib, TorchRL)
+with its install command and ``ipp_toolkit.plugins`` the entry points the planner and terrain
+registries read (``IPP_TOOLKIT_NO_PLUGINS=1``: the toolkit's own only); they are used at every
+layer (``ipp_toolkit.io`` and ``ipp_toolkit.plugins`` import nothing of the toolkit). One
+import still goes up the list, lazily: the config checks terrain names against the world's
+terrain registry (:mod:`ipp_toolkit.world.registry`, which imports nothing of the toolkit
+but ``ipp_toolkit.plugins``, so no import circle) when a config is built.
 """
 
 from .config.files import load_config, save_config
@@ -33,6 +35,8 @@ from .uav_env import IPPUAVEnv
 
 register_envs()  # gymnasium.make("ipp_toolkit/UAVTeam-v0" or "ipp_toolkit/UAV-v0")
 
+# The one definition of the version: setup.cfg reads it (``attr:``), which needs a plain string
+# literal here, as setuptools reads it from this file without importing the package.
 __version__ = "0.1.0"
 
 __all__ = [

@@ -2,11 +2,12 @@
 
 Example (a notebook)::
 
-    from reports import compare
-    comparison = compare(agents=4, comm=25.0, planners="ig,coverage,random", trials=20)
+    from reports import compare_planners
+    comparison = compare_planners(agents=4, comm=25.0, planners="ig,coverage,random", trials=20)
     comparison            # renders the Markdown table; comparison.plot("figs") draws
 
-:func:`compare` builds the :class:`~ipp_toolkit.config.schema.EnvConfig` (the one builder,
+:func:`compare_planners` (also here under its earlier name, ``compare``) builds the
+:class:`~ipp_toolkit.config.schema.EnvConfig` (the one builder,
 :func:`ipp_toolkit.config.settings.build_env_config`: keyword > config file > defaults),
 checks and builds every planner (:func:`resolve_planners`) before anything is written, runs
 :func:`ipp_toolkit.runs.evaluation.evaluate` and summarises the rows; with ``out`` it also writes
@@ -57,6 +58,7 @@ if TYPE_CHECKING:
 __all__ = [
     "Comparison",
     "compare",
+    "compare_planners",
     "build_config",
     "resolve_planners",
     "default_planners",
@@ -94,7 +96,7 @@ def draw_trajectory(out_dir: Path, config: EnvConfig, label: str, mission: int,
 
 @dataclass
 class Comparison:
-    """The outcome of :func:`compare`.
+    """The outcome of :func:`compare_planners`.
 
     Attributes:
         result: the raw ``EvaluationResult`` (tidy rows, curves, recorded trajectories).
@@ -122,7 +124,7 @@ class Comparison:
         """Draw ``curves.png/.pdf`` and one trajectory figure per recorded mission.
 
         Trajectory figures go to ``out_dir/trajectories/<label>_mission<k>.png/.pdf``; those
-        of ``drawn`` (label, mission) pairs are already there (:func:`compare` draws them
+        of ``drawn`` (label, mission) pairs are already there (:func:`compare_planners` draws them
         while the other missions fly), and so are figures drawn before from the same data:
         neither is drawn again.
 
@@ -355,18 +357,18 @@ def _record_checkpoints(out: Path, checkpoints: dict[str, dict[str, str]], write
         write_json(path, stored)
 
 
-def compare(agents: int | None = None, comm: float | None = None,
-            planners: str | Sequence[str | PlannerSpec] | None = None, trials: int = 50,
-            seed: int = 0, terrain: str | os.PathLike[str] | None = None,
-            threshold: float | None = None, workers: int = 1,
-            out: str | os.PathLike[str] | None = None,
-            config: EnvConfig | str | os.PathLike[str] | None = None,
-            resolution: float | None = None, budget: int | None = None,
-            progress: bool = True, area_size: float | None = None,
-            grid_spacing: float | None = None,
-            note: Callable[[str], None] | None = None, animate: bool = False,
-            reference: str | Sequence[str] | None = None, namespace: str = "test",
-            backend: str = "local", address: str | None = None) -> Comparison:
+def compare_planners(agents: int | None = None, comm: float | None = None,
+                     planners: str | Sequence[str | PlannerSpec] | None = None, trials: int = 50,
+                     seed: int = 0, terrain: str | os.PathLike[str] | None = None,
+                     threshold: float | None = None, workers: int = 1,
+                     out: str | os.PathLike[str] | None = None,
+                     config: EnvConfig | str | os.PathLike[str] | None = None,
+                     resolution: float | None = None, budget: int | None = None,
+                     progress: bool = True, area_size: float | None = None,
+                     grid_spacing: float | None = None,
+                     note: Callable[[str], None] | None = None, animate: bool = False,
+                     reference: str | Sequence[str] | None = None, namespace: str = "test",
+                     backend: str = "local", address: str | None = None) -> Comparison:
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
@@ -435,6 +437,11 @@ def compare(agents: int | None = None, comm: float | None = None,
         if out is not None:
             _write_outputs(comparison, Path(out), drawer.drawn, animate, specs, int(seed))
         return comparison
+
+
+# The function's earlier name, kept for ``from reports.compare import compare`` (the package's
+# ``reports.compare`` is this module, so the package exports the function as compare_planners).
+compare = compare_planners
 
 
 def _check_run_inputs(trials: int, workers: int, namespace: str, backend: str,

@@ -35,7 +35,8 @@ from ipp_toolkit.io import atomic_write, write_json
 
 from .tables import METRIC_NAMES
 
-__all__ = ["plot_curves", "plot_trajectories", "curves_from_rows", "save_figure", "FORMATS"]
+__all__ = ["plot_curves", "plot_trajectories", "curves_from_rows", "curve_style", "save_figure",
+           "FORMATS"]
 
 FORMATS = ("png", "pdf")
 """File formats written for every figure."""
@@ -46,6 +47,35 @@ _TERRAIN_CMAP = ListedColormap(["#d9dde3", "#b5532f"], name="terrain2")
 def _colour(index: int, cmap: str = "tab10") -> tuple[float, float, float, float]:
     colours = colormaps[cmap]
     return colours(index % colours.N)
+
+
+# The curves of two planners can be identical (the same planner under two labels, two that
+# decide alike): colour alone would leave only the one drawn last. So every planner also gets a
+# dash pattern and a marker of its own, lines narrow from the first planner drawn to the last
+# (an earlier line shows at the sides of a later one and in its gaps), and each planner's
+# markers sit on other steps than the others'. Only the first planner is solid.
+_DASHES: tuple[tuple[float, tuple[float, ...]], ...] = (
+    (0, ()), (0, (6, 2)), (0, (2, 1.5)), (0, (6, 2, 1.5, 2)), (0, (3, 3)), (0, (1, 3)),
+    (0, (8, 2, 1.5, 2, 1.5, 2)), (0, (12, 3)), (0, (4, 1.5, 1, 1.5, 1, 1.5)), (0, (1, 1.5)))
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "h", "*")
+_WIDEST, _NARROWEST = 3.0, 1.0  # line widths of the first and the last planner, points
+
+
+def curve_style(index: int, count: int, steps: int) -> dict[str, Any]:
+    """Line2D keywords of planner ``index`` of ``count`` on a curve of ``steps`` points.
+
+    Each of colour, dash pattern and marker differs between any two of the first ten
+    planners; the three together between any two of the first 990 (cycles of 10, 9 and 11,
+    the first planner's solid line aside). The markers of planner ``index`` sit every
+    ``period`` steps from step ``index % period`` (``period``: the number of planners, at
+    most ``steps``).
+    """
+    dash = _DASHES[0] if index == 0 else _DASHES[1 + (index - 1) % (len(_DASHES) - 1)]
+    width = _WIDEST - (_WIDEST - _NARROWEST) * index / max(count - 1, 1)
+    period = max(1, min(count, steps))
+    return {"color": _colour(index), "linestyle": dash, "linewidth": width,
+            "marker": _MARKERS[index % len(_MARKERS)], "markersize": 5.5,
+            "markevery": (index % period, period)}
 
 
 def save_figure(figure: Figure, stem: str | os.PathLike[str],
@@ -180,9 +210,9 @@ def _draw_curves(panels: Sequence[tuple[str, Mapping[str, np.ndarray]]], title: 
         for index, (planner, curves) in enumerate(by_planner.items()):
             mean, std = _mean_std(curves)
             steps = np.arange(len(mean))
-            colour = _colour(index)
-            ax.plot(steps, mean, color=colour, marker="o", markersize=3, label=planner)
-            ax.fill_between(steps, mean - std, mean + std, color=colour, alpha=0.2,
+            style = curve_style(index, len(by_planner), len(steps))
+            ax.plot(steps, mean, label=planner, **style)
+            ax.fill_between(steps, mean - std, mean + std, color=style["color"], alpha=0.2,
                             linewidth=0)
         ax.set_xlabel("step s")
         ax.set_ylabel(METRIC_NAMES.get(metric, metric) + (" (bits)" if metric == "entropy"
@@ -190,19 +220,25 @@ def _draw_curves(panels: Sequence[tuple[str, Mapping[str, np.ndarray]]], title: 
         ax.set_title(METRIC_NAMES.get(metric, metric))
         ax.grid(alpha=0.3)
         ax.xaxis.get_major_locator().set_params(integer=True)
-    axes[0].legend(title="planner")
+    axes[0].legend(title="planner", handlelength=4.0)  # long enough to show the dashes
     figure.suptitle(title)
     return save_figure(figure, stem)
 
 
 def _paths(ax: Any, positions: np.ndarray, footprints: np.ndarray | None,
            resolution: float | None, min_altitude: float) -> None:
+    altitudes = np.unique(positions[:, :, 2])
     for k in range(positions.shape[1]):
         colour = _colour(k)
         x, y, z = positions[:, k, 0], positions[:, k, 1], positions[:, k, 2]
         ax.plot(x, y, "-", color=colour, linewidth=1.5, alpha=0.9, zorder=3, clip_on=False)
-        ax.scatter(x, y, s=12.0 * (z / min_altitude) ** 2, color=colour, edgecolors="black",
-                   linewidths=0.5, alpha=0.85, zorder=4, clip_on=False)
+        for rank, altitude in enumerate(altitudes):
+            at = z == altitude
+            # Lower (smaller) markers above higher ones, whichever UAV: a place visited at
+            # two altitudes is always a ring (the legend says so), never one hidden marker.
+            ax.scatter(x[at], y[at], s=12.0 * (altitude / min_altitude) ** 2, color=colour,
+                       edgecolors="black", linewidths=0.5, alpha=0.85, clip_on=False,
+                       zorder=4 + 0.5 * (len(altitudes) - rank) / len(altitudes))
         ax.scatter(x[:1], y[:1], s=160, marker="*", color=colour, edgecolors="black",
                    linewidths=0.8, zorder=5, clip_on=False)
         if footprints is not None and resolution:
@@ -227,8 +263,10 @@ def plot_trajectories(trajectory: Mapping[str, Any], out_path_stem: str | os.Pat
 
     Returns:
         the written paths. Paths are lines in the UAV's colour with one marker per step
-        (marker area grows with altitude); a star marks the start; the dashed rectangles on
-        the right are the last footprints.
+        (marker area grows with altitude; a place passed at several altitudes shows the
+        smaller marker inside the larger, a ring); a star marks the start; the dashed
+        rectangles on the right are the camera footprints of the last step. The legend
+        explains each of them.
     """
     inputs = {**trajectory, "title": title} if reuse else None
     return _save_once(Path(out_path_stem), inputs,
@@ -274,13 +312,38 @@ def _draw_trajectories(trajectory: Mapping[str, Any], out_path_stem: str | os.Pa
                       label=f"UAV {k}") for k in range(positions.shape[1])]
     handles.append(Line2D([], [], linestyle="", marker="*", markersize=12, color="grey",
                           markeredgecolor="black", label="start"))
-    handles += [Line2D([], [], linestyle="", marker="o", color="grey", markeredgecolor="black",
-                       markersize=math.sqrt(12.0) * z / min_altitude, label=f"{z:g} m")
-                for z in altitudes]
-    figure.legend(handles=handles, loc="outside right center", fontsize="small")
+    handles += [_altitude_marker(z, min_altitude, f"{z:g} m") for z in altitudes]
+    labels = [handle.get_label() for handle in handles]
+    if _has_rings(positions):
+        # Two altitudes' markers, one drawn over the other, as on the maps.
+        handles.append((_altitude_marker(altitudes[-1], min_altitude),
+                        _altitude_marker(altitudes[0], min_altitude)))
+        labels.append(RING_LABEL)
+    if footprints is not None:
+        handles.append(Patch(fill=False, edgecolor="grey", linestyle="--"))
+        labels.append(FOOTPRINT_LABEL)
+    figure.legend(handles, labels, loc="outside right center", fontsize="small")
     if title:
         figure.suptitle(title)
     return save_figure(figure, out_path_stem)
+
+
+RING_LABEL = "ring: one place at 2+ altitudes"
+"""Legend entry of a trajectory figure whose paths pass one place at several altitudes."""
+FOOTPRINT_LABEL = "camera footprint, last step"
+"""Legend entry of the dashed rectangles (the right panel's last footprints)."""
+
+
+def _altitude_marker(altitude: float, min_altitude: float, label: str = "") -> Line2D:
+    """A legend marker of the size the maps draw ``altitude`` at (``s`` is points squared)."""
+    return Line2D([], [], linestyle="", marker="o", color="grey", markeredgecolor="black",
+                  markersize=math.sqrt(12.0) * altitude / min_altitude, label=label)
+
+
+def _has_rings(positions: np.ndarray) -> bool:
+    """Whether some (x, y) is flown over at two or more altitudes (by any UAVs)."""
+    points = positions.reshape(-1, 3)
+    return len(np.unique(points[:, :2], axis=0)) < len(np.unique(points, axis=0))
 
 
 _STAMP_FORMAT = "ipp-toolkit figure inputs v1"

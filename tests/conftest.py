@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+# Only the toolkit's own entry points (its built-in planners): planners and terrains of other
+# installed packages (a plug-in built from docs/extending.md, say) would change what the
+# registries list and refuse. Set before the toolkit is imported; every process the tests
+# start inherits it. Tests of plug-ins set it to 0 where they need them.
+os.environ["IPP_TOOLKIT_NO_PLUGINS"] = "1"
 
 import pytest
 from helpers import small_config

@@ -13,7 +13,7 @@ import pytest
 
 from ipp_toolkit.config.settings import named_terrain_kinds
 from ipp_toolkit.planning import available_planners
-from reports import compare as compare_function
+from reports import compare_planners
 from reports.cli import compare_main
 
 FLAGS = ("--agents", "--comm", "--planners", "--trials", "--seed", "--terrain", "--threshold",
@@ -183,8 +183,23 @@ def test_end_to_end_writes_everything_and_refuses_another_config(capsys, tmp_pat
 def test_compare_is_exported():
     import reports
 
-    assert reports.compare is compare_function and callable(compare_function)
-    assert {"compare", "summarise", "plot_curves", "plot_trajectories"} <= set(reports.__all__)
+    assert reports.compare_planners is compare_planners and callable(compare_planners)
+    assert {"compare_planners", "summarise", "plot_curves",
+            "plot_trajectories"} <= set(reports.__all__)
+
+
+def test_reports_compare_is_the_module_and_the_earlier_spelling_still_runs(monkeypatch):
+    import types
+
+    import reports
+
+    module = importlib.import_module("reports.compare")
+    assert isinstance(module, types.ModuleType) and reports.compare is module
+    assert module.compare is compare_planners  # from reports.compare import compare
+    # from reports import compare; compare(...): the module forwards the call, with a warning.
+    monkeypatch.setattr(reports, "compare_planners", lambda *args, **kwargs: (args, kwargs))
+    with pytest.warns(FutureWarning, match="use reports.compare_planners"):
+        assert reports.compare(trials=2) == ((), {"trials": 2})
 
 
 @needs_evaluation

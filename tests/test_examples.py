@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import ast
+import re
 import runpy
 import sys
 from pathlib import Path
@@ -9,6 +11,7 @@ from pathlib import Path
 import pytest
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+DOCS = Path(__file__).resolve().parent.parent / "docs"
 
 
 def run_example(name: str, args: list[str], monkeypatch: pytest.MonkeyPatch,
@@ -38,13 +41,55 @@ def test_uav_advantages_prints_and_draws(tmp_path, monkeypatch, capsys):
                            minibatch_size=60, eval_missions=1, warm_start=""),
                 small_config(n_agents=2, resolution=1.0), tmp_path / "run", progress=False,
                 tensorboard=False)
-    figure = tmp_path / "adv.png"
+    # Without --out: into its own folder under the working directory, named at the end.
+    monkeypatch.chdir(tmp_path)
     out = run_example("02_uav_advantages.py", ["--checkpoint", str(run.best_policy),
-                                               "--step", "2", "--out", str(figure)],
-                      monkeypatch, capsys)
+                                               "--step", "2"], monkeypatch, capsys)
     rows = [line for line in out.splitlines() if line.startswith("uav_")]
     assert len(rows) == 2 and all(row.count("*") == 1 for row in rows)
-    assert figure.stat().st_size > 10_000
+    figure = Path("examples-output", "02_uav_advantages", "uav_advantages.png")
+    assert out.splitlines()[-1] == f"figure: {figure}"
+    assert (tmp_path / figure).stat().st_size > 10_000
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["examples-output", "run"]
+
+
+def _argument_default(example: Path, flag: str) -> object:
+    """The ``default=`` of ``parser.add_argument(flag, ...)`` in ``example``'s source."""
+    for node in ast.walk(ast.parse(example.read_text(encoding="utf-8"))):
+        if (isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "add_argument"
+                and node.args and getattr(node.args[0], "value", None) == flag):
+            default = next(k.value for k in node.keywords if k.arg == "default")
+            if isinstance(default, ast.Call):  # Path("...")
+                default = default.args[0]
+            return ast.literal_eval(default)
+    return None
+
+
+WRITERS = ["02_uav_advantages.py", "04_real_terrain.py", "05_torchrl_mappo.py"]
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in EXAMPLES.glob("*.py")))
+def test_an_example_that_writes_files_names_its_own_folder(name, monkeypatch, capsys):
+    source = (EXAMPLES / name).read_text(encoding="utf-8")
+    default = _argument_default(EXAMPLES / name, "--out")
+    if name not in WRITERS:
+        assert default is None and "savefig" not in source and ".save(" not in source
+        return
+    assert default == f"examples-output/{Path(name).stem}"
+    if name == "05_torchrl_mappo.py":
+        pytest.importorskip("torchrl", reason="torchrl is not installed (optional extra)")
+    monkeypatch.setenv("COLUMNS", "300")  # argparse would break the path at its hyphen
+    with pytest.raises(SystemExit) as exit_:
+        run_example(name, ["--help"], monkeypatch, capsys)
+    assert exit_.value.code == 0
+    assert f"default: {default}" in " ".join(capsys.readouterr().out.split())
+
+
+def test_the_docs_name_the_step_example_02_draws_by_default():
+    step = _argument_default(EXAMPLES / "02_uav_advantages.py", "--step")
+    text = (DOCS / "training.md").read_text(encoding="utf-8")
+    bullet = text[text.index("* `02_uav_advantages.py`"):text.index("* `03_credit")]
+    assert re.findall(r"\bstep (\d+)", bullet) == [str(step)]
 
 
 def test_credit_assignment_study_runs_every_variant(monkeypatch, capsys):

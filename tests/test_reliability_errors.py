@@ -15,7 +15,7 @@ import pytest
 from ipp_toolkit.config.files import read_config_file
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.env import IPPEnv
-from reports import compare
+from reports import compare_planners as compare
 from reports.cli import compare_main, simulate_main, train_main
 
 

@@ -320,19 +320,19 @@ def test_build_config_terrain_file(tmp_path):
                     or importlib.util.find_spec("baselines.heuristics.random_planner") is None,
                     reason="needs ipp_toolkit.runs.evaluation and the random baseline")
 def test_compare_in_memory_then_plot(tmp_path):
-    from reports import compare
+    from reports import compare_planners
 
-    comparison = compare(agents=2, trials=2, resolution=0.5, budget=2, planners=["random"],
-                         progress=False)
+    comparison = compare_planners(agents=2, trials=2, resolution=0.5, budget=2,
+                                  planners=["random"], progress=False)
     assert comparison.result.out_dir is None and not list(tmp_path.iterdir())
     assert "| random |" in comparison.table and comparison.summary.steps == (1, 2)
     assert set(comparison.result.trajectories) == {("random", 0)}
     names = sorted(p.name for p in comparison.plot(tmp_path))
     assert names == ["curves.pdf", "curves.png", "random_mission0.pdf", "random_mission0.png"]
     with pytest.raises(ValueError, match="trials must be an integer >= 1"):
-        compare(trials=0)
+        compare_planners(trials=0)
     with pytest.raises(ValueError, match="unknown planner 'astar'"):
-        compare(planners="random,astar", trials=1)
+        compare_planners(planners="random,astar", trials=1)
 
 
 def test_compare_animate_writes_one_gif_per_planner(tmp_path, placeholder_figures):

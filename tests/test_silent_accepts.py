@@ -8,7 +8,7 @@ import pytest
 
 from ipp_toolkit import EnvConfig, IPPEnv
 from ipp_toolkit.config.files import config_from_dict
-from reports import compare
+from reports import compare_planners as compare
 from reports.cli import compare_main, study_main
 
 

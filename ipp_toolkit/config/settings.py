@@ -1,8 +1,8 @@
 """One builder from user settings (flags, a YAML file, Python keywords) to an ``EnvConfig``.
 
 Every command of the toolkit (``ipp-compare``, ``ipp-simulate``, ``ipp-train``, the studies)
-and the Python faces (:func:`reports.compare`) build their mission config here, with one
-precedence rule::
+and the Python faces (:func:`reports.compare_planners`) build their mission config here, with
+one precedence rule::
 
     explicit value (a flag or keyword that is not None)  >  the config file  >  defaults
 

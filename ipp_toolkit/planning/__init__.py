@@ -34,6 +34,7 @@ import numpy as np
 
 from ..config.schema import EnvConfig, FeatureConfig
 from ..io import CheckpointError
+from ..plugins import entry_points
 from ..sim.features import actor_observations
 from ..sim.mission import MissionState
 from ..sim.team import choose_in_order
@@ -324,7 +325,8 @@ def register_planner(name: str, replace: bool = False
 
 
 def _entry_points() -> dict[str, metadata.EntryPoint]:
-    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+    # Through ipp_toolkit.plugins: IPP_TOOLKIT_NO_PLUGINS=1 keeps only the toolkit's own.
+    return {ep.name: ep for ep in entry_points(ENTRY_POINT_GROUP)}
 
 
 def planner_modules(names: Sequence[str]) -> list[str]:

@@ -9,7 +9,8 @@ packages add theirs by entry point in the group :data:`ENTRY_POINT_GROUP`
 (:func:`load_entry_point_terrains`). :func:`real_raster_names` lists the bundled rasters of
 ``ipp_toolkit/data/rasters``.
 
-This module imports nothing of the toolkit: the config checks names against it
+This module imports nothing of the toolkit but :mod:`ipp_toolkit.plugins` (which imports
+nothing of it): the config checks names against it
 (:func:`ipp_toolkit.config.schema.terrain_kinds`) without an import circle.
 """
 
@@ -19,9 +20,10 @@ import functools
 import json
 import warnings
 from collections.abc import Callable
-from importlib import metadata
 from pathlib import Path
 from typing import Any
+
+from ..plugins import entry_points
 
 __all__ = ["ENTRY_POINT_GROUP", "TERRAIN_GENERATORS", "RASTER_FOLDER", "register_terrain",
            "load_entry_point_terrains", "takes_namespace", "raster_manifest", "real_raster_names"]
@@ -83,7 +85,8 @@ def load_entry_point_terrains() -> None:
     if _ENTRY_POINTS_READ:
         return
     _ENTRY_POINTS_READ = True  # first: a module that builds a config looks the kinds up again
-    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+    # Through ipp_toolkit.plugins: IPP_TOOLKIT_NO_PLUGINS=1 keeps only the toolkit's own.
+    for entry in entry_points(ENTRY_POINT_GROUP):
         try:
             generator = entry.load()
         except Exception as err:  # noqa: BLE001 - one broken package must not hide the others
