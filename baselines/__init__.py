@@ -12,3 +12,14 @@
 
 In each, what flies a planner never imports its training code.
 """
+
+from ipp_toolkit.planning import register_removed_name
+
+# The PPO policies on other gain planes: the manual keeps the default (learned-mixture) and the
+# one from random networks (split); their records (with the commands that trained them) are in
+# the repository's experiments/shipped-policies/.
+for _name in ("spatial-mixture", "learned-cleanup"):
+    register_removed_name(f"ppo=shipped:{_name}", (
+        "removed 2026-12-03 (the manual keeps the default ppo and split); its record and "
+        f"command: experiments/shipped-policies/ppo_{_name.replace('-', '_')}_4agents_d25.json; "
+        "use ppo or ig_learned"))

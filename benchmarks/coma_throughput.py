@@ -43,7 +43,7 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=3)
     parser.add_argument("--gain", type=float, default=None, metavar="SMOOTHING",
                         help="with the gain planes: 0 = ig's objective, > 0 = the smoothed "
-                             "objective of the spatial-mixture policy (metres)")
+                             "objective of a gain-prior policy over ig_spatial (metres)")
     parser.add_argument("--warmup", type=int, default=1,
                         help="untimed updates first (the first calls load and compile kernels)")
     parser.add_argument("--device", default="cpu", help="where the networks learn: cpu or cuda")

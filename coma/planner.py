@@ -11,7 +11,6 @@ in :attr:`COMAPlanner.transfer_notes`).
 from __future__ import annotations
 
 import os
-import warnings
 
 import numpy as np
 import torch
@@ -35,7 +34,7 @@ from .persistence import (
     resolve_policy,
 )
 
-__all__ = ["COMAPlanner", "COMAPriorPlanner", "choose_greedy", "teammate_discount"]
+__all__ = ["COMAPlanner", "choose_greedy", "teammate_discount"]
 
 
 class COMAPlanner(Planner):
@@ -68,17 +67,11 @@ class COMAPlanner(Planner):
     #: Name of the shipped policy used when no checkpoint is given.
     shipped = DEFAULT_SHIPPED
 
-    #: For a deprecated alias: the spelling to use instead (warned at construction).
-    deprecated = ""
-
     def __init__(self, checkpoint: str | os.PathLike[str] | None = None,
                  overlap_discount: float = OVERLAP_DISCOUNT,
                  lookahead_steps: int = LOOKAHEAD_STEPS,
                  lookahead_discount: float = LOOKAHEAD_DISCOUNT,
                  lookahead_silent: bool = False):
-        if self.deprecated:
-            warnings.warn(f"planner {self.name!r} is deprecated; use {self.deprecated}",
-                          DeprecationWarning, stacklevel=2)
         torch.set_num_threads(1)
         path = resolve_policy(f"shipped:{self.shipped}" if checkpoint is None else checkpoint)
         if checkpoint is None and not os.path.exists(path):
@@ -186,21 +179,3 @@ def choose_greedy(actor: torch.nn.Module, observations: np.ndarray, masks: np.nd
 
     rescore = discount.rescorer(views, gains, scores, masks, logits_of)
     return choose_for_views(scores, views, rescore)
-
-
-class COMAPriorPlanner(COMAPlanner):
-    """Deprecated alias of ``coma=shipped:prior``: the gain-prior policy (4 agents, 25 m).
-
-    Its actor is a :class:`~coma.networks.GainPriorActor`: logits = a learned residual +
-    beta x each option's expected gain (the ``ig`` planner's objective, from the ``gain``
-    feature planes). Trained by COMA from that start, the ``ig``-like policy, at 4 UAVs and
-    D = 25 m (``ipp-train coma --feature gain=true --warm-start none --set gain_prior=50
-    ...``, the whole command in ``coma/checkpoints/coma_prior_4agents_d25.json``; not in the
-    paper) and applied to other teams without retraining, like ``coma``. It
-    observes the gain planes, which cost more per step than the paper's planes (about 50 ms
-    per distinct local map at r_M = 0.1 m). ``checkpoint`` overrides the packaged file.
-    """
-
-    name = "coma_prior"
-    shipped = "prior"
-    deprecated = "coma=shipped:prior"

@@ -44,42 +44,10 @@ class Stage:
     init: str | None = None
 
 
-_GAIN_PRIOR = {"warm_start": {"planner": ""}, "gain_prior": 50.0, "critic_warmup_updates": 10,
-               "eval_every": 5, "checkpoint_every": 5}
-_MIXTURE_SELECTION = {"validation_terrains": ("split", "blobs", "fractal", "real"),
-                      "selection": "worst_vs_ig", "eval_missions": 30}
-
 #: Every shipped policy's recipe, by its ``shipped:NAME``.
 RECIPES: dict[str, tuple[Stage, ...]] = {
     "paper-actor": (
         Stage("coma", {"missions": 37_000}),
-    ),
-    "prior": (
-        Stage("prior", {**_GAIN_PRIOR, "missions": 3000, "lr_actor": 3e-4,
-                        "eval_missions": 20}, {"features": {"gain": True}}),
-    ),
-    "prior-mixture": (
-        Stage("prior", {**_GAIN_PRIOR, "missions": 3000, "lr_actor": 3e-4,
-                        "eval_missions": 20}, {"features": {"gain": True}}),
-        Stage("mixture", {**_GAIN_PRIOR, **_MIXTURE_SELECTION, "missions": 3000,
-                          "lr_actor": 1e-4},
-              {"features": {"gain": True}, "terrain": {"kind": "mixture"}}, init="previous"),
-    ),
-    # The shipped run: seed 1 of two (seed 0 ended level with it on fresh validation
-    # missions), stopped after 2,500 of its 3,000 missions; nothing depends on the total.
-    "spatial-mixture": (
-        Stage("spatial", {**_GAIN_PRIOR, **_MIXTURE_SELECTION, "missions": 2500,
-                          "lr_actor": 1e-4, "seed": 1},
-              {"features": {"gain": True, "gain_smoothing": 5.0},
-               "terrain": {"kind": "mixture"}}),
-    ),
-    # spatial-mixture's recipe with the learned field prior in the gain planes: its untrained
-    # residual flies ig_learned's objective (without ig's same-step coordination).
-    "learned-mixture": (
-        Stage("learned", {**_GAIN_PRIOR, **_MIXTURE_SELECTION, "missions": 2500,
-                          "lr_actor": 1e-4, "seed": 0},
-              {"features": {"gain": True, "gain_interest": "learned"},
-               "terrain": {"kind": "mixture"}}),
     ),
     # The paper's learner from random networks (the scratch preset, the paper's inputs): the
     # best of three training seeds on validation missions.

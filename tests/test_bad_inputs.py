@@ -19,7 +19,7 @@ def broken_policies(tmp_path_factory) -> dict[str, str]:
     empty.write_bytes(b"")
     garbage = folder / "garbage.pt"
     garbage.write_bytes(b"\x00not a torch file")
-    data = torch.load(resolve_policy("shipped:prior"), weights_only=True)
+    data = torch.load(resolve_policy("shipped:paper-actor"), weights_only=True)
     name = next(iter(data["critic"]))
     data["critic"][name] = torch.full_like(data["critic"][name], float("inf"))
     infinite = folder / "infinite.pt"

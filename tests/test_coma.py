@@ -448,27 +448,30 @@ def test_residual_penalty_keeps_the_gain_prior_actor_near_its_prior(tmp_path):
         tiny_coma(residual_penalty=-1.0)
 
 
-def test_shipped_names_resolve_everywhere_and_aliases_are_deprecated(tmp_path):
+def test_shipped_names_resolve_everywhere_and_removed_ones_say_why(tmp_path):
     from coma.cli import build_parser, configs_from_args
     from coma.persistence import DEFAULT_SHIPPED, SHIPPED_POLICIES, resolve_policy, shipped_policy
     from ipp_toolkit.planning import make_planner
 
-    assert resolve_policy("shipped:prior") == shipped_policy(SHIPPED_POLICIES["prior"])
+    assert resolve_policy("shipped:paper-actor") == shipped_policy(SHIPPED_POLICIES["paper-actor"])
     assert resolve_policy("runs/x/best.pt") == Path("runs/x/best.pt")
     with pytest.raises(ValueError, match="unknown shipped policy 'nope'; shipped policies: "
-                                         "shipped:paper-actor, shipped:prior, "
-                                         "shipped:prior-mixture, shipped:spatial-mixture, "
-                                         "shipped:learned-mixture, shipped:scratch"):
+                                         "shipped:paper-actor, shipped:scratch"):
         resolve_policy("shipped:nope")
     default = make_planner("coma")
     assert Path(default.checkpoint) == resolve_policy(f"shipped:{DEFAULT_SHIPPED}")
-    with pytest.warns(DeprecationWarning, match="coma=shipped:prior"):
-        assert Path(make_planner("coma_prior").checkpoint) == resolve_policy("shipped:prior")
     coma_config, _ = configs_from_args(build_parser().parse_args(
-        ["--out", str(tmp_path), "--init", "shipped:prior"]))
-    assert coma_config.init_policy == str(resolve_policy("shipped:prior"))
+        ["--out", str(tmp_path), "--init", "shipped:paper-actor"]))
+    assert coma_config.init_policy == str(resolve_policy("shipped:paper-actor"))
     with pytest.raises(ValueError, match="unknown shipped policy"):
         configs_from_args(build_parser().parse_args(["--out", "x", "--init", "shipped:x"]))
+    # The gain-prior policies and their planner alias were removed: asking says where their
+    # records are and what to use instead.
+    for name in ("prior", "prior-mixture", "spatial-mixture", "learned-mixture"):
+        with pytest.raises(ValueError, match="removed 2026-12-03.*experiments/shipped-policies"):
+            resolve_policy(f"shipped:{name}")
+    with pytest.raises(ValueError, match="coma_prior.*removed 2026-12-03"):
+        make_planner("coma_prior")
 
 
 def test_selection_by_the_worst_gap_to_ig_over_validation_terrains(tmp_path):

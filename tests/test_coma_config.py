@@ -60,8 +60,7 @@ def test_old_flat_dicts_load_to_the_same_config():
 
 def test_shipped_checkpoints_keep_their_flat_warm_start_settings():
     # The shipped files were written with the flat names: planner and size are still read.
-    wanted = {"paper-actor": "ig", "prior": "", "prior-mixture": "",
-              "spatial-mixture": ""}
+    wanted = {"paper-actor": "ig"}
     assert set(wanted) <= set(SHIPPED_POLICIES)  # later files store the nested form
     for name, planner in wanted.items():
         path = resolve_policy(f"shipped:{name}")
@@ -118,7 +117,7 @@ def test_set_and_warm_start_flag_switch_it_off_and_reach_recipes():
                                         "--set", "warm_start.missions=10"))
     assert config.warm_start == WarmStartConfig(planner="coverage", missions=10)
     # A recipe's stages keep their own fields (no warm start) and take the dotted change.
-    for _, config, _ in stage_configs(_args("--preset", "prior-mixture",
+    for _, config, _ in stage_configs(_args("--preset", "scratch",
                                             "--set", "warm_start.epochs=3")):
         assert config.warm_start == WarmStartConfig(planner="", epochs=3)
 

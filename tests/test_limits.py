@@ -58,7 +58,7 @@ def test_training_refuses_networks_that_cannot_fit(tmp_path, capsys, argv, needl
 ])
 def test_checkpoint_sizes_are_bounded_before_building(tmp_path, capsys, planner, section,
                                                       field, value, needle):
-    shipped = resolve_policy("shipped:prior") if planner == "coma" else \
+    shipped = resolve_policy("shipped:paper-actor") if planner == "coma" else \
         resolve_ppo_policy("shipped:split")
     data = torch.load(shipped, weights_only=True)
     data[section][field] = value

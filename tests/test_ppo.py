@@ -225,9 +225,7 @@ def test_default_ppo_is_the_default_shipped_policy_and_names_resolve_for_sb3_too
 
 
 @pytest.mark.parametrize("preset,name", [("shipped", "split"), ("split", "split"),
-                                         ("spatial-mixture", "spatial-mixture"),
-                                         ("learned-mixture", "learned-mixture"),
-                                         ("learned-cleanup", "learned-cleanup")])
+                                         ("learned-mixture", "learned-mixture")])
 def test_ppo_preset_gives_the_shipped_runs_flags(preset, name):
     from baselines.sb3.ppo_training import _parser, run_config_from_args
 

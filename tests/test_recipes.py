@@ -35,10 +35,18 @@ def test_unknown_recipe_and_recipe_flags(capsys):
     with pytest.raises(ValueError, match="no recipe named 'nope'"):
         recipes.recipe("nope")
     stages = stage_configs(build_parser().parse_args(
-        ["--out", "x", "--preset", "prior-mixture", "--missions", "50", "--seed", "3"]))
-    assert [s.name for s, _, _ in stages] == ["prior", "mixture"]
+        ["--out", "x", "--preset", "scratch", "--missions", "50", "--seed", "3"]))
+    assert [s.name for s, _, _ in stages] == ["scratch"]
     assert all(c.missions == 50 and c.seed == 3 for _, c, _ in stages)
-    assert stages[1][2].terrain.kind == "mixture" and stages[0][2].terrain.kind == "split"
+    assert not stages[0][2].features.own_position  # the recipe's own mission change
+
+
+def test_a_removed_policys_recipe_is_refused_with_its_record(capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--out", "x", "--preset", "prior-mixture"])
+    err = capsys.readouterr().err
+    assert "shipped:prior-mixture" in err
+    assert "experiments/shipped-policies/coma_prior_mixture_4agents_d25.json" in err
 
 
 def test_a_two_stage_recipe_runs_and_resumes(tmp_path, monkeypatch):

@@ -85,9 +85,7 @@ TRAINING_KIND = "ipp-toolkit/ppo-training"
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 """Where the shipped PPO policies live."""
 SHIPPED_POLICIES: dict[str, str] = {"split": "ppo_4agents_d25.pt",
-                                   "spatial-mixture": "ppo_spatial_mixture_4agents_d25.pt",
-                                   "learned-mixture": "ppo_learned_mixture_4agents_d25.pt",
-                                   "learned-cleanup": "ppo_learned_cleanup_4agents_d25.pt"}
+                                   "learned-mixture": "ppo_learned_mixture_4agents_d25.pt"}
 """Shipped PPO policies by name, as in ``ppo=shipped:NAME`` (files in :data:`CHECKPOINTS`)."""
 DEFAULT_SHIPPED = "learned-mixture"
 """The shipped policy the ``ppo`` planner flies by default (the best on validation missions)."""

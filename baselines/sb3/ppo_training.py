@@ -166,9 +166,8 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
 #: ``ipp-train ppo --preset NAME``: the flags that trained each shipped PPO policy
 #: (``ppo=shipped:NAME``, from its JSON record). ``split`` (also ``shipped``, its first name)
 #: asked for 3,000,000 transitions and was stopped by a 28-minute limit at 1,738,016;
-#: ``spatial-mixture`` ships its periodic checkpoint at 1,100,000 (the best on validation
-#: missions), with the env file bundled beside its weights. Each recipe asks for what its
-#: policy trained.
+#: ``learned-mixture`` ships a periodic checkpoint, with the env file bundled beside its
+#: weights. Each recipe asks for what its policy trained.
 _SPLIT_FLAGS: dict[str, Any] = {
     "timesteps": 1_738_016, "n_envs": 8, "n_steps": 64, "batch_size": 256, "seed": 0,
     "agents": 4, "comm": 25.0, "resolution": 0.5, "checkpoint_every": 100_000}
@@ -176,20 +175,11 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
     "shipped": _SPLIT_FLAGS,
     "split": _SPLIT_FLAGS,
-    "spatial-mixture": {
-        **_SPLIT_FLAGS, "timesteps": 1_100_000, "gain_prior": 20.0,
-        "config": str(CHECKPOINTS / "ppo_spatial_mixture_4agents_d25.yaml")},
-    # spatial-mixture's run on the learned field prior's gain planes; ships its checkpoint
-    # at 600,000 (the best on validation missions).
+    # The run of the gain-prior PPO on the learned field prior's gain planes; ships its
+    # checkpoint at 600,000 (the best on validation missions).
     "learned-mixture": {
         **_SPLIT_FLAGS, "timesteps": 600_000, "gain_prior": 20.0,
         "config": str(CHECKPOINTS / "ppo_learned_mixture_4agents_d25.yaml")},
-    # learned-mixture's run on planes that also value cleaning up likely false positives in
-    # the last 10 steps (ig_learned's default objective): seed 1 of three, its final policy
-    # (600,000 asked for, 600,064 trained: whole rollouts of 2,048).
-    "learned-cleanup": {
-        **_SPLIT_FLAGS, "timesteps": 600_064, "gain_prior": 20.0, "seed": 1,
-        "config": str(CHECKPOINTS / "ppo_learned_cleanup_4agents_d25.yaml")},
 }
 
 
