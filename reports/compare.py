@@ -372,8 +372,8 @@ def compare_planners(agents: int | None = None, comm: float | None = None,
     """Evaluate planners on the test missions of one configuration and summarise them.
 
     Args:
-        agents, comm, terrain, threshold, config, resolution, budget, area_size,
-            grid_spacing: the configuration, see
+        config: the configuration, with ``agents``, ``comm``, ``terrain``, ``threshold``,
+            ``resolution``, ``budget``, ``area_size`` and ``grid_spacing`` over it, see
             :func:`ipp_toolkit.config.settings.build_env_config` (None: the config's value, else the
             paper's: 4 UAVs, D = 25 m, ``split``).
         planners: see :func:`resolve_planners`; None: every available registered planner.

@@ -87,9 +87,10 @@ def test_an_example_that_writes_files_names_its_own_folder(name, monkeypatch, ca
 
 def test_the_docs_name_the_step_example_02_draws_by_default():
     step = _argument_default(EXAMPLES / "02_uav_advantages.py", "--step")
-    text = (DOCS / "training.md").read_text(encoding="utf-8")
-    bullet = text[text.index("* `02_uav_advantages.py`"):text.index("* `03_credit")]
-    assert re.findall(r"\bstep (\d+)", bullet) == [str(step)]
+    text = (DOCS / "credit-assignment.md").read_text(encoding="utf-8")
+    # The prose (not the command that asks for another --step) names the default.
+    section = text[text.index("## 2. A mission"):text.index("## 3.")].split("```")[-1]
+    assert set(re.findall(r"\bstep (\d+)", section)) == {str(step)}
 
 
 def test_credit_assignment_study_runs_every_variant(monkeypatch, capsys):

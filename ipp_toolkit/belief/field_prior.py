@@ -29,7 +29,7 @@ share of interesting cells of each block). :meth:`FieldPrior.fine_values` resamp
 bilinearly onto a finer block grid (e.g. the 0.5 m blocks ``ig_spatial`` evaluates on).
 
 Cost: one forward pass per decision for the whole team (N maps batched); 6-9 ms for four
-UAVs on one CPU thread (docs/field-prior.md, "Cost"). torch is imported on first use.
+UAVs on one CPU thread (experiments/field-prior/README.md, "Cost"). torch is imported on first use.
 """
 
 from __future__ import annotations
