@@ -21,6 +21,7 @@ import io
 import math
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -58,12 +59,15 @@ def _simulate_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
     )
     add_version(parser)
-    parser.add_argument("--config", type=Path, help="YAML config (defaults: the paper's)")
+    parser.add_argument("--config", type=Path,
+                        help="YAML config (default: none, the paper's configuration)")
     parser.add_argument("--agents", type=positive_int("agents"),
-                        help="team size (overrides the config)")
+                        help="team size (overrides the config; default: the config's, else 4)")
     parser.add_argument("--comm", type=comm_range,
-                        help="communication range in metres or 'inf' (overrides the config)")
-    parser.add_argument("--resolution", type=positive_float, help="map resolution r_M in metres")
+                        help="communication range in metres or 'inf' (overrides the config; "
+                             "default: the config's, else 25)")
+    parser.add_argument("--resolution", type=positive_float,
+                        help="map resolution r_M in metres (default: the config's, else 0.1)")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED", help="run seed")
     parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
     parser.add_argument("--out", default="results/simulate",
@@ -177,10 +181,12 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "default: the --config file's, else split")
     parser.add_argument("--threshold", type=finite_float, default=None, metavar="T",
                         help="raster threshold in the raster's units: cells whose mean value "
-                             "is >= T are interesting (required with a terrain FILE)")
+                             "is >= T are interesting (required with a terrain FILE; default: the "
+                             "--config file's)")
     parser.add_argument("--threshold-quantile", type=finite_float, default=None, metavar="Q",
                         help="threshold as a quantile of the values instead (1 - Q of the "
-                             "cells are interesting): a raster FILE, fractal or real")
+                             "cells are interesting): a raster FILE, fractal or real (default: the "
+                             "--config file's)")
     add_compute_flags(parser, workers_type=positive_int("workers"),
                       workers_default=min(2, os.cpu_count() or 1), workers_metavar="N",
                       workers_help="parallel evaluation processes; min(2, CPU count) "
@@ -194,23 +200,23 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "and refuses another one")
     parser.add_argument("--config", type=Path, default=None, metavar="YAML",
                         help="YAML config: it wins over the defaults, and every flag given "
-                             "explicitly wins over it (None: the paper's configuration)")
+                             "explicitly wins over it (default: none, the paper's configuration)")
     parser.add_argument("--resolution", type=positive_float, default=None,
                         metavar="METRES",
-                        help="map resolution r_M in metres (None: the config's, 0.1)")
+                        help="map resolution r_M in metres (default: the config's, else 0.1)")
     parser.add_argument("--budget", type=positive_int("budget"), default=None, metavar="STEPS",
-                        help="number of steps B (None: the config's, 15)")
+                        help="number of steps B (default: the config's, else 15)")
     parser.add_argument("--area-size", type=positive_float, default=None, metavar="METRES",
-                        help="side of the square area in metres (None: the config's, 50)")
+                        help="side of the square area in metres (default: the config's, else 50)")
     parser.add_argument("--grid-spacing", type=positive_float, default=None, metavar="METRES",
-                        help="distance between waypoints in metres (None: the config's, 5); "
-                             "the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
+                        help="distance between waypoints in metres (default: the config's, else "
+                             "5); the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
                              "waypoints")
     parser.add_argument("--reference", default=None, metavar="LABEL[,LABEL...]",
                         help="the planners of the summary's paired columns, one column each "
                              "(final entropy minus theirs on the same missions); each named "
-                             "one must be flown. Default: ig (the paper's baseline) and "
-                             "ig_spatial (the best heuristic), each where flown")
+                             "one must be flown (default: ig, the paper's baseline, and "
+                             "ig_spatial, the best heuristic, each where flown)")
     parser.add_argument("--namespace", choices=("test", "validation"), default="test",
                         help="fly the held-out test missions, or the validation missions to "
                              "select policies on (the default --out then starts with "
@@ -333,6 +339,26 @@ def train_main(argv: list[str] | None = None) -> int:
         paths = plot_training(out)
         print(f"training curves: {paths[0]}")
     return code
+
+
+def command_parsers() -> dict[str, Callable[[], argparse.ArgumentParser]]:
+    """The parser builder of every command line, by its name: each console script, each
+    ``ipp-train`` trainer (``ipp-train sb3 --algo PPO`` takes ``ipp-train ppo``'s flags under
+    its own name). What ``--help`` prints; building them imports no torch."""
+    from baselines.field_prior import training as prior
+    from baselines.rllib import training as rllib
+    from baselines.sb3 import ppo_training, training
+    from coma.cli import build_parser as coma_parser
+
+    from .study_cli import _study_parser
+
+    return {"ipp-simulate": _simulate_parser, "ipp-compare": _compare_parser,
+            "ipp-study": _study_parser, "ipp-train coma": coma_parser,
+            "ipp-train ppo": ppo_training._parser,
+            "ipp-train sb3": training._parser,
+            "ipp-train sb3 --algo PPO": lambda: ppo_training._parser(
+                prog="ipp-train sb3 --algo PPO"),
+            "ipp-train prior": prior._parser, "ipp-train rllib": rllib._parser}
 
 
 def _flag_value(argv: list[str], flag: str) -> str | None:
