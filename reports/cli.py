@@ -17,7 +17,9 @@ from __future__ import annotations
 import argparse
 import csv
 import gc
+import hashlib
 import io
+import json
 import math
 import os
 import sys
@@ -26,10 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import (
     build_env_config,
     comm_label,
     named_terrain_kinds,
+    safe_name,
     setting_line,
 )
 from ipp_toolkit.env import IPPEnv
@@ -141,7 +145,74 @@ def _simulate(env: IPPEnv, observations: dict, infos: dict, seed: int,
     return 0
 
 
-DEFAULT_COMPARE_OUT = "results/compare-a{agents}-d{comm}"
+def default_compare_out(env_config: EnvConfig, seed: int, namespace: str,
+                        planners: str) -> str:
+    """``ipp-compare``'s folder when ``--out`` is not given.
+
+    ``results/compare-aN-dD`` for the paper's configuration of N UAVs at range D (seed 0,
+    planners without weight files of their own): rerunning it reuses the stored missions, and
+    other planners flown into it join them. Any other run key (config, seed, the weight files
+    named in ``--planners``) adds the settings that differ and a short hash of the key, e.g.
+    ``results/compare-a4-d25-r0.5-b20-1a2b3c4d``: a folder refuses missions of another
+    configuration, so two configurations must never share a default one.
+    """
+    team = env_config.team
+    stem = "validate" if namespace == "validation" else "compare"
+    name = f"results/{stem}-a{team.n_agents}-d{comm_label(team.comm_range)}"
+    reference = build_env_config(None, agents=team.n_agents, comm=team.comm_range)
+    key = _run_key(env_config, seed, namespace, planners)
+    if key == _run_key(reference, 0, namespace, "default"):
+        return name
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode("utf-8")).hexdigest()
+    return "-".join([name, *_differing_settings(env_config, reference, seed), digest[:8]])
+
+
+def _run_key(env_config: EnvConfig, seed: int, namespace: str, planners: str) -> dict:
+    """What decides whether a folder may take a run's missions (the folder's identity but
+    the toolkit's version, whose change only warns), with each planner that names options
+    (a weight file: its sha256 too, so retrained weights get their own folder)."""
+    from ipp_toolkit.runs.result_store import folder_identity
+
+    from .compare import _requested_specs
+
+    identity = folder_identity(env_config, seed, namespace)
+    identity.pop("version", None)
+    weights = {}
+    for spec in _requested_specs(planners):
+        if spec.options:
+            files = {key: _file_sha256(Path(value)) for key, value in spec.options.items()
+                     if isinstance(value, str) and Path(value).is_file()}
+            weights[spec.effective_label] = {"name": spec.name, "options": spec.options,
+                                             "files": files}
+    return {"run": identity, "planners": weights}
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _differing_settings(env_config: EnvConfig, reference: EnvConfig, seed: int) -> list[str]:
+    """The flag-level settings of ``env_config`` that differ from ``reference`` (the paper's
+    configuration of the team) and a seed other than 0, as words of a folder name."""
+    parts = []
+    terrain = env_config.terrain
+    if (terrain.kind, terrain.raster) != (reference.terrain.kind, reference.terrain.raster):
+        raster = terrain.kind == "raster" and isinstance(terrain.raster, str)
+        parts.append(safe_name(Path(terrain.raster).stem) if raster else terrain.kind)
+    world, base = env_config.world, reference.world
+    for prefix, mine, theirs in (("r", world.resolution, base.resolution),
+                                 ("b", env_config.team.budget, reference.team.budget),
+                                 ("area", world.area_size, base.area_size),
+                                 ("g", world.grid_spacing, base.grid_spacing)):
+        if mine != theirs:
+            parts.append(f"{prefix}{mine:g}")
+    if seed != 0:
+        parts.append(f"seed{seed}")
+    return parts
 
 
 def _compare_parser() -> argparse.ArgumentParser:
@@ -195,9 +266,13 @@ def _compare_parser() -> argparse.ArgumentParser:
                                    "tasks",
                       address_help=" (its CPUs fly the missions; results are written here, "
                                    "to --out)")
-    parser.add_argument("--out", default=DEFAULT_COMPARE_OUT, metavar="DIR",
+    parser.add_argument("--out", default=None, metavar="DIR",
                         help="output folder; rerunning into it resumes the same configuration "
-                             "and refuses another one")
+                             "and refuses another one (default: results/compare-aN-dD for the "
+                             "paper's configuration of N UAVs at range D; other settings add "
+                             "what differs and a short hash of the run, e.g. "
+                             "results/compare-a4-d25-r0.5-1a2b3c4d, so that no two "
+                             "configurations share a default folder)")
     parser.add_argument("--config", type=Path, default=None, metavar="YAML",
                         help="YAML config: it wins over the defaults, and every flag given "
                              "explicitly wins over it (default: none, the paper's configuration)")
@@ -258,15 +333,11 @@ def compare_main(argv: list[str] | None = None) -> int:
         check_backend_flags(args.backend, args.address)
     except (ValueError, RayUnavailableError) as err:
         return error(err)
-    out = args.out
-    if out == DEFAULT_COMPARE_OUT:
-        out = out.format(agents=env_config.team.n_agents,
-                         comm=comm_label(env_config.team.comm_range))
-        if args.namespace == "validation":
-            out = out.replace("compare-", "validate-")
     try:
+        out = args.out if args.out is not None else default_compare_out(
+            env_config, args.seed, args.namespace, args.planners)
         out_dir = check_out_path(out)  # before Path("") turns into the current folder
-    except ValueError as err:
+    except (ValueError, OSError) as err:
         return error(err)
     print(setting_line(env_config, args.config), file=sys.stderr)
     try:

@@ -430,6 +430,7 @@ def compare(agents: int | None = None, comm: float | None = None,
                                namespace, backend, address, pool, drawer)
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=True)
+            (note or _print_note)(result.reuse_note())  # a rerun that flies nothing says so
         comparison = Comparison(result=result,
                                 summary=_summary(result, reference, checkpoints))
         if out is not None:

@@ -33,6 +33,7 @@ import gc
 import math
 import os
 import time
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -397,6 +398,9 @@ def _evaluate_claimed(config: EnvConfig, inputs: _Inputs, folder: Path | None, p
             folder, labels, missions, inputs.record, config.team.budget, identity)
     tasks = [(label, mission) for mission in range(missions) for label in labels
              if (label, mission) not in store.done]
+    # Counted per planner for the result: a rerun says what it reused and what it flew.
+    reused = dict(Counter(label for label, _ in store.done))
+    flown = dict(Counter(label for label, _ in tasks))
     n_workers = min(inputs.workers, len(tasks))
     local = backend == "local" and n_workers <= 1
     runner = _prepare_runner(config, inputs, namespace, tasks, local)
@@ -414,7 +418,9 @@ def _evaluate_claimed(config: EnvConfig, inputs: _Inputs, folder: Path | None, p
         if cluster is not None:
             cluster.close()
     store.prepare()
-    return _results(config, inputs, store, folder, namespace)
+    result = _results(config, inputs, store, folder, namespace)
+    result.reused, result.flown = reused, flown
+    return result
 
 
 def _prepare_runner(config: EnvConfig, inputs: _Inputs, namespace: str,

@@ -1,0 +1,65 @@
+"""What the console scripts tell a user about what they did: missions reused or flown, default
+folders that do not collide, training missions rounded up to whole updates, the reward."""
+
+from __future__ import annotations
+
+from ipp_toolkit.config.settings import build_env_config
+from reports.cli import compare_main, default_compare_out
+
+TINY = ["--agents", "2", "--trials", "2", "--resolution", "0.5", "--budget", "3",
+        "--workers", "1", "--no-progress"]
+
+
+def test_a_rerun_says_what_it_reused_and_what_it_flew(tmp_path, capsys, placeholder_figures):
+    out = tmp_path / "run"
+    assert compare_main([*TINY, "--planners", "random", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"reused 0 stored missions from {out}; flew 2 new of 1 planner (random)" in err
+    # Partly stored: the stored planner's missions are read back, the new one's flown.
+    assert compare_main([*TINY, "--planners", "random,coverage", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert (f"reused 2 stored missions of 1 planner (random) from {out}; flew 2 new of 1 "
+            "planner (coverage)") in err
+    # The same command again flies nothing, and says so.
+    assert compare_main([*TINY, "--planners", "random,coverage", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert (f"reused 4 stored missions of 2 planners (random, coverage) from {out}; flew 0 "
+            "new") in err
+
+
+def test_default_folders_of_other_settings_do_not_collide(tmp_path, monkeypatch, capsys,
+                                                          placeholder_figures):
+    monkeypatch.chdir(tmp_path)
+    argv = ["--agents", "2", "--trials", "1", "--budget", "2", "--planners", "random",
+            "--workers", "1", "--no-progress"]
+    assert compare_main([*argv, "--resolution", "0.5"]) == 0
+    # Another resolution went into the same default folder, which refused it (exit 2).
+    assert compare_main([*argv, "--resolution", "1"]) == 0
+    folders = sorted(path.name for path in (tmp_path / "results").iterdir())
+    assert len(folders) == 2, folders
+    assert folders[0].startswith("compare-a2-d25-r0.5-b2-"), folders
+    assert folders[1].startswith("compare-a2-d25-r1-b2-"), folders
+    # The same settings again find their folder: nothing new is flown.
+    assert compare_main([*argv, "--resolution", "1"]) == 0
+    assert "flew 0 new" in capsys.readouterr().err
+    assert len(list((tmp_path / "results").iterdir())) == 2
+
+
+def test_the_default_folder_names_the_run_key_and_keeps_the_papers_name(tmp_path):
+    paper = build_env_config(None, agents=4, comm=25.0)
+    assert default_compare_out(paper, 0, "test", "default") == "results/compare-a4-d25"
+    # Planners without weight files of their own grow the same folder.
+    assert default_compare_out(paper, 0, "test", "ig,coverage") == "results/compare-a4-d25"
+    assert default_compare_out(paper, 0, "validation", "ig") == "results/validate-a4-d25"
+    seeded = default_compare_out(paper, 3, "test", "ig")
+    assert seeded.startswith("results/compare-a4-d25-seed3-")
+    blobs = build_env_config(None, agents=4, comm=25.0, terrain="blobs")
+    assert default_compare_out(blobs, 0, "test", "ig").startswith("results/compare-a4-d25-blobs-")
+    # A planner's weight file: retrained weights (another content) get another folder.
+    weights = tmp_path / "best.pt"
+    weights.write_bytes(b"first")
+    first = default_compare_out(paper, 0, "test", f"ig,coma={weights}")
+    weights.write_bytes(b"second")
+    second = default_compare_out(paper, 0, "test", f"ig,coma={weights}")
+    assert first != second and first.startswith("results/compare-a4-d25-")
+    assert len({first, second, seeded}) == 3
