@@ -314,6 +314,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, ImportError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
+    for note in dict.fromkeys(_rounding_note(config) for _, config, _ in stages):
+        if note:
+            print(f"ipp-train coma: note: {note}", file=sys.stderr)
     if any(config.precision == "bfloat16" for _, config, _ in stages) \
             and bfloat16_hardware(resolve_device(args.device)) is False:
         hardware = "this CPU" if args.device == "cpu" else "this GPU"
@@ -347,6 +350,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _Failed as failed:
         return int(failed.args[0])
     return code
+
+
+def _rounding_note(config: COMAConfig) -> str:
+    """What a run of ``config`` trains when its missions are not whole updates (training
+    flies ``missions_per_update`` missions per update, so it rounds up), else empty: asked
+    for 8, a run trained 50 without a word."""
+    per = config.missions_per_update
+    updates = -(-config.missions // per)
+    if updates * per == config.missions:
+        return ""
+    return (f"{config.missions} training missions are not whole updates of "
+            f"missions_per_update = {per}: training {updates * per} missions ({updates} "
+            f"update{'s' if updates != 1 else ''}); ask for a multiple of {per} (--missions), "
+            "or change --set missions_per_update")
 
 
 class _Failed(Exception):

@@ -3,8 +3,10 @@ folders that do not collide, training missions rounded up to whole updates, the 
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 from ipp_toolkit.config.settings import build_env_config
-from reports.cli import compare_main, default_compare_out
+from reports.cli import compare_main, default_compare_out, train_main
 
 TINY = ["--agents", "2", "--trials", "2", "--resolution", "0.5", "--budget", "3",
         "--workers", "1", "--no-progress"]
@@ -63,3 +65,25 @@ def test_the_default_folder_names_the_run_key_and_keeps_the_papers_name(tmp_path
     second = default_compare_out(paper, 0, "test", f"ig,coma={weights}")
     assert first != second and first.startswith("results/compare-a4-d25-")
     assert len({first, second, seeded}) == 3
+
+
+def test_ipp_train_coma_says_it_rounds_the_missions_up_to_whole_updates(tmp_path, capsys,
+                                                                         monkeypatch):
+    import coma.learner
+
+    asked = []
+
+    def no_training(coma_config, *args, **kwargs):  # what the run would train, not trained
+        asked.append(coma_config.missions)
+        return SimpleNamespace(updates=1, missions=50, best_entropy=0.5,
+                               best_policy=tmp_path / "best.pt")
+
+    monkeypatch.setattr(coma.learner, "train", no_training)
+    argv = ["coma", "--out", str(tmp_path / "run"), "--agents", "2", "--warm-start", "none"]
+    assert train_main([*argv, "--missions", "8"]) == 0
+    err = capsys.readouterr().err
+    assert ("ipp-train coma: note: 8 training missions are not whole updates of "
+            "missions_per_update = 50: training 50 missions (1 update)") in err
+    assert train_main([*argv, "--missions", "100"]) == 0  # whole updates: no note
+    assert "note:" not in capsys.readouterr().err
+    assert asked == [8, 100]
