@@ -5,8 +5,10 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import pytest
+
 from ipp_toolkit.config.settings import build_env_config
-from reports.cli import compare_main, default_compare_out, train_main
+from reports.cli import compare_main, default_compare_out, simulate_main, train_main
 
 TINY = ["--agents", "2", "--trials", "2", "--resolution", "0.5", "--budget", "3",
         "--workers", "1", "--no-progress"]
@@ -87,3 +89,21 @@ def test_ipp_train_coma_says_it_rounds_the_missions_up_to_whole_updates(tmp_path
     assert train_main([*argv, "--missions", "100"]) == 0  # whole updates: no note
     assert "note:" not in capsys.readouterr().err
     assert asked == [8, 100]
+
+
+def test_ipp_simulate_says_what_its_reward_is(tmp_path, capsys):
+    argv = ["--out", str(tmp_path), "--resolution", "1.0", "--agents", "2"]
+    assert simulate_main(argv) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "reward = 22 (H_t - H_t+1) / H_t - 0.5 per step: H is the weighted entropy" in out
+    assert "less than 2.3% is rewarded below 0 even while the entropy falls" in out
+    # The config's own weights: without a time penalty a reward is never below 0.
+    config = tmp_path / "reward.yaml"
+    config.write_text("reward: {alpha: 10, beta: 0}\n")
+    assert simulate_main([*argv, "--config", str(config), "--force"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "reward = 10 (H_t - H_t+1) / H_t + 0 per step" in out and "below 0" not in out
+    with pytest.raises(SystemExit):
+        simulate_main(["--help"])
+    assert "rewarded below 0 even while the entropy falls" in " ".join(
+        capsys.readouterr().out.split())
