@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from .._native import kernels
 from ..config.limits import check_mission, check_result_rows
 from ..config.schema import EnvConfig, check_int
 from ..config.settings import safe_name
@@ -403,6 +404,12 @@ def _evaluate_claimed(config: EnvConfig, inputs: _Inputs, folder: Path | None, p
     flown = dict(Counter(label for label, _ in tasks))
     n_workers = min(inputs.workers, len(tasks))
     local = backend == "local" and n_workers <= 1
+    if local and tasks:
+        # Compiled (or loaded) ahead, as a pool's workers do, saying so where Numba's cache
+        # does not hold them: a first run is otherwise silent for up to a minute. A kernel
+        # that fails to compile fails the mission that calls it, with its own error.
+        with contextlib.suppress(Exception):
+            kernels.compile_mission_kernels(announce=kernels.print_compile_note)
     runner = _prepare_runner(config, inputs, namespace, tasks, local)
     cluster = None
     if backend == "ray" and tasks:
