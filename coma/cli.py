@@ -109,6 +109,25 @@ def _preset_default(field: str) -> str:
     return "default: the preset's: " + ", ".join(f"{k} {v}" for k, v in values.items())
 
 
+def _add_beyond_paper_flags(parser: argparse.ArgumentParser) -> None:
+    """The training flags beyond the paper's: several team settings (domain randomisation)
+    and a start from a policy (fine-tuning)."""
+    parser.add_argument("--team-sizes", type=int_list("--team-sizes"), metavar="N,N,...",
+                        help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
+                             "randomisation; not in the paper; "
+                             f"{_preset_default('team_sizes')}: the mission's own)")
+    parser.add_argument("--comm-ranges", type=comm_range_list("--comm-ranges"),
+                        metavar="D,D,...",
+                        help="train on these communication ranges in metres, e.g. 0,25,inf "
+                             f"({_preset_default('comm_ranges')}: the mission's own)")
+    parser.add_argument("--init", metavar="POLICY",
+                        help="start from this COMA policy file instead of a warm start "
+                             "(fine-tuning), or a shipped one: --init shipped:NAME "
+                             f"({', '.join(SHIPPED_POLICIES)}; plain 'shipped': coma's "
+                             "default; default: none, the preset's warm start or random "
+                             "networks)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``ipp-train coma``; the flags it shares with ``ipp-compare`` and
     ``ipp-study`` come from :mod:`ipp_toolkit.runs.cli_flags`."""
@@ -159,20 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "switch the preset's off; the same as --set "
                              "warm_start.planner=NAME); not in the paper "
                              f"({_preset_default('warm_start.planner')})")
-    parser.add_argument("--team-sizes", type=int_list("--team-sizes"), metavar="N,N,...",
-                        help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
-                             "randomisation; not in the paper; "
-                             f"{_preset_default('team_sizes')}: the mission's own)")
-    parser.add_argument("--comm-ranges", type=comm_range_list("--comm-ranges"),
-                        metavar="D,D,...",
-                        help="train on these communication ranges in metres, e.g. 0,25,inf "
-                             f"({_preset_default('comm_ranges')}: the mission's own)")
-    parser.add_argument("--init", metavar="POLICY",
-                        help="start from this COMA policy file instead of a warm start "
-                             "(fine-tuning), or a shipped one: --init shipped:NAME "
-                             f"({', '.join(SHIPPED_POLICIES)}; plain 'shipped': coma's "
-                             "default; default: none, the preset's warm start or random "
-                             "networks)")
+    _add_beyond_paper_flags(parser)
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=VALUE",
                         help="set a feature of the mission config, e.g. --feature "
                              "own_position=true or --feature gain_smoothing=5 (repeatable)")

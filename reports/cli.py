@@ -240,6 +240,21 @@ def _differing_settings(env_config: EnvConfig, reference: EnvConfig, seed: int) 
     return parts
 
 
+def _add_world_flags(parser: argparse.ArgumentParser) -> None:
+    """``ipp-compare``'s flags of the mission's world and length (each over the config's)."""
+    parser.add_argument("--resolution", type=positive_float, default=None,
+                        metavar="METRES",
+                        help="map resolution r_M in metres (default: the config's, else 0.1)")
+    parser.add_argument("--budget", type=positive_int("budget"), default=None, metavar="STEPS",
+                        help="number of steps B (default: the config's, else 15)")
+    parser.add_argument("--area-size", type=positive_float, default=None, metavar="METRES",
+                        help="side of the square area in metres (default: the config's, else 50)")
+    parser.add_argument("--grid-spacing", type=positive_float, default=None, metavar="METRES",
+                        help="distance between waypoints in metres (default: the config's, else "
+                             "5); the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
+                             "waypoints")
+
+
 def _compare_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-compare",
@@ -301,17 +316,7 @@ def _compare_parser() -> argparse.ArgumentParser:
     parser.add_argument("--config", type=Path, default=None, metavar="YAML",
                         help="YAML config: it wins over the defaults, and every flag given "
                              "explicitly wins over it (default: none, the paper's configuration)")
-    parser.add_argument("--resolution", type=positive_float, default=None,
-                        metavar="METRES",
-                        help="map resolution r_M in metres (default: the config's, else 0.1)")
-    parser.add_argument("--budget", type=positive_int("budget"), default=None, metavar="STEPS",
-                        help="number of steps B (default: the config's, else 15)")
-    parser.add_argument("--area-size", type=positive_float, default=None, metavar="METRES",
-                        help="side of the square area in metres (default: the config's, else 50)")
-    parser.add_argument("--grid-spacing", type=positive_float, default=None, metavar="METRES",
-                        help="distance between waypoints in metres (default: the config's, else "
-                             "5); the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
-                             "waypoints")
+    _add_world_flags(parser)
     parser.add_argument("--reference", default=None, metavar="LABEL[,LABEL...]",
                         help="the planners of the summary's paired columns, one column each "
                              "(final entropy minus theirs on the same missions); each named "
