@@ -60,12 +60,12 @@ from .config import (
     nested_fields,
     preset,
 )
-from .learner import TrainingDiverged, train
-from .networks import bfloat16_hardware
-from .parallel import resolve_device
-from .persistence import DEFAULT_SHIPPED, SHIPPED_POLICIES, resolve_policy
 from .recipes import RECIPES, Stage, recipe
-from .validation import validation_settings
+
+# Nothing that imports torch at the top: the learner, networks, files and validation are
+# imported where a run is checked or trained, so the flags, --help and a refused flag answer
+# without torch's import (seconds).
+from .shipped import DEFAULT_SHIPPED, SHIPPED_POLICIES
 
 __all__ = ["TRAINING_DEFAULTS", "PAPER_TRAINING_DEFAULTS", "build_parser", "coerce_value",
            "configs_from_args", "main"]
@@ -93,6 +93,41 @@ def _preset_name(value: str) -> str:
     return value
 
 
+def _preset_default(field: str) -> str:
+    """``default: the preset's`` and each preset's value of COMAConfig ``field`` (a dotted
+    name for a nested one), for --help: the flag's default comes from --preset."""
+    values = {}
+    for name in PRESETS:
+        value: Any = preset(name)
+        for part in field.split("."):
+            value = getattr(value, part)
+        values[name] = ("none" if value in ("", ()) else
+                        ",".join(f"{v:g}" for v in value) if isinstance(value, tuple)
+                        else str(value))
+    if len(set(values.values())) == 1:
+        return f"default: the preset's, {next(iter(values.values()))} in every preset"
+    return "default: the preset's: " + ", ".join(f"{k} {v}" for k, v in values.items())
+
+
+def _add_beyond_paper_flags(parser: argparse.ArgumentParser) -> None:
+    """The training flags beyond the paper's: several team settings (domain randomisation)
+    and a start from a policy (fine-tuning)."""
+    parser.add_argument("--team-sizes", type=int_list("--team-sizes"), metavar="N,N,...",
+                        help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
+                             "randomisation; not in the paper; "
+                             f"{_preset_default('team_sizes')}: the mission's own)")
+    parser.add_argument("--comm-ranges", type=comm_range_list("--comm-ranges"),
+                        metavar="D,D,...",
+                        help="train on these communication ranges in metres, e.g. 0,25,inf "
+                             f"({_preset_default('comm_ranges')}: the mission's own)")
+    parser.add_argument("--init", metavar="POLICY",
+                        help="start from this COMA policy file instead of a warm start "
+                             "(fine-tuning), or a shipped one: --init shipped:NAME "
+                             f"({', '.join(SHIPPED_POLICIES)}; plain 'shipped': coma's "
+                             "default; default: none, the preset's warm start or random "
+                             "networks)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``ipp-train coma``; the flags it shares with ``ipp-compare`` and
     ``ipp-study`` come from :mod:`ipp_toolkit.runs.cli_flags`."""
@@ -106,17 +141,22 @@ def build_parser() -> argparse.ArgumentParser:
                         choices=sorted(set(PRESETS) | set(RECIPES)), default="cpu",
                         help="hyper-parameter preset (default: cpu), or the recipe of a "
                              "shipped policy (its name in coma=shipped:NAME; every stage, "
-                             "see coma/recipes.py)")
-    parser.add_argument("--variant", choices=VARIANTS, help="credit-assignment variant")
+                             "see coma/recipes.py); the flags whose default is the preset's "
+                             "take its value (a recipe: its stages')")
+    parser.add_argument("--variant", choices=VARIANTS,
+                        help=f"credit-assignment variant ({_preset_default('variant')})")
     parser.add_argument("--config", help="YAML mission config (world, team, features, ...) "
                              "over the training defaults (the paper's mission at r_M 0.5 m "
-                             "with features.own_position on); explicit flags win over it")
-    parser.add_argument("--seed", type=int, help="run seed")
+                             "with features.own_position on); explicit flags win over it (default: "
+                             "none)")
+    parser.add_argument("--seed", type=int, help=f"run seed ({_preset_default('seed')})")
     parser.add_argument("--out", required=True, help="run folder")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
     parser.add_argument("--missions", type=positive_int("missions"),
-                        help="training missions in total")
-    parser.add_argument("--width", type=int, help="convolution channels")
+                        help="training missions in total, rounded up to whole updates of "
+                             f"missions_per_update ({_preset_default('missions')})")
+    parser.add_argument("--width", type=int,
+                        help=f"convolution channels ({_preset_default('width')})")
     parser.add_argument("--precision", choices=PRECISIONS,
                         help="what the learning passes compute in (default float32): "
                              "bfloat16 is mixed precision, faster on CPUs with bfloat16 "
@@ -125,7 +165,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--agents", type=positive_int("agents"),
                         help="team size (default: from --config, 4)")
     parser.add_argument("--comm", type=comm_range, metavar="METRES|inf",
-                        help="communication range in metres, or inf")
+                        help="communication range in metres, or inf (default: from "
+                             "--config, 25)")
     parser.add_argument("--terrain", metavar="KIND",
                         help="terrain kind of the training missions, e.g. mixture (default: "
                              "the --config file's, else split)")
@@ -135,18 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warm-start", metavar="PLANNER",
                         help="first imitate this registered planner (e.g. ig; 'none' to "
                              "switch the preset's off; the same as --set "
-                             "warm_start.planner=NAME); not in the paper")
-    parser.add_argument("--team-sizes", type=int_list("--team-sizes"), metavar="N,N,...",
-                        help="train on these team sizes, one per update, e.g. 2,4,8 (domain "
-                             "randomisation; not in the paper)")
-    parser.add_argument("--comm-ranges", type=comm_range_list("--comm-ranges"),
-                        metavar="D,D,...",
-                        help="train on these communication ranges in metres, e.g. 0,25,inf")
-    parser.add_argument("--init", metavar="POLICY",
-                        help="start from this COMA policy file instead of a warm start "
-                             "(fine-tuning), or a shipped one: --init shipped:NAME "
-                             f"({', '.join(SHIPPED_POLICIES)}; plain 'shipped': coma's "
-                             "default)")
+                             "warm_start.planner=NAME); not in the paper "
+                             f"({_preset_default('warm_start.planner')})")
+    _add_beyond_paper_flags(parser)
     parser.add_argument("--feature", action="append", default=[], metavar="NAME=VALUE",
                         help="set a feature of the mission config, e.g. --feature "
                              "own_position=true or --feature gain_smoothing=5 (repeatable)")
@@ -170,6 +202,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _check_compute(args: argparse.Namespace) -> None:
     """Refuse a bad --backend / --address / --device before anything is written
     (ValueError, ImportError or ConnectionError with the message to print)."""
+    from .parallel import resolve_device
+
     check_backend_flags(args.backend, args.address)  # RayUnavailableError names the install
     resolve_device(args.device)
     if args.backend == "ray" and args.address is not None:
@@ -206,6 +240,8 @@ def _changes_from_args(args: argparse.Namespace) -> dict[str, Any]:
     if args.comm_ranges is not None:
         changes["comm_ranges"] = args.comm_ranges
     if args.init is not None:
+        from .persistence import resolve_policy
+
         init = f"shipped:{DEFAULT_SHIPPED}" if args.init == "shipped" else args.init
         changes["init_policy"] = str(resolve_policy(init))
         if not Path(changes["init_policy"]).is_file():
@@ -238,6 +274,8 @@ def stage_configs(args: argparse.Namespace) -> list[tuple[Stage, COMAConfig, Env
     A stage that starts from the previous one gets its ``init_policy`` when it runs (the
     file does not exist yet); ``--init`` replaces the first stage's start.
     """
+    from .persistence import resolve_policy
+
     changes = _changes_from_args(args)
     stages = []
     for k, stage in enumerate(recipe(args.preset)):
@@ -261,6 +299,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``ipp-train coma``: returns 0 on success, 1 on divergence, 2 on bad input."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    from .networks import bfloat16_hardware
+    from .parallel import resolve_device
+    from .validation import validation_settings
+
     try:
         if args.preset in RECIPES:
             stages = stage_configs(args)
@@ -278,6 +320,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, ImportError, ConnectionError) as error:
         print(f"ipp-train coma: error: {error}", file=sys.stderr)
         return 2
+    for note in dict.fromkeys(_rounding_note(config) for _, config, _ in stages):
+        if note:
+            print(f"ipp-train coma: note: {note}", file=sys.stderr)
     if any(config.precision == "bfloat16" for _, config, _ in stages) \
             and bfloat16_hardware(resolve_device(args.device)) is False:
         hardware = "this CPU" if args.device == "cpu" else "this GPU"
@@ -313,6 +358,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     return code
 
 
+def _rounding_note(config: COMAConfig) -> str:
+    """What a run of ``config`` trains when its missions are not whole updates (training
+    flies ``missions_per_update`` missions per update, so it rounds up), else empty: asked
+    for 8, a run trained 50 without a word."""
+    per = config.missions_per_update
+    updates = -(-config.missions // per)
+    if updates * per == config.missions:
+        return ""
+    return (f"{config.missions} training missions are not whole updates of "
+            f"missions_per_update = {per}: training {updates * per} missions ({updates} "
+            f"update{'s' if updates != 1 else ''}); ask for a multiple of {per} (--missions), "
+            "or change --set missions_per_update")
+
+
 class _Failed(Exception):
     """A run that ended with a nonzero exit code (already reported)."""
 
@@ -320,6 +379,8 @@ class _Failed(Exception):
 def _train_stages(args: argparse.Namespace, stages: list[tuple[Stage, COMAConfig, EnvConfig]],
                   folders: list[Path], compute: dict[str, Any]) -> int:
     """Train every stage into its folder; the exit code of :func:`main`."""
+    from .learner import TrainingDiverged, train
+
     try:
         for k, (stage, coma_config, env_config) in enumerate(stages):
             if k > 0 and stage.init == "previous":

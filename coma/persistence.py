@@ -43,23 +43,14 @@ from .config import COMAConfig, from_dict
 from .inputs import critic_channels, value_channels
 from .networks import ConvNet, GainPriorActor
 
+# The shipped policies' names need no torch: ipp-train coma's flags read them from there.
+from .shipped import DEFAULT_SHIPPED, SHIPPED_POLICIES, SHIPPED_POLICY
+
 __all__ = ["CHECKPOINT_KIND", "COMANetworks", "build_networks", "save_policy", "load_policy",
            "check_transfer", "shipped_policy", "resolve_policy", "SHIPPED_POLICIES",
            "DEFAULT_SHIPPED", "SHIPPED_POLICY", "untrained_reason"]
 
 CHECKPOINT_KIND = "ipp-toolkit/coma"
-SHIPPED_POLICY = "coma_4agents_d25.pt"
-#: Shipped policies by name, as in ``coma=shipped:NAME`` and ``--init shipped:NAME``.
-#: ``scratch``: the paper's learner from random networks on the paper's inputs (the
-#: ``scratch`` preset: no imitation, no IG-derived planes or logits).
-#: ``paper-actor``: the paper's actor warm-started by imitating ``ig``, then trained by COMA.
-#: The gain-prior policies that were shipped before (``prior``, ``prior-mixture``,
-#: ``spatial-mixture``, ``learned-mixture``) are refused with a hint
-#: (``ipp_toolkit.planning.REMOVED_NAMES``); their recipes still train them.
-SHIPPED_POLICIES = {"paper-actor": SHIPPED_POLICY, "scratch": "coma_scratch_4agents_d25.pt"}
-#: The shipped policy the ``coma`` planner flies by default: a policy COMA's training moved
-#: (:func:`untrained_reason`), chosen on validation missions (docs/training.md).
-DEFAULT_SHIPPED = "scratch"
 
 
 @dataclass

@@ -17,18 +17,23 @@ from __future__ import annotations
 import argparse
 import csv
 import gc
+import hashlib
 import io
+import json
 import math
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import (
     build_env_config,
     comm_label,
     named_terrain_kinds,
+    safe_name,
     setting_line,
 )
 from ipp_toolkit.env import IPPEnv
@@ -54,16 +59,25 @@ def _simulate_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ipp-simulate",
         allow_abbrev=False,  # a prefix of another flag must not be taken for it
-        description="Fly one mission with random valid actions and report its metrics.",
+        description="Fly one mission with random valid actions and report its metrics. The "
+                    "reward column is the team reward of each step, alpha (H_t - H_t+1) / H_t "
+                    "+ beta, where H is the weighted entropy of the global map (cells believed "
+                    "interesting weigh 1, the others 0) and beta a time penalty (alpha 22, "
+                    "beta -0.5 by default): a step that cuts H by less than -beta / alpha "
+                    "(2.3 %) is rewarded below 0 even while the entropy falls. The entropy "
+                    "column is the mean entropy over the truly interesting cells.",
         formatter_class=HelpFormatter,
     )
     add_version(parser)
-    parser.add_argument("--config", type=Path, help="YAML config (defaults: the paper's)")
+    parser.add_argument("--config", type=Path,
+                        help="YAML config (default: none, the paper's configuration)")
     parser.add_argument("--agents", type=positive_int("agents"),
-                        help="team size (overrides the config)")
+                        help="team size (overrides the config; default: the config's, else 4)")
     parser.add_argument("--comm", type=comm_range,
-                        help="communication range in metres or 'inf' (overrides the config)")
-    parser.add_argument("--resolution", type=positive_float, help="map resolution r_M in metres")
+                        help="communication range in metres or 'inf' (overrides the config; "
+                             "default: the config's, else 25)")
+    parser.add_argument("--resolution", type=positive_float,
+                        help="map resolution r_M in metres (default: the config's, else 0.1)")
     parser.add_argument("--seed", type=int, default=0, metavar="SEED", help="run seed")
     parser.add_argument("--mission", type=int, default=0, help="mission index within the run")
     parser.add_argument("--out", default="results/simulate",
@@ -99,6 +113,24 @@ def simulate_main(argv: list[str] | None = None) -> int:
         return 2
 
 
+def reward_lines(config: EnvConfig) -> list[str]:
+    """What ``ipp-simulate``'s columns are, with ``config``'s reward weights: a random
+    flight's rewards are mostly negative while its entropy falls, which needs saying."""
+    reward = config.reward
+    sign = "-" if reward.beta < 0 else "+"
+    lines = [f"reward = {reward.alpha:g} (H_t - H_t+1) / H_t {sign} {abs(reward.beta):g} per step: "
+             "H is the weighted entropy of the global map",
+             f"  (cells believed interesting, p > 0.5, weigh {reward.weight_interesting:g}, the "
+             f"others {reward.weight_uninteresting:g})"]
+    if reward.beta < 0:
+        lines[-1] += f", {reward.beta:g} a time penalty, so a step"
+        lines.append(f"  that cuts H by less than {-reward.beta / reward.alpha:.1%} is "
+                     "rewarded below 0 even while the entropy falls")
+    lines.append("entropy: mean entropy in bits over the truly interesting cells (1 at the "
+                 "prior)")
+    return lines
+
+
 def _simulate(env: IPPEnv, observations: dict, infos: dict, seed: int,
               targets: tuple[Path, Path]) -> int:
     """Fly ``env``'s mission with random valid actions, print and write its metrics."""
@@ -109,6 +141,7 @@ def _simulate(env: IPPEnv, observations: dict, infos: dict, seed: int,
     config = env.config
     print(f"{config.team.n_agents} UAVs, D = {config.team.comm_range:g} m, "
           f"{config.world.map_cells}^2 map, budget {config.team.budget} steps")
+    print("\n".join(reward_lines(config)))
     print(f"{'step':>4} {'reward':>8} {'entropy':>8} {'f1':>6} {'rmse':>6}")
     print(f"{0:>4} {'':>8} {rows[0]['entropy']:8.3f} {rows[0]['f1']:6.3f} {rows[0]['rmse']:6.3f}")
     while env.agents:
@@ -137,7 +170,89 @@ def _simulate(env: IPPEnv, observations: dict, infos: dict, seed: int,
     return 0
 
 
-DEFAULT_COMPARE_OUT = "results/compare-a{agents}-d{comm}"
+def default_compare_out(env_config: EnvConfig, seed: int, namespace: str,
+                        planners: str) -> str:
+    """``ipp-compare``'s folder when ``--out`` is not given.
+
+    ``results/compare-aN-dD`` for the paper's configuration of N UAVs at range D (seed 0,
+    planners without weight files of their own): rerunning it reuses the stored missions, and
+    other planners flown into it join them. Any other run key (config, seed, the weight files
+    named in ``--planners``) adds the settings that differ and a short hash of the key, e.g.
+    ``results/compare-a4-d25-r0.5-b20-1a2b3c4d``: a folder refuses missions of another
+    configuration, so two configurations must never share a default one.
+    """
+    team = env_config.team
+    stem = "validate" if namespace == "validation" else "compare"
+    name = f"results/{stem}-a{team.n_agents}-d{comm_label(team.comm_range)}"
+    reference = build_env_config(None, agents=team.n_agents, comm=team.comm_range)
+    key = _run_key(env_config, seed, namespace, planners)
+    if key == _run_key(reference, 0, namespace, "default"):
+        return name
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode("utf-8")).hexdigest()
+    return "-".join([name, *_differing_settings(env_config, reference, seed), digest[:8]])
+
+
+def _run_key(env_config: EnvConfig, seed: int, namespace: str, planners: str) -> dict:
+    """What decides whether a folder may take a run's missions (the folder's identity but
+    the toolkit's version, whose change only warns), with each planner that names options
+    (a weight file: its sha256 too, so retrained weights get their own folder)."""
+    from ipp_toolkit.runs.result_store import folder_identity
+
+    from .compare import _requested_specs
+
+    identity = folder_identity(env_config, seed, namespace)
+    identity.pop("version", None)
+    weights = {}
+    for spec in _requested_specs(planners):
+        if spec.options:
+            files = {key: _file_sha256(Path(value)) for key, value in spec.options.items()
+                     if isinstance(value, str) and Path(value).is_file()}
+            weights[spec.effective_label] = {"name": spec.name, "options": spec.options,
+                                             "files": files}
+    return {"run": identity, "planners": weights}
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _differing_settings(env_config: EnvConfig, reference: EnvConfig, seed: int) -> list[str]:
+    """The flag-level settings of ``env_config`` that differ from ``reference`` (the paper's
+    configuration of the team) and a seed other than 0, as words of a folder name."""
+    parts = []
+    terrain = env_config.terrain
+    if (terrain.kind, terrain.raster) != (reference.terrain.kind, reference.terrain.raster):
+        raster = terrain.kind == "raster" and isinstance(terrain.raster, str)
+        parts.append(safe_name(Path(terrain.raster).stem) if raster else terrain.kind)
+    world, base = env_config.world, reference.world
+    for prefix, mine, theirs in (("r", world.resolution, base.resolution),
+                                 ("b", env_config.team.budget, reference.team.budget),
+                                 ("area", world.area_size, base.area_size),
+                                 ("g", world.grid_spacing, base.grid_spacing)):
+        if mine != theirs:
+            parts.append(f"{prefix}{mine:g}")
+    if seed != 0:
+        parts.append(f"seed{seed}")
+    return parts
+
+
+def _add_world_flags(parser: argparse.ArgumentParser) -> None:
+    """``ipp-compare``'s flags of the mission's world and length (each over the config's)."""
+    parser.add_argument("--resolution", type=positive_float, default=None,
+                        metavar="METRES",
+                        help="map resolution r_M in metres (default: the config's, else 0.1)")
+    parser.add_argument("--budget", type=positive_int("budget"), default=None, metavar="STEPS",
+                        help="number of steps B (default: the config's, else 15)")
+    parser.add_argument("--area-size", type=positive_float, default=None, metavar="METRES",
+                        help="side of the square area in metres (default: the config's, else 50)")
+    parser.add_argument("--grid-spacing", type=positive_float, default=None, metavar="METRES",
+                        help="distance between waypoints in metres (default: the config's, else "
+                             "5); the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
+                             "waypoints")
 
 
 def _compare_parser() -> argparse.ArgumentParser:
@@ -177,10 +292,12 @@ def _compare_parser() -> argparse.ArgumentParser:
                              "default: the --config file's, else split")
     parser.add_argument("--threshold", type=finite_float, default=None, metavar="T",
                         help="raster threshold in the raster's units: cells whose mean value "
-                             "is >= T are interesting (required with a terrain FILE)")
+                             "is >= T are interesting (required with a terrain FILE; default: the "
+                             "--config file's)")
     parser.add_argument("--threshold-quantile", type=finite_float, default=None, metavar="Q",
                         help="threshold as a quantile of the values instead (1 - Q of the "
-                             "cells are interesting): a raster FILE, fractal or real")
+                             "cells are interesting): a raster FILE, fractal or real (default: the "
+                             "--config file's)")
     add_compute_flags(parser, workers_type=positive_int("workers"),
                       workers_default=min(2, os.cpu_count() or 1), workers_metavar="N",
                       workers_help="parallel evaluation processes; min(2, CPU count) "
@@ -189,28 +306,22 @@ def _compare_parser() -> argparse.ArgumentParser:
                                    "tasks",
                       address_help=" (its CPUs fly the missions; results are written here, "
                                    "to --out)")
-    parser.add_argument("--out", default=DEFAULT_COMPARE_OUT, metavar="DIR",
+    parser.add_argument("--out", default=None, metavar="DIR",
                         help="output folder; rerunning into it resumes the same configuration "
-                             "and refuses another one")
+                             "and refuses another one (default: results/compare-aN-dD for the "
+                             "paper's configuration of N UAVs at range D; other settings add "
+                             "what differs and a short hash of the run, e.g. "
+                             "results/compare-a4-d25-r0.5-1a2b3c4d, so that no two "
+                             "configurations share a default folder)")
     parser.add_argument("--config", type=Path, default=None, metavar="YAML",
                         help="YAML config: it wins over the defaults, and every flag given "
-                             "explicitly wins over it (None: the paper's configuration)")
-    parser.add_argument("--resolution", type=positive_float, default=None,
-                        metavar="METRES",
-                        help="map resolution r_M in metres (None: the config's, 0.1)")
-    parser.add_argument("--budget", type=positive_int("budget"), default=None, metavar="STEPS",
-                        help="number of steps B (None: the config's, 15)")
-    parser.add_argument("--area-size", type=positive_float, default=None, metavar="METRES",
-                        help="side of the square area in metres (None: the config's, 50)")
-    parser.add_argument("--grid-spacing", type=positive_float, default=None, metavar="METRES",
-                        help="distance between waypoints in metres (None: the config's, 5); "
-                             "the altitudes stay 5/10/15 m, fixed starts snap to the nearest "
-                             "waypoints")
+                             "explicitly wins over it (default: none, the paper's configuration)")
+    _add_world_flags(parser)
     parser.add_argument("--reference", default=None, metavar="LABEL[,LABEL...]",
                         help="the planners of the summary's paired columns, one column each "
                              "(final entropy minus theirs on the same missions); each named "
-                             "one must be flown. Default: ig (the paper's baseline) and "
-                             "ig_spatial (the best heuristic), each where flown")
+                             "one must be flown (default: ig, the paper's baseline, and "
+                             "ig_spatial, the best heuristic, each where flown)")
     parser.add_argument("--namespace", choices=("test", "validation"), default="test",
                         help="fly the held-out test missions, or the validation missions to "
                              "select policies on (the default --out then starts with "
@@ -252,15 +363,11 @@ def compare_main(argv: list[str] | None = None) -> int:
         check_backend_flags(args.backend, args.address)
     except (ValueError, RayUnavailableError) as err:
         return error(err)
-    out = args.out
-    if out == DEFAULT_COMPARE_OUT:
-        out = out.format(agents=env_config.team.n_agents,
-                         comm=comm_label(env_config.team.comm_range))
-        if args.namespace == "validation":
-            out = out.replace("compare-", "validate-")
     try:
+        out = args.out if args.out is not None else default_compare_out(
+            env_config, args.seed, args.namespace, args.planners)
         out_dir = check_out_path(out)  # before Path("") turns into the current folder
-    except ValueError as err:
+    except (ValueError, OSError) as err:
         return error(err)
     print(setting_line(env_config, args.config), file=sys.stderr)
     try:
@@ -333,6 +440,26 @@ def train_main(argv: list[str] | None = None) -> int:
         paths = plot_training(out)
         print(f"training curves: {paths[0]}")
     return code
+
+
+def command_parsers() -> dict[str, Callable[[], argparse.ArgumentParser]]:
+    """The parser builder of every command line, by its name: each console script, each
+    ``ipp-train`` trainer (``ipp-train sb3 --algo PPO`` takes ``ipp-train ppo``'s flags under
+    its own name). What ``--help`` prints; building them imports no torch."""
+    from baselines.field_prior import training as prior
+    from baselines.rllib import training as rllib
+    from baselines.sb3 import ppo_training, training
+    from coma.cli import build_parser as coma_parser
+
+    from .study_cli import _study_parser
+
+    return {"ipp-simulate": _simulate_parser, "ipp-compare": _compare_parser,
+            "ipp-study": _study_parser, "ipp-train coma": coma_parser,
+            "ipp-train ppo": ppo_training._parser,
+            "ipp-train sb3": training._parser,
+            "ipp-train sb3 --algo PPO": lambda: ppo_training._parser(
+                prog="ipp-train sb3 --algo PPO"),
+            "ipp-train prior": prior._parser, "ipp-train rllib": rllib._parser}
 
 
 def _flag_value(argv: list[str], flag: str) -> str | None:

@@ -432,8 +432,8 @@ def compare_planners(agents: int | None = None, comm: float | None = None,
                                namespace, backend, address, pool, drawer)
         if out is not None:
             _record_checkpoints(Path(out), checkpoints, write=True)
-        comparison = Comparison(result=result,
-                                summary=_summary(result, reference, checkpoints))
+            (note or _print_note)(result.reuse_note())  # a rerun that flies nothing says so
+        comparison = Comparison(result, _summary(result, reference, checkpoints))
         if out is not None:
             _write_outputs(comparison, Path(out), drawer.drawn, animate, specs, int(seed))
         return comparison

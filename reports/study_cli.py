@@ -108,7 +108,8 @@ def _study_parser() -> argparse.ArgumentParser:
     parser.add_argument("--failures", type=int_list("--failures", minimum=0), default="0",
                         help="robustness: numbers of UAVs failing at a random step, "
                              "comma-separated (e.g. 0,1; beyond the paper)")
-    parser.add_argument("--trials", type=positive_int("--trials"), default=50)
+    parser.add_argument("--trials", type=positive_int("--trials"), default=50,
+                        help="test missions per setting and planner")
     parser.add_argument("--seed", type=int, default=None,
                         help="run seed of the missions flown (default 0; sweep: "
                              "the validation missions of seed 10000, never a training seed)")
@@ -119,7 +120,9 @@ def _study_parser() -> argparse.ArgumentParser:
                                    "machine, or Ray tasks on one Ray for the whole study",
                       address_help=" (results are written here, to --out, a folder the nodes "
                                    "share for credit/ablation)")
-    parser.add_argument("--resolution", type=positive_float, default=None)
+    parser.add_argument("--resolution", type=positive_float, default=None,
+                        help="map resolution of the missions flown, in metres (default: the "
+                             "paper's 0.1)")
     parser.add_argument("--out", default=None, help="study folder (default results/STUDY)")
     parser.add_argument("--variants", default="coma,central_qv,actor_independent,decentralised",
                         help="credit: variants to train")
@@ -164,8 +167,8 @@ def _add_generalisation_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference", default=None, metavar="LABEL[,LABEL...]",
                         help="generalisation: the planners every other is compared with, "
                              "paired, on the same missions, one set of columns each; each "
-                             "named one must be flown (the figure uses the first). Default: "
-                             "ig and ig_spatial, each where flown")
+                             "named one must be flown (the figure uses the first; default: "
+                             "ig and ig_spatial, each where flown)")
 
 
 def _study(args: argparse.Namespace, out: str, backend: dict[str, str | None], seed: int,

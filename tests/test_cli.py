@@ -51,7 +51,7 @@ def test_help_lists_every_flag_with_its_default(capsys):
         assert flag in text, flag
     for default in ("file's, else 4", "file's, else 25", "(default: default)", "(default: 50)",
                     "(default: 0)", "file's, else split",
-                    "(default: results/compare-a{agents}-d{comm})"):
+                    "(default: results/compare-aN-dD for the paper's configuration"):
         assert default in " ".join(text.split()), default
     # No meaningless defaults: an unset option or a switch says nothing.
     assert "(default: None)" not in text and "(default: False)" not in text
@@ -155,7 +155,9 @@ def test_end_to_end_writes_everything_and_refuses_another_config(capsys, tmp_pat
     monkeypatch.chdir(tmp_path)
     assert compare_main(TINY) == 0
     printed = capsys.readouterr().out
-    out = tmp_path / "results" / "compare-a2-d25"  # the default --out
+    # The default --out: another resolution and budget than the paper's are in its name.
+    out, = (tmp_path / "results").iterdir()
+    assert out.name.startswith("compare-a2-d25-r0.5-b3-")
     for name in ("summary.md", "summary.csv", "summary.tex", "curves.png", "curves.pdf",
                  "results.csv", "config.json", "trajectories/random_mission0.png",
                  "trajectories/random_mission0.pdf", "trajectories/coverage_mission0.png",

@@ -11,6 +11,7 @@ from helpers import tiny_coma, tiny_env
 
 import coma.cli
 import coma.learner
+import coma.networks
 from coma.cli import build_parser, configs_from_args
 from coma.config import COMAConfig, from_dict
 from coma.learner import make_optimisers, to_channels_last, train, update
@@ -115,7 +116,7 @@ def test_a_bfloat16_run_is_reproducible_and_its_policy_flies_in_float32(tmp_path
 @pytest.mark.parametrize("native", [True, False])
 def test_ipp_train_coma_takes_the_precision_flag(tmp_path, monkeypatch, capsys, native):
     # Where the CPU has no bfloat16 instructions, the run says it is likely slower, and runs.
-    monkeypatch.setattr(coma.cli, "bfloat16_hardware", lambda device: native)
+    monkeypatch.setattr(coma.networks, "bfloat16_hardware", lambda device: native)
     out = tmp_path / "run"
     assert train_main(["coma", "--out", str(out), "--missions", "2", "--agents", "2",
                        "--resolution", "1.0", "--precision", "bfloat16",

@@ -78,7 +78,7 @@ def test_a_worker_that_compiled_waits_for_the_others_then_goes_on_alone():
         "start = time.monotonic()\n"
         "compiled = _compile_kernels_together(*values, 2, wait_s=0.5)\n"
         "print(compiled, values[0].value, values[1].value, time.monotonic() - start)\n")
-    runs = []
+    runs, notes = [], []
     with tempfile.TemporaryDirectory() as cache:
         environment = {**os.environ, "NUMBA_CACHE_DIR": cache}
         for _ in range(2):
@@ -86,6 +86,8 @@ def test_a_worker_that_compiled_waits_for_the_others_then_goes_on_alone():
                                   text=True, env=environment, timeout=300, check=False)
             assert done.returncode == 0, done.stderr[-2000:]
             runs.append(done.stdout.split())
+            notes.append(kernels.COMPILE_NOTE in done.stderr)
+    assert notes == [True, False]  # said when it compiles, not when it loads
     total = len(kernels.mission_kernels())
     (compiled, claimed, finished, waited), (cached, claimed_again, _, _) = runs
     assert int(compiled) == total and int(cached) == 0
@@ -100,3 +102,78 @@ def test_one_worker_compiles_on_first_use_as_before():
     finally:
         pool.close()
     assert pool.kernels_claimed.value == 0
+
+
+class _FakeKernel:
+    """A stand-in for a Numba dispatcher: counts its compiles, each a cache miss."""
+
+    def __init__(self, name: str) -> None:
+        self.__name__ = name
+        self.compiled = 0
+        self.stats = type("Stats", (), {"cache_misses": {}})()
+
+    def compile(self, types: tuple) -> None:
+        self.compiled += 1
+        self.stats.cache_misses[types] = 1
+
+
+@pytest.fixture
+def fake_kernels(monkeypatch):
+    """Three fake mission kernels; ``uncached`` names those Numba's cache does not hold."""
+    found = [(_FakeKernel(name), (name,)) for name in ("a", "b", "c")]
+    uncached: set[str] = set()
+    monkeypatch.setattr(kernels, "AVAILABLE", True)
+    monkeypatch.setattr(kernels, "mission_kernels", lambda: found)
+    monkeypatch.setattr(kernels, "cached", lambda kernel, types: kernel.__name__ not in uncached)
+    return found, uncached
+
+
+def test_a_compile_is_announced_once_and_a_load_not_at_all(fake_kernels, capsys):
+    found, uncached = fake_kernels
+    said = []
+    kernels.compile_mission_kernels(announce=lambda: said.append(1))
+    assert said == [] and all(kernel.compiled == 1 for kernel, _ in found)  # all loads
+    uncached.update({"b", "c"})
+    kernels.compile_mission_kernels(announce=lambda: said.append(1))
+    assert said == [1]  # once, before the first kernel that compiles
+    kernels.compile_mission_kernels(announce=kernels.print_compile_note)
+    assert capsys.readouterr().err == kernels.COMPILE_NOTE + "\n"
+
+
+def test_a_pools_workers_say_once_between_them_that_they_compile(fake_kernels, capsys):
+    import multiprocessing
+
+    from ipp_toolkit.runs.process_pool import _compile_kernels_together
+
+    _, uncached = fake_kernels
+    uncached.update({"a", "b", "c"})
+    claimed, finished, announced = (multiprocessing.Value("i", 0) for _ in range(3))
+    for _ in range(2):  # two workers, one after the other here; each takes what is left
+        claimed.value = 0
+        _compile_kernels_together(claimed, finished, 2, wait_s=0.0, announced=announced)
+    assert capsys.readouterr().err.count(kernels.COMPILE_NOTE) == 1
+
+
+@needs_numba
+def test_cached_tells_a_compile_from_a_load(tmp_path):
+    # A one-line kernel in its own module and an empty cache folder: not cached, compiled
+    # (cached in this process), then in a fresh interpreter loaded from the disk cache.
+    (tmp_path / "tiny_kernel.py").write_text(
+        "from numba import njit\n\n\n@njit(cache=True)\ndef add(a, b):\n    return a + b\n")
+    script = ("import sys\n"
+              f"sys.path.insert(0, {str(tmp_path)!r})\n"
+              "from numba import types\n"
+              "import tiny_kernel\n"
+              "from ipp_toolkit._native.kernels import cached\n"
+              "argument_types = (types.int64, types.int64)\n"
+              "before = cached(tiny_kernel.add, argument_types)\n"
+              "tiny_kernel.add.compile(argument_types)\n"
+              "print(before, cached(tiny_kernel.add, argument_types))\n")
+    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    runs = []
+    for _ in range(2):
+        done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                              env=environment, timeout=120, check=False)
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs.append(done.stdout.split())
+    assert runs == [["False", "True"], ["True", "True"]]

@@ -111,7 +111,8 @@ def test_ipp_compare_honours_the_config_file(tmp_path, capsys, monkeypatch,
                          "--workers", "1", "--no-progress"]) == 0
     captured = capsys.readouterr()
     assert "2 UAVs" in captured.err and "D = 0 m" in captured.err and "blobs" in captured.err
-    folder = tmp_path / "results" / "compare-a2-d0"  # named from the file's setting
+    folder, = (tmp_path / "results").iterdir()  # named from the file's setting
+    assert folder.name.startswith("compare-a2-d0-blobs-r1-b2-")
     stored = json.loads((folder / "config.json").read_text())
     env = stored["config"]
     assert env["team"]["n_agents"] == 2 and env["team"]["comm_range"] == 0
@@ -172,11 +173,13 @@ def test_ipp_compare_validation_namespace(tmp_path, capsys, monkeypatch,
     argv = ["--agents", "2", "--resolution", "1.0", "--budget", "2", "--trials", "1",
             "--planners", "random", "--workers", "1", "--no-progress"]
     assert compare_main(argv + ["--namespace", "validation"]) == 0
-    stored = json.loads((tmp_path / "results" / "validate-a2-d25" / "config.json").read_text())
+    folder, = (tmp_path / "results").iterdir()
+    assert folder.name.startswith("validate-a2-d25-r1-b2-")
+    stored = json.loads((folder / "config.json").read_text())
     assert stored["namespace"] == "validation"
-    assert compare_main(argv + ["--namespace", "validation", "--out",
-                                "results/validate-a2-d25", "--seed", "0"]) == 0
-    assert compare_main(argv + ["--namespace", "test", "--out", "results/validate-a2-d25"]) == 2
+    assert compare_main(argv + ["--namespace", "validation", "--out", str(folder),
+                                "--seed", "0"]) == 0
+    assert compare_main(argv + ["--namespace", "test", "--out", str(folder)]) == 2
     assert "namespace" in capsys.readouterr().err
 
 

@@ -485,7 +485,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="later rounds fly ig_learned with its clean-up of likely false "
                              "positives in the last steps (default: the prior's objective "
                              "alone)")
-    parser.add_argument("--config", help="YAML mission config (world, terrain, sensor, ...)")
+    parser.add_argument("--config", help="YAML mission config (world, terrain, sensor, ...; "
+                        "default: none, the paper's mission)")
     parser.add_argument("--terrain", default=None, metavar="KIND",
                         help="terrain of the missions (default: mixture)")
     parser.add_argument("--resolution", type=positive_float, default=None,

@@ -27,26 +27,17 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_checkpoint
 from ipp_toolkit.sim.team import N_ACTIONS
 
+# The algorithms' names need no torch: the command line reads them from train_config.
+from .train_config import RLLIB_ALGORITHMS, canonical_rllib_algo
+
 __all__ = ["RLLIB_POLICY_KIND", "RLLIB_ALGORITHMS", "MASKED_LOGIT", "RLlibArchitecture",
            "canonical_rllib_algo", "MaskedConvPolicy", "RLlibPolicyFile",
            "save_rllib_policy", "load_rllib_policy", "policy_file_of"]
 
 RLLIB_POLICY_KIND = "ipp-toolkit/rllib"
 """Format tag of ``OUT/policy.pt`` written by ``ipp-train rllib``."""
-RLLIB_ALGORITHMS = ("PPO", "APPO", "IMPALA")
-"""The RLlib algorithms ``ipp-train rllib --algo`` trains (RLlib's spelling)."""
 MASKED_LOGIT = -1e9
 """The logit of a masked action: exp() of it is 0 in float32, and it stays finite."""
-
-
-def canonical_rllib_algo(text: str) -> str:
-    """``text`` in RLlib's spelling (any case); ValueError naming it otherwise."""
-    if isinstance(text, str):
-        for algo in RLLIB_ALGORITHMS:
-            if text.strip().lower() == algo.lower():
-                return algo
-    raise ValueError(f"unknown RLlib algorithm {text!r}; supported: "
-                     f"{', '.join(RLLIB_ALGORITHMS)}")
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,23 @@ from ipp_toolkit.config.files import check_same_run, config_from_dict, config_to
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.sim.features import actor_plane_names
 
-from ..sb3.ppo import check_policy_size
-from .policy import canonical_rllib_algo
+from ..sb3.run_config import check_policy_size
 
-__all__ = ["RLlibTrainConfig", "check_sizes", "same_run", "env_record"]
+__all__ = ["RLLIB_ALGORITHMS", "RLlibTrainConfig", "canonical_rllib_algo", "check_sizes",
+           "same_run", "env_record"]
+
+RLLIB_ALGORITHMS = ("PPO", "APPO", "IMPALA")
+"""The RLlib algorithms ``ipp-train rllib --algo`` trains (RLlib's spelling)."""
+
+
+def canonical_rllib_algo(text: str) -> str:
+    """``text`` in RLlib's spelling (any case); ValueError naming it otherwise."""
+    if isinstance(text, str):
+        for algo in RLLIB_ALGORITHMS:
+            if text.strip().lower() == algo.lower():
+                return algo
+    raise ValueError(f"unknown RLlib algorithm {text!r}; supported: "
+                     f"{', '.join(RLLIB_ALGORITHMS)}")
 
 
 @dataclass(frozen=True)

@@ -42,8 +42,7 @@ from ..sb3.ppo_training import (
     mission_config_from_args,
     training_env_config,
 )
-from .policy import RLLIB_ALGORITHMS, canonical_rllib_algo
-from .train_config import RLlibTrainConfig, check_sizes
+from .train_config import RLLIB_ALGORITHMS, RLlibTrainConfig, canonical_rllib_algo, check_sizes
 
 __all__ = ["INSTALL_COMMAND", "RLlibUnavailableError", "RLlibTrainConfig", "require_rllib",
            "train_rllib", "main"]

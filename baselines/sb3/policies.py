@@ -49,6 +49,9 @@ from ipp_toolkit.sim.team import N_ACTIONS
 
 from .ppo import NoOptimizer, SmallCNN, actor_logits, check_policy_size, masked_argmax
 
+# The algorithms' names need no torch: the command lines read them from run_config.
+from .run_config import ALGORITHMS, canonical_algo
+
 __all__ = [
     "ALGORITHMS",
     "ACTOR_CRITIC_ALGORITHMS",
@@ -72,9 +75,6 @@ __all__ = [
     "initial_lstm_states",
 ]
 
-ALGORITHMS = ("PPO", "MaskablePPO", "A2C", "DQN", "QRDQN", "RecurrentPPO", "TRPO", "ARS")
-"""Algorithms ``ipp-train sb3 --algo`` trains and the ``sb3`` planner flies (SB3 spelling):
-every SB3 and sb3-contrib algorithm that takes a discrete action space."""
 ACTOR_CRITIC_ALGORITHMS = ("PPO", "A2C", "MaskablePPO", "TRPO")
 """Algorithms whose policy is an (optionally masked) ``ActorCriticPolicy``."""
 MASKED_ALGORITHMS = ("MaskablePPO",)
@@ -97,26 +97,6 @@ _POLICY_CLASSES: dict[str, type[BasePolicy]] = {
     "TRPO": ActorCriticPolicy,
     "ARS": ARSPolicy,
 }
-_CONTINUOUS_ONLY = ("SAC", "TD3", "DDPG", "TQC", "CROSSQ")
-
-
-def canonical_algo(name: str) -> str:
-    """The SB3 spelling of a supported algorithm name given in any case.
-
-    Raises:
-        ValueError: an unsupported name; the message lists the supported ones.
-    """
-    if isinstance(name, str):
-        for algo in ALGORITHMS:
-            if name.strip().lower() == algo.lower():
-                return algo
-    hint = ""
-    if isinstance(name, str) and name.strip().upper() in _CONTINUOUS_ONLY:
-        hint = f" ({name.strip()} needs continuous actions; the UAVs have 6 discrete ones)"
-    raise ValueError(f"unsupported algorithm {name!r}{hint}; supported: "
-                     f"{', '.join(ALGORITHMS)}")
-
-
 def policy_class(algo: str) -> type[BasePolicy]:
     """The SB3 policy class that ``algo`` trains and the planner rebuilds."""
     return _POLICY_CLASSES[canonical_algo(algo)]

@@ -18,10 +18,7 @@ import argparse
 import shlex
 import sys
 from pathlib import Path
-from typing import Any, Protocol
-
-from sb3_contrib import MaskablePPO
-from stable_baselines3 import PPO
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ipp_toolkit.config.limits import check_mission, check_rollout
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
@@ -32,20 +29,14 @@ from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.sim.team import N_ACTIONS
-from ipp_toolkit.vec import make_sb3_vec_env
 
-from .ppo import (
-    CHECKPOINT_KIND,
-    CHECKPOINTS,
-    TRAINING_KIND,
-    PPOTrainConfig,
-    SB3RunConfig,
-    model_payload,
-    policy_class,
-    policy_kwargs,
-    policy_metadata,
-)
-from .runner import RunFormat, run_sb3_training, same_run_check
+# torch, SB3 and the simulator's SB3 view are imported where a run is built, not here: the
+# flags, --help and a refused flag answer without them (ipp-train sb3 and rllib build their
+# flags from this module too).
+from .run_config import CHECKPOINT_KIND, CHECKPOINTS, TRAINING_KIND, PPOTrainConfig, SB3RunConfig
+
+if TYPE_CHECKING:
+    from .runner import RunFormat
 
 __all__ = ["TrainingWorld", "training_env_config", "train_ppo", "check_training_memory",
            "add_mission_flags", "add_network_flags", "mission_config_from_args",
@@ -73,6 +64,9 @@ def training_env_config(config: TrainingWorld, env_config: EnvConfig) -> EnvConf
 
 
 def _ppo_run_format() -> RunFormat:
+    from .ppo import policy_metadata
+    from .runner import RunFormat
+
     return RunFormat(algo_label="PPO", policy_kind=CHECKPOINT_KIND, training_kind=TRAINING_KIND,
                      metadata=policy_metadata, tb_log_name="ppo")
 
@@ -125,6 +119,11 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         ValueError: bad arguments, an existing run in ``out_dir`` without ``resume``, or a
             checkpoint whose configs differ from the given ones.
     """
+    from ipp_toolkit.vec import make_sb3_vec_env
+
+    from .ppo import model_payload, policy_class, policy_kwargs
+    from .runner import run_sb3_training, same_run_check
+
     if not isinstance(config, PPOTrainConfig):
         raise ValueError(f"config must be a PPOTrainConfig, got {type(config).__name__}")
     if not isinstance(env_config, EnvConfig):
@@ -139,6 +138,9 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
                                 invalid_penalty=config.invalid_penalty)
 
     def make_model(env: Any, env_seed: int, tb_dir: str, done: int) -> Any:
+        from sb3_contrib import MaskablePPO
+        from stable_baselines3 import PPO
+
         cls = MaskablePPO if config.masked else PPO
         return cls(policy_class(config), env, learning_rate=config.lr, n_steps=config.n_steps,
                    batch_size=config.batch_size, n_epochs=config.n_epochs, gamma=config.gamma,
@@ -187,8 +189,9 @@ def add_mission_flags(parser: argparse.ArgumentParser, defaults: SB3RunConfig | 
     """The mission flags every trainer shares (``ipp-train ppo``, ``sb3``, ``rllib``): the env
     file, the run seed and the training world (team size, range, resolution). ``defaults``
     has the fields ``seed``, ``n_agents``, ``comm_range`` and ``resolution``."""
-    parser.add_argument("--config", help="env config YAML (defaults: the paper's world)")
-    parser.add_argument("--seed", type=int, default=defaults.seed)
+    parser.add_argument("--config", help="env config YAML (default: none, the paper's world)")
+    parser.add_argument("--seed", type=int, default=defaults.seed,
+                        help="run seed: the policy's weights, its sampling, the missions")
     parser.add_argument("--agents", type=positive_int("agents"), default=None,
                         help=f"team size N (default: the --config file's, else "
                              f"{defaults.n_agents})")
@@ -258,7 +261,8 @@ def run_config_from_args(args: argparse.Namespace, defaults: SB3RunConfig
 def add_run_flags(parser: argparse.ArgumentParser) -> None:
     """The run-control flags of every SB3 trainer: time limit, resume, progress."""
     parser.add_argument("--time-limit", type=float, default=None, metavar="MINUTES",
-                        help="stop after this many minutes of training and save")
+                        help="stop after this many minutes of training and save (default: none, "
+                             "no limit)")
     parser.add_argument("--resume", action="store_true",
                         help="continue from OUT/checkpoint.pt")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -317,13 +321,15 @@ def _parser(preset: str = "default", prog: str = "ipp-train ppo") -> argparse.Ar
     parser.add_argument("--preset", choices=sorted(PPO_PRESETS), default="default",
                         help="start from these flags: NAME retrains the shipped policy "
                              "ppo=shipped:NAME ('shipped' is 'split'; flags given explicitly "
-                             "win)")
+                             "win); the defaults shown below are the 'default' preset's")
     parser.add_argument("--out", default="runs/ppo", help="output folder (default runs/ppo)")
     parser.add_argument("--n-steps", type=int, default=defaults.n_steps,
                         help="rollout steps per agent slot")
-    parser.add_argument("--batch-size", type=int, default=defaults.batch_size)
-    parser.add_argument("--lr", type=float, default=defaults.lr)
-    parser.add_argument("--ent-coef", type=float, default=defaults.ent_coef)
+    parser.add_argument("--batch-size", type=int, default=defaults.batch_size,
+                        help="mini-batch of each update, in agent-transitions")
+    parser.add_argument("--lr", type=float, default=defaults.lr, help="learning rate (Adam)")
+    parser.add_argument("--ent-coef", type=float, default=defaults.ent_coef,
+                        help="weight of the entropy bonus")
     add_run_config_flags(parser, defaults)
     parser.add_argument("--gain-prior", type=float, default=defaults.gain_prior, metavar="BETA",
                         help="> 0: add the gain planes' expected gain of each option to the "
@@ -355,6 +361,8 @@ def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
         command = shlex.join([*prog.split(), *argv])
     known, _ = _parser(prog=prog).parse_known_args(argv)  # exits 2 on malformed options
     args = _parser(known.preset, prog).parse_args(argv)
+    from .ppo import policy_kwargs
+
     try:
         env_config, run_fields = run_config_from_args(args, PPOTrainConfig())
         hyper = {"n_steps": args.n_steps, "batch_size": args.batch_size, "lr": args.lr,

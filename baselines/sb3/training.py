@@ -30,7 +30,7 @@ import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
@@ -39,26 +39,9 @@ from ipp_toolkit.io import CheckpointError, save_checkpoint
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
 from ipp_toolkit.runs.progress import report_interrupt
 from ipp_toolkit.sim.features import actor_plane_names
-from ipp_toolkit.vec import make_sb3_vec_env
 
-from .policies import (
-    ALGORITHMS,
-    SB3_POLICY_KIND,
-    SB3_TRAINING_KIND,
-    PolicyArchitecture,
-    canonical_algo,
-    policy_class,
-    sb3_policy_kwargs,
-    sb3_policy_metadata,
-)
-from .ppo import (
-    PPOTrainConfig,
-    SB3RunConfig,
-    check_policy_size,
-    config_from_record,
-    config_record,
-    save_policy,
-)
+# The policies (torch), SB3 and the simulator's SB3 view are imported where a model is built:
+# the flags, --help and a refused flag answer without them.
 from .ppo_training import (
     add_run_config_flags,
     add_run_flags,
@@ -68,7 +51,18 @@ from .ppo_training import (
     training_env_config,
 )
 from .ppo_training import main as ppo_main
-from .runner import ReportingARS, RunFormat, run_sb3_training, same_run_check
+from .run_config import (
+    ALGORITHMS,
+    PPOTrainConfig,
+    SB3RunConfig,
+    canonical_algo,
+    check_policy_size,
+    config_from_record,
+    config_record,
+)
+
+if TYPE_CHECKING:
+    from .policies import PolicyArchitecture
 
 __all__ = ["SB3TrainConfig", "ALGORITHM_DEFAULTS", "PPO_ALGORITHMS", "algorithm_class",
            "coerce_hyperparameter", "sb3_model_payload", "make_sb3_model", "save_sb3_policy",
@@ -123,6 +117,8 @@ def algorithm_class(algo: str) -> type:
     """The SB3 / sb3-contrib algorithm class of ``algo`` (any case)."""
     algo = canonical_algo(algo)
     if algo == "ARS":
+        from .runner import ReportingARS
+
         return ReportingARS  # ARS that logs the task metrics
     if algo in ("MaskablePPO", "QRDQN", "RecurrentPPO", "TRPO"):
         import sb3_contrib
@@ -209,6 +205,8 @@ class SB3TrainConfig(SB3RunConfig):
 
     def architecture(self) -> PolicyArchitecture:
         """The policy's network sizes."""
+        from .policies import PolicyArchitecture
+
         options = {name: self.hyperparameters[name] for name in _POLICY_OPTIONS
                    if name in self.hyperparameters}
         return PolicyArchitecture(width=self.width, features_dim=self.features_dim,
@@ -270,6 +268,8 @@ def make_sb3_model(config: SB3TrainConfig, env: Any, seed: int | None = None,
         seed: the model's seed (default ``config.seed``); SB3 also seeds ``env`` with it.
         tensorboard_log: TensorBoard folder, or None.
     """
+    from .policies import policy_class, sb3_policy_kwargs
+
     algo = config.algo
     return algorithm_class(algo)(
         policy_class(algo), env, policy_kwargs=sb3_policy_kwargs(algo, config.architecture()),
@@ -291,6 +291,9 @@ def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
         config: its configuration.
         env_config: the env config it trained on (its features are the policy's planes).
     """
+    from .policies import SB3_POLICY_KIND, sb3_policy_metadata
+    from .ppo import save_policy
+
     _check_rebuildable(model, config)
     if config.algo in PPO_ALGORITHMS:
         return save_policy(path, model, config.to_ppo_config(), env_config, **extra)
@@ -301,7 +304,7 @@ def save_sb3_policy(path: str | Path, model: Any, config: SB3TrainConfig,
 def _check_rebuildable(model: Any, config: SB3TrainConfig) -> None:
     """ValueError unless ``model``'s policy is the one the planner rebuilds from ``config``
     (same class, parameter names and shapes): a file of another policy would not load."""
-    from .policies import build_policy
+    from .policies import build_policy, policy_class
 
     policy = getattr(model, "policy", None)
     shape = tuple(getattr(getattr(model, "observation_space", None), "shape", ()) or ())
@@ -349,6 +352,11 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
         ValueError: bad arguments, an existing run without ``resume``, or a checkpoint of
             other configs.
     """
+    from ipp_toolkit.vec import make_sb3_vec_env
+
+    from .policies import SB3_POLICY_KIND, SB3_TRAINING_KIND, sb3_policy_metadata
+    from .runner import RunFormat, run_sb3_training, same_run_check
+
     if not isinstance(config, SB3TrainConfig):
         raise ValueError(f"config must be an SB3TrainConfig, got {type(config).__name__}")
     if not isinstance(env_config, EnvConfig):
@@ -401,7 +409,7 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
 
 
 def _parser() -> argparse.ArgumentParser:
-    defaults = SB3TrainConfig(algo="A2C")
+    defaults = SB3RunConfig()  # SB3TrainConfig's run fields, without building a policy
     parser = argparse.ArgumentParser(
         prog="ipp-train sb3",
         allow_abbrev=False,  # a prefix of another flag must not be taken for it
@@ -416,7 +424,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="output folder (default runs/sb3-ALGO, lower case)")
     parser.add_argument("--lr", type=float, default=None,
                         help="learning rate (default: the algorithm's, see --set)")
-    parser.add_argument("--gamma", type=float, default=None, help="discount factor")
+    parser.add_argument("--gamma", type=float, default=None,
+                        help="discount factor (default: the algorithm's, see --set)")
     add_run_config_flags(parser, defaults)
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="an algorithm hyper-parameter (repeatable): "

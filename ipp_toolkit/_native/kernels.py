@@ -49,6 +49,7 @@ from __future__ import annotations
 import importlib.util
 import itertools
 import os
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -61,7 +62,8 @@ __all__ = ["AVAILABLE", "find_or_add", "apply_values", "apply_values_with_stats"
            "gain_lookup", "segment_sums", "weighted_segment_sums", "summed_area",
            "path_values", "indexed_segment_sums", "row_differences", "same_bits",
            "sensor_noise",
-           "mission_kernels", "compile_mission_kernels",
+           "mission_kernels", "compile_mission_kernels", "cached", "COMPILE_NOTE",
+           "print_compile_note",
            "REGION_STATS", "N_STATS"]
 
 AVAILABLE = (os.environ.get("IPP_TOOLKIT_NO_NUMBA", "") in ("", "0")
@@ -443,7 +445,36 @@ def mission_kernels() -> list[tuple[Any, tuple[Any, ...]]]:
     ]
 
 
-def compile_mission_kernels(claim: Callable[[], int] | None = None) -> int:
+COMPILE_NOTE = ("note: compiling the simulator's kernels (Numba): they are not in its cache "
+                "yet (a first run, or the toolkit changed); up to a minute, once; later runs "
+                "load them")
+"""What a process says when it starts compiling kernels that Numba's cache does not hold: a
+first run is otherwise silent for that long."""
+
+
+def print_compile_note() -> None:
+    """Print :data:`COMPILE_NOTE` on stderr (an ``announce`` of :func:`compile_mission_kernels`)."""
+    print(COMPILE_NOTE, file=sys.stderr, flush=True)
+
+
+def cached(kernel: Any, argument_types: tuple[Any, ...]) -> bool | None:
+    """Whether compiled ``kernel`` (a Numba dispatcher) for ``argument_types`` is a load, not a
+    compile: compiled in this process already, or in Numba's disk cache for this source, CPU
+    and Numba version. None where this Numba's cache cannot be read that way (its index key
+    and file are Numba internals, read here as Numba 0.60 to 0.68 write them)."""
+    types = tuple(argument_types)
+    try:
+        if types in kernel.overloads:
+            return True
+        cache = kernel._cache
+        key = cache._index_key(types, kernel.targetctx.codegen())
+        return key in cache._cache_file._load_index()
+    except Exception:  # another Numba's internals: cannot tell, so say nothing
+        return None
+
+
+def compile_mission_kernels(claim: Callable[[], int] | None = None,
+                            announce: Callable[[], None] | None = None) -> int:
     """Compile, or load from Numba's cache, the kernels of :func:`mission_kernels` now.
 
     A process calls its kernels' compiler on first use; compiled, each is saved in Numba's
@@ -459,6 +490,9 @@ def compile_mission_kernels(claim: Callable[[], int] | None = None) -> int:
         claim: gives the index (into :func:`mission_kernels`) of the next kernel to take,
             one index per call over all the processes that share it; an index past the end
             means done. None: all of them, in this process.
+        announce: called once, before the first kernel this process takes that Numba's cache
+            does not hold (:func:`cached`), e.g. :func:`print_compile_note`; never when every
+            one is a load.
 
     Returns:
         how many of the kernels this process took had to be compiled (not in Numba's
@@ -471,6 +505,9 @@ def compile_mission_kernels(claim: Callable[[], int] | None = None) -> int:
     compiled = 0
     while (index := claim()) < len(found):
         kernel, argument_types = found[index]
+        if announce is not None and cached(kernel, argument_types) is False:
+            announce()
+            announce = None
         misses = sum(kernel.stats.cache_misses.values())
         kernel.compile(argument_types)
         compiled += sum(kernel.stats.cache_misses.values()) > misses

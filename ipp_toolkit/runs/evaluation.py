@@ -33,6 +33,7 @@ import gc
 import math
 import os
 import time
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from .._native import kernels
 from ..config.limits import check_mission, check_result_rows
 from ..config.schema import EnvConfig, check_int
 from ..config.settings import safe_name
@@ -397,8 +399,17 @@ def _evaluate_claimed(config: EnvConfig, inputs: _Inputs, folder: Path | None, p
             folder, labels, missions, inputs.record, config.team.budget, identity)
     tasks = [(label, mission) for mission in range(missions) for label in labels
              if (label, mission) not in store.done]
+    # Counted per planner for the result: a rerun says what it reused and what it flew.
+    reused = dict(Counter(label for label, _ in store.done))
+    flown = dict(Counter(label for label, _ in tasks))
     n_workers = min(inputs.workers, len(tasks))
     local = backend == "local" and n_workers <= 1
+    if local and tasks:
+        # Compiled (or loaded) ahead, as a pool's workers do, saying so where Numba's cache
+        # does not hold them: a first run is otherwise silent for up to a minute. A kernel
+        # that fails to compile fails the mission that calls it, with its own error.
+        with contextlib.suppress(Exception):
+            kernels.compile_mission_kernels(announce=kernels.print_compile_note)
     runner = _prepare_runner(config, inputs, namespace, tasks, local)
     cluster = None
     if backend == "ray" and tasks:
@@ -414,7 +425,9 @@ def _evaluate_claimed(config: EnvConfig, inputs: _Inputs, folder: Path | None, p
         if cluster is not None:
             cluster.close()
     store.prepare()
-    return _results(config, inputs, store, folder, namespace)
+    result = _results(config, inputs, store, folder, namespace)
+    result.reused, result.flown = reused, flown
+    return result
 
 
 def _prepare_runner(config: EnvConfig, inputs: _Inputs, namespace: str,

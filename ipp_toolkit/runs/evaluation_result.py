@@ -50,6 +50,9 @@ class EvaluationResult:
             metres, ``footprints`` (B + 1, N, 4) int, ``area_size`` and ``resolution`` floats.
         out_dir: the results folder, or None for an in-memory evaluation.
         namespace: the random-stream namespace of the missions.
+        reused: missions per planner label read back from ``out_dir`` (stored by an earlier
+            run) instead of flown; empty for :func:`load_results`.
+        flown: missions per planner label flown by this evaluation.
     """
 
     config: EnvConfig
@@ -59,6 +62,27 @@ class EvaluationResult:
     trajectories: dict[tuple[str, int], dict[str, Any]] = field(default_factory=dict)
     out_dir: Path | None = None
     namespace: str = "test"
+    reused: dict[str, int] = field(default_factory=dict)
+    flown: dict[str, int] = field(default_factory=dict)
+
+    def reuse_note(self) -> str:
+        """One line saying which missions were read back from ``out_dir`` and which were
+        flown, e.g. ``reused 150 stored missions of 3 planners from results/x; flew 0 new``
+        (a rerun of the same settings flies nothing, and should say so); empty without a
+        folder."""
+        if self.out_dir is None:
+            return ""
+        reused, flown = sum(self.reused.values()), sum(self.flown.values())
+
+        def planners(counts: dict[str, int]) -> str:
+            named = [label for label, count in counts.items() if count]
+            listed = f" ({', '.join(named)})" if len(named) <= 4 else ""
+            return f"{len(named)} planner{'s' if len(named) != 1 else ''}{listed}"
+
+        text = (f"reused {reused} stored mission{'s' if reused != 1 else ''}"
+                + (f" of {planners(self.reused)}" if reused else "")
+                + f" from {self.out_dir}; flew {flown} new")
+        return text + (f" of {planners(self.flown)}" if flown else "")
 
     @property
     def missions(self) -> list[int]:

@@ -154,7 +154,7 @@ _COMPILE_WAIT_S = 60.0
 
 
 def _compile_kernels_together(claimed: Any, finished: Any, workers: int,
-                              wait_s: float = _COMPILE_WAIT_S) -> int:
+                              wait_s: float = _COMPILE_WAIT_S, announced: Any = None) -> int:
     """Take a share of the mission kernels to compile; if any had to be compiled, wait for
     the other workers to finish their share.
 
@@ -165,16 +165,26 @@ def _compile_kernels_together(claimed: Any, finished: Any, workers: int,
     start cost about 0.2 s a run). ``claimed`` and ``finished`` are shared integers: the
     next kernel to take, and how many workers are done taking. Returns how many kernels this
     worker compiled. A kernel that fails to compile here fails the mission that calls it,
-    with its own error.
+    with its own error. The first worker to meet a kernel that is not in Numba's cache says
+    so on stderr (:data:`~ipp_toolkit._native.kernels.COMPILE_NOTE`), once for the pool:
+    ``announced`` is a shared flag (None: this worker says it if it compiles).
     """
     def claim() -> int:
         with claimed.get_lock():
             claimed.value += 1
             return claimed.value - 1
 
+    def announce() -> None:
+        if announced is not None:
+            with announced.get_lock():
+                if announced.value:
+                    return
+                announced.value = 1
+        kernels.print_compile_note()
+
     compiled = 0
     with contextlib.suppress(Exception):  # see above: the mission reports it
-        compiled = kernels.compile_mission_kernels(claim)
+        compiled = kernels.compile_mission_kernels(claim, announce)
     with finished.get_lock():
         finished.value += 1
     deadline = time.monotonic() + wait_s
@@ -184,10 +194,12 @@ def _compile_kernels_together(claimed: Any, finished: Any, workers: int,
 
 
 def _init_worker(parent: int, modules: tuple[str, ...],
-                 kernel_share: tuple[Any, Any, int] | None) -> None:
-    """Process-pool initializer: one thread per worker, import ``modules`` ahead, then take
-    a share of the kernels (``kernel_share``: :func:`_compile_kernels_together`'s counters
-    and the number of workers; None: each on first use).
+                 kernel_share: tuple[Any, Any, int, Any] | None) -> None:
+    """Process-pool initializer: one thread per worker, take a share of the kernels
+    (``kernel_share``: :func:`_compile_kernels_together`'s counters, the number of workers
+    and the shared flag of its note; None: each on first use), then import ``modules`` ahead.
+    The kernels first: a first run says that it compiles within seconds of its start, not
+    after the planners' imports (torch, SB3).
 
     Ctrl-C reaches every process of the terminal's group; only the main process handles it
     (it stops the pool), so a worker ignores it instead of printing its own traceback. A
@@ -198,13 +210,14 @@ def _init_worker(parent: int, modules: tuple[str, ...],
     """
     guard_worker(parent)
     prepare_worker_process()
+    if kernel_share is not None:
+        claimed, finished, workers, announced = kernel_share
+        _compile_kernels_together(claimed, finished, workers, announced=announced)
     for module in modules:
         # Ahead of the tasks only: a module that fails to import fails the task that needs
         # it, with the planner's own error.
         with contextlib.suppress(Exception):
             importlib.import_module(module)
-    if kernel_share is not None:
-        _compile_kernels_together(*kernel_share)
 
 
 def _worker_ready() -> None:
@@ -244,8 +257,9 @@ class WorkerPool:
         # One process per worker, each starting with a share of the kernels to compile.
         self.kernels_claimed = context.Value("i", 0)
         self.kernels_finished = context.Value("i", 0)
-        kernel_share = ((self.kernels_claimed, self.kernels_finished, n_workers)
-                        if n_workers > 1 else None)
+        self.kernels_announced = context.Value("i", 0)  # the compile note, said once
+        kernel_share = ((self.kernels_claimed, self.kernels_finished, n_workers,
+                         self.kernels_announced) if n_workers > 1 else None)
         self.executor = concurrent.futures.ProcessPoolExecutor(
             max_workers=n_workers, mp_context=context,
             initializer=_init_worker, initargs=(os.getpid(), tuple(modules), kernel_share))

@@ -3,9 +3,10 @@
 tqdm redraws its bar with carriage returns, which is right on a terminal and floods a log
 file (a run under ``nohup`` or in CI writes thousands of partial lines). :func:`progress_bar`
 gives tqdm on a terminal and, when the stream is not one, a :class:`LineProgress` with the same
-``update`` / ``set_postfix`` / ``close`` calls that prints one line each time another
-``every`` percent is done (and at the end)::
+``update`` / ``set_postfix`` / ``close`` calls that prints one line as it starts, then one
+each time another ``every`` percent is done (and at the end)::
 
+    evaluate: 0% (0/200 missions, 0 s)
     evaluate: 25% (50/200 missions, 12 s)
 """
 
@@ -42,6 +43,10 @@ class LineProgress:
         self.postfix = ""
         self._printed_percent = self._percent()
         self._closed = False
+        if self.n < self.total:
+            # A line at once, where it starts: the first ``every`` percent can take minutes
+            # (a first run compiles, a slow planner's missions), and a log stays empty.
+            self._print()
 
     def _percent(self) -> float:
         return 100.0 * self.n / self.total if self.total else 100.0
