@@ -54,21 +54,23 @@ from ipp_toolkit.belief.field_prior import (
 )
 from ipp_toolkit.belief.interest import interest_smoother
 from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.limits import check_mission
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch, write_json
 from ipp_toolkit.planning import Planner, planner_views
 from ipp_toolkit.runs.cli_flags import comm_range_list, int_list, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import progress_bar, report_interrupt
+from ipp_toolkit.runs.progress import progress_bar, run_reporting
 from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.world.seeding import planner_seed
+from ipp_toolkit.world.terrain import check_raster_file
 
 from ..heuristics.spatial_gain import SpatialGainPlanner
 from .planner import LearnedPriorPlanner
 
-__all__ = ["PriorTrainingConfig", "collect_states", "main", "train_prior"]
+__all__ = ["PriorTrainingConfig", "check_inputs", "collect_states", "main", "train_prior"]
 
 TRAINING_FORMAT = "ipp-toolkit/field-prior-training"
 PRIOR_COMMAND = "ipp-train prior"
@@ -278,13 +280,14 @@ def train_prior(config: PriorTrainingConfig, env_config: EnvConfig, out: str | P
 
     Raises:
         ValueError: ``out`` holds another run, or a run while ``resume`` is False, or nothing
-            to resume.
+            to resume; a mission over a limit (:func:`check_inputs`).
         CheckpointError: a damaged ``last.pt``.
     """
     import torch
 
     torch.set_num_threads(1)
     out = Path(out)
+    check_inputs(config, env_config)
     record = {"command": command, "training": config.to_json(),
               "env": config_to_dict(env_config)}
     with claim(out, PRIOR_COMMAND) as folder:
@@ -292,6 +295,17 @@ def train_prior(config: PriorTrainingConfig, env_config: EnvConfig, out: str | P
         if announce:
             print(announce, file=sys.stderr)
         return _train(config, env_config, out, record, state, progress)
+
+
+def check_inputs(config: PriorTrainingConfig, env_config: EnvConfig) -> None:
+    """Refuse (ValueError naming the value) the missions of any team setting before a run's
+    folder is claimed or anything written: a size over its limit by its estimate (at
+    r_M = 1e-300 m the smoother's tables were built for ever), a raster file that cannot be
+    read or is over a limit by its check (it was refused only at the first mission, leaving
+    a folder no rerun would take)."""
+    for agents, comm in team_settings(config):
+        check_mission(env_config.replace(team={"n_agents": agents, "comm_range": comm}))
+    check_raster_file(env_config.terrain, env_config.world)
 
 
 def _train(config: PriorTrainingConfig, env_config: EnvConfig, out: Path,
@@ -498,7 +512,8 @@ def main(argv: list[str] | None = None) -> int:
     """``ipp-train prior [options]``; 0 on success, 2 on bad input, 130 when interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(argv)
-    try:
+
+    def work() -> int:
         values = {f.name: getattr(args, f.name) for f in fields(PriorTrainingConfig)
                   if f.name not in ("team_sizes", "comm_ranges")}
         config = PriorTrainingConfig(
@@ -510,13 +525,10 @@ def main(argv: list[str] | None = None) -> int:
                            progress=not args.no_progress,
                            command=shlex.join(["ipp-train", "prior", *argv]),
                            announce=setting_line(env_config, args.config))
-    except (ValueError, CheckpointError) as error:
-        print(f"ipp-train prior: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return report_interrupt("ipp-train prior", f"continue with --resume --out {args.out}")
-    print(f"saved {path}")
-    return 0
+        print(f"saved {path}")
+        return 0
+
+    return run_reporting("ipp-train prior", work, f"continue with --resume --out {args.out}")
 
 
 if __name__ == "__main__":
