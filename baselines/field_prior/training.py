@@ -20,7 +20,8 @@ Selection: ``best.pt`` is the network with the lowest cross-entropy on the valid
 recorded so far (re-scored when a round adds states). The Gaussian smoothing's cross-entropy
 on the same states is printed beside it, as the reference to beat.
 
-Files in ``--out``: ``config.json`` (the command, the settings), ``data/`` (the states of
+Files in ``--out``: ``config.json`` (the command, the settings and the sha256 of a raster
+file the terrain reads, checked on ``--resume``), ``data/`` (the states of
 every finished round), ``progress.csv`` (one row per epoch), ``last.pt`` (to ``--resume``
 after an interruption: the network, optimiser, round and epoch) and ``best.pt`` (the prior,
 flown as ``ig_learned=OUT/best.pt``, its record naming the command and validation score).
@@ -62,6 +63,7 @@ from ipp_toolkit.planning import Planner, planner_views
 from ipp_toolkit.runs.cli_flags import comm_range_list, int_list, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
 from ipp_toolkit.runs.progress import progress_bar, run_reporting
+from ipp_toolkit.runs.result_store import check_raster_unchanged, raster_digest
 from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.world.seeding import planner_seed
@@ -280,7 +282,8 @@ def train_prior(config: PriorTrainingConfig, env_config: EnvConfig, out: str | P
 
     Raises:
         ValueError: ``out`` holds another run, or a run while ``resume`` is False, or nothing
-            to resume; a mission over a limit (:func:`check_inputs`).
+            to resume; a mission over a limit (:func:`check_inputs`); a raster file replaced
+            since the run began (named with both sha256 digests).
         CheckpointError: a damaged ``last.pt``.
     """
     import torch
@@ -290,6 +293,9 @@ def train_prior(config: PriorTrainingConfig, env_config: EnvConfig, out: str | P
     check_inputs(config, env_config)
     record = {"command": command, "training": config.to_json(),
               "env": config_to_dict(env_config)}
+    digest = raster_digest(env_config)
+    if digest is not None:
+        record["raster_sha256"] = digest
     with claim(out, PRIOR_COMMAND) as folder:
         state = _open_run(out, record, resume, folder.found - {LOCK_NAME, RECORD_NAME})
         if announce:
@@ -431,6 +437,8 @@ def _open_run(out: Path, record: dict[str, Any], resume: bool, found: frozenset[
             if stored.get(key) != json.loads(json.dumps(record[key])):
                 raise ValueError(f"--resume: the settings differ from the run in {str(out)!r} "
                                  f"(section {key!r}); resume with the run's own flags")
+        check_raster_unchanged(stored.get("raster_sha256"), record.get("raster_sha256"),
+                               record["env"]["terrain"]["raster"], f"run folder {str(out)!r}")
         return load_torch(out / "last.pt", TRAINING_FORMAT)
     if found:
         raise ValueError(f"--out {str(out)!r} exists and is not an empty folder; use --resume "

@@ -155,7 +155,7 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         make_env=make_env, make_model=make_model,
         payload=lambda model: model_payload(model, config, env_cfg),
         check_resume=check_resume, extra_record=extra, progress=progress, resume=resume,
-        time_limit_s=time_limit_s, announce=announce)
+        time_limit_s=time_limit_s, announce=announce, env_config=env_cfg)
 
 
 # --------------------------------------------------------------------------------------------

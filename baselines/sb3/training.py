@@ -393,7 +393,8 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
         payload=lambda model: sb3_model_payload(model, config, env_cfg),
         check_resume=check_resume,
         extra_record={} if command is None else {"command": str(command)},
-        progress=progress, resume=resume, time_limit_s=time_limit_s, announce=announce)
+        progress=progress, resume=resume, time_limit_s=time_limit_s, announce=announce,
+        env_config=env_cfg)
 
 
 # --------------------------------------------------------------------------------------------
