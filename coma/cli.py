@@ -34,7 +34,6 @@ from ipp_toolkit.config.settings import (
     parse_feature_flags,
     setting_line,
 )
-from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.planning import removed_name
 from ipp_toolkit.runs.cli_flags import (
     add_compute_flags,
@@ -47,7 +46,7 @@ from ipp_toolkit.runs.cli_flags import (
     positive_int,
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.runs.progress import run_reporting
 from ipp_toolkit.runs.ray_backend import check_backend_flags, probe
 from ipp_toolkit.runs.run_folder import COMA_COMMAND, check_out_path, claim
 
@@ -299,27 +298,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``ipp-train coma``: returns 0 on success, 1 on divergence, 2 on bad input."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    # ImportError: a planner or Ray that cannot be imported; FileExistsError: --out holds a
+    # run; ConnectionError: no Ray at --address.
+    return run_reporting("ipp-train coma", lambda: _run(args),
+                         f"continue with --resume --out {args.out} (from the last checkpoint)",
+                         errors=(ImportError, FileExistsError, ConnectionError))
+
+
+def _run(args: argparse.Namespace) -> int:
+    """:func:`main` once its flags are parsed; bad input raises (reported by ``main``)."""
     from .networks import bfloat16_hardware
     from .parallel import resolve_device
     from .validation import validation_settings
 
-    try:
-        if args.preset in RECIPES:
-            stages = stage_configs(args)
-        else:
-            stages = [(Stage(args.preset), *configs_from_args(args))]
-        for _, coma_config, env_config in stages:
-            # An invalid team, range or validation terrain fails here, before any writing.
-            validation_settings(coma_config, mission_settings(coma_config, env_config))
-            if coma_config.warm_start.enabled:
-                from ipp_toolkit.planning import planner_factory
+    if args.preset in RECIPES:
+        stages = stage_configs(args)
+    else:
+        stages = [(Stage(args.preset), *configs_from_args(args))]
+    for _, coma_config, env_config in stages:
+        # An invalid team, range or validation terrain fails here, before any writing.
+        validation_settings(coma_config, mission_settings(coma_config, env_config))
+        if coma_config.warm_start.enabled:
+            from ipp_toolkit.planning import planner_factory
 
-                planner_factory(coma_config.warm_start.planner)  # an unknown name fails here
-        _check_compute(args)
-        check_out_path(args.out)  # an empty --out is not the current folder
-    except (ValueError, ImportError, ConnectionError) as error:
-        print(f"ipp-train coma: error: {error}", file=sys.stderr)
-        return 2
+            planner_factory(coma_config.warm_start.planner)  # an unknown name fails here
+    _check_compute(args)
+    check_out_path(args.out)  # an empty --out is not the current folder
     for note in dict.fromkeys(_rounding_note(config) for _, config, _ in stages):
         if note:
             print(f"ipp-train coma: note: {note}", file=sys.stderr)
@@ -337,19 +341,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.backend == "ray":  # one Ray for every stage
                 from ipp_toolkit.runs.ray_backend import session
 
-                try:
-                    stack.enter_context(session(args.address, args.workers))
-                except (ValueError, ConnectionError) as error:
-                    print(f"ipp-train coma: error: {error}", file=sys.stderr)
-                    return 2
+                stack.enter_context(session(args.address, args.workers))
             if len(stages) > 1:
                 # A recipe's folder holds its stages' folders: held as one run, so a second
                 # recipe (or another command) into it is refused before any stage starts.
-                try:
-                    stack.enter_context(claim(args.out, COMA_COMMAND))
-                except ValueError as error:
-                    print(f"ipp-train coma: error: {error}", file=sys.stderr)
-                    return 2
+                stack.enter_context(claim(args.out, COMA_COMMAND))
             code = _train_stages(args, stages, folders, compute)
             if code != 0:
                 raise _Failed(code)  # the claim removes the folder if nothing was written
@@ -378,30 +374,23 @@ class _Failed(Exception):
 
 def _train_stages(args: argparse.Namespace, stages: list[tuple[Stage, COMAConfig, EnvConfig]],
                   folders: list[Path], compute: dict[str, Any]) -> int:
-    """Train every stage into its folder; the exit code of :func:`main`."""
+    """Train every stage into its folder; the exit code of :func:`main` (bad input raises)."""
     from .learner import TrainingDiverged, train
 
-    try:
-        for k, (stage, coma_config, env_config) in enumerate(stages):
-            if k > 0 and stage.init == "previous":
-                coma_config = coma_config.replace(init_policy=str(folders[k - 1] / "best.pt"))
-            # A later stage not begun yet starts afresh; the first one must exist to resume.
-            resume = args.resume and (k == 0 or (folders[k] / "last.pt").exists())
-            if len(stages) > 1:
-                print(f"stage {k + 1}/{len(stages)} ({stage.name}): {folders[k]}",
-                      file=sys.stderr)
+    for k, (stage, coma_config, env_config) in enumerate(stages):
+        if k > 0 and stage.init == "previous":
+            coma_config = coma_config.replace(init_policy=str(folders[k - 1] / "best.pt"))
+        # A later stage not begun yet starts afresh; the first one must exist to resume.
+        resume = args.resume and (k == 0 or (folders[k] / "last.pt").exists())
+        if len(stages) > 1:
+            print(f"stage {k + 1}/{len(stages)} ({stage.name}): {folders[k]}", file=sys.stderr)
+        try:
             result = train(coma_config, env_config, folders[k], resume=resume,
                            progress=not args.no_progress,
                            announce=setting_line(env_config, args.config), **compute)
-    except (FileExistsError, CheckpointError, ValueError, ConnectionError) as error:
-        print(f"ipp-train coma: error: {error}", file=sys.stderr)
-        return 2
-    except TrainingDiverged as error:
-        print(f"ipp-train coma: {error}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return report_interrupt("ipp-train coma", f"continue with --resume --out {args.out} "
-                                "(from the last checkpoint)")
+        except TrainingDiverged as error:  # not bad input: the run failed (exit code 1)
+            print(f"ipp-train coma: {error}", file=sys.stderr)
+            return 1
     criterion = ("worst gap to IG's final entropy" if coma_config.selection == "worst_vs_ig"
                  else "final entropy")
     print(f"trained {result.updates} updates ({result.missions} missions); best validation "

@@ -41,6 +41,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_weights, write_json
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.runs.progress import progress_bar
+from ipp_toolkit.runs.result_store import raster_digest
 from ipp_toolkit.runs.run_folder import COMA_COMMAND, claim
 from ipp_toolkit.sim.features import actor_plane_names, critic_plane_names
 from ipp_toolkit.sim.mission import MissionGeometry
@@ -65,6 +66,7 @@ from .persistence import (
 from .run_files import (
     TrainResult,
     check_counters,
+    check_raster_record,
     read_progress,
     resume_fields,
     saved_update,
@@ -216,7 +218,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
           device: str | torch.device = "cpu", announce: str = "") -> TrainResult:
     """Train COMA (or a variant) and write its run folder.
 
-    The folder gets ``config.json`` (both configs), ``progress.csv`` (one row per update),
+    The folder gets ``config.json`` (both configs, and the sha256 of a raster file the terrain
+    reads, which a resume checks), ``progress.csv`` (one row per update),
     ``tb/`` (TensorBoard), ``last.pt`` (resumable training checkpoint, written every
     ``checkpoint_every`` updates and at the end) and ``best.pt`` (the policy with the lowest
     validation entropy so far).
@@ -259,7 +262,8 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     Raises:
         TrainingDiverged: a loss became non-finite; ``last.pt`` and ``best.pt`` keep the last
             good state.
-        CheckpointError: a checkpoint to resume is corrupt or belongs to another run.
+        CheckpointError: a checkpoint to resume is corrupt or belongs to another run, or the
+            terrain's raster file was replaced since the run began.
         FileExistsError: ``out_dir`` holds a run and ``resume`` is false.
         ValueError: bad ``workers``, ``backend``, ``address`` or ``device`` (e.g. ``cuda``
             where there is none), before anything is written.
@@ -272,8 +276,11 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
     check_workers(workers, backend, address)
     out = Path(out_dir)
     settings, checks, known = _check_missions(coma_config, env_config)
+    raster_sha256 = raster_digest(env_config)  # recorded in config.json, checked on resume
     # Held for the whole run: a second run into the folder is refused, naming this process.
     with claim(out_dir, COMA_COMMAND):  # the given path: an empty one is refused
+        if resume:
+            check_raster_record(out, raster_sha256, env_config.terrain.raster)
         resumable = _check_folder(out, resume, coma_config, env_config)
         if announce:
             print(announce, file=sys.stderr)
@@ -282,7 +289,7 @@ def train(coma_config: COMAConfig, env_config: EnvConfig, out_dir: str | Path,
         with make_workers(spec, workers, backend, address, known) as pool:
             return _train_with(pool, coma_config, env_config, out, resumable, progress,
                                tensorboard, max_updates, warm_start, learner_device, settings,
-                               checks, reference)
+                               checks, reference, raster_sha256)
 
 
 def _check_missions(coma_config: COMAConfig, env_config: EnvConfig
@@ -353,11 +360,11 @@ def _train_with(pool: Workers, coma_config: COMAConfig, env_config: EnvConfig, o
                 tensorboard: bool, max_updates: int | None,
                 warm_start: WarmStartConfig | None, device: torch.device,
                 settings: list[EnvConfig], checks: list[EnvConfig],
-                reference: list[float] | None) -> TrainResult:
+                reference: list[float] | None, raster_sha256: str | None) -> TrainResult:
     """The run of :func:`train` once its inputs are checked: ``pool`` flies the missions of
     the training ``settings`` and the validation ``checks``, the networks learn on
     ``device``; ``resumable`` is the checkpoint to continue from (:func:`_resumable`), if any."""
-    run = _Run(pool, coma_config, env_config, out, settings, checks, reference)
+    run = _Run(pool, coma_config, env_config, out, settings, checks, reference, raster_sha256)
     generator = torch.Generator().manual_seed(coma_config.seed)
     if resumable is not None:
         learning = _Learning(*_resume(resumable, run.last_path, run.csv_path, coma_config,
@@ -402,18 +409,20 @@ class _Run:
     """The steps of a run whose inputs are checked: start, validate, update, checkpoint.
 
     ``pool`` flies the missions of the training ``settings`` and the validation ``checks``;
-    ``reference`` is IG's validation scores with ``selection = worst_vs_ig``, else None.
+    ``reference`` is IG's validation scores with ``selection = worst_vs_ig``, else None;
+    ``raster_sha256`` the digest of the terrain's raster file that ``config.json`` records.
     """
 
     def __init__(self, pool: Workers, coma_config: COMAConfig, env_config: EnvConfig,
                  out: Path, settings: list[EnvConfig], checks: list[EnvConfig],
-                 reference: list[float] | None) -> None:
+                 reference: list[float] | None, raster_sha256: str | None = None) -> None:
         self.pool, self.coma_config, self.env_config = pool, coma_config, env_config
         self.out = out
         self.settings, self.checks, self.reference = settings, checks, reference
         self.last_path, self.best_path = out / "last.pt", out / "best.pt"
         self.csv_path = out / "progress.csv"
         self.budget = env_config.team.budget
+        self.raster_sha256 = raster_sha256  # of the raster file the terrain reads, if any
 
     def criterion(self, scores: dict[str, float]) -> float:
         """What best.pt minimises: the mean final entropy, or the worst gap to IG."""
@@ -441,6 +450,8 @@ class _Run:
         state = {"update": 0, "missions": 0, "transitions": 0, "since_target": 0,
                  "best_entropy": math.inf, "best_update": 0, "wall_s": 0.0}
         run_info: dict[str, Any] = {"coma": cfg.to_dict(), "env": config_to_dict(env_config)}
+        if self.raster_sha256 is not None:
+            run_info["raster_sha256"] = self.raster_sha256
         if self.reference is not None:
             run_info["validation_reference"] = {
                 "planner": "ig", "terrains": [c.terrain.kind for c in self.checks],

@@ -3,7 +3,8 @@
 This module owns ``progress.csv`` (one row per update, the columns :data:`CSV_COLUMNS`:
 :func:`write_progress`, :func:`read_progress` for a resume, read by
 :func:`ipp_toolkit.runs.progress_csv.read_progress_csv`), which configuration fields a
-resumed run must share with its checkpoint (:func:`resume_fields`), and
+resumed run must share with its checkpoint (:func:`resume_fields`), the raster file's sha256
+that ``config.json`` records and a resume checks (:func:`check_raster_record`), and
 :class:`TrainResult`, what :func:`coma.learner.train` returns. The networks' files
 (``last.pt``, ``best.pt``) are written by :mod:`coma.persistence`.
 """
@@ -12,18 +13,20 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ipp_toolkit.io import CheckpointError, atomic_write
 from ipp_toolkit.runs.progress_csv import read_progress_csv
+from ipp_toolkit.runs.result_store import check_raster_unchanged
 
 from .config import COMAConfig
 from .persistence import load_policy
 
 __all__ = ["CSV_COLUMNS", "TrainResult", "write_progress", "read_progress", "resume_fields",
-           "saved_update", "check_counters"]
+           "saved_update", "check_counters", "check_raster_record"]
 
 
 CSV_COLUMNS = ["update", "missions", "transitions", "eps", "return_mean", "final_entropy_mean",
@@ -134,3 +137,19 @@ def saved_update(path: Path) -> str:
     except (CheckpointError, KeyError):
         return "unreadable"
 
+
+def check_raster_record(out: Path, digest: str | None, raster: str | None) -> None:
+    """Refuse (CheckpointError naming the file and both digests) to resume the run in ``out``
+    when its ``config.json`` recorded another sha256 of the raster file ``raster`` than the
+    file's now, ``digest``: the missions would no longer be those the run trained on. A
+    run without a raster file, or whose record is unreadable or predates the digest, is not
+    checked (its checkpoint's own checks still apply)."""
+    if digest is None:
+        return
+    try:
+        record = json.loads((out / "config.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return
+    recorded = record.get("raster_sha256") if isinstance(record, dict) else None
+    check_raster_unchanged(recorded, digest, raster, f"run folder {str(out)!r}",
+                           CheckpointError)

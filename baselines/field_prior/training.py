@@ -20,7 +20,8 @@ Selection: ``best.pt`` is the network with the lowest cross-entropy on the valid
 recorded so far (re-scored when a round adds states). The Gaussian smoothing's cross-entropy
 on the same states is printed beside it, as the reference to beat.
 
-Files in ``--out``: ``config.json`` (the command, the settings), ``data/`` (the states of
+Files in ``--out``: ``config.json`` (the command, the settings and the sha256 of a raster
+file the terrain reads, checked on ``--resume``), ``data/`` (the states of
 every finished round), ``progress.csv`` (one row per epoch), ``last.pt`` (to ``--resume``
 after an interruption: the network, optimiser, round and epoch) and ``best.pt`` (the prior,
 flown as ``ig_learned=OUT/best.pt``, its record naming the command and validation score).
@@ -54,21 +55,24 @@ from ipp_toolkit.belief.field_prior import (
 )
 from ipp_toolkit.belief.interest import interest_smoother
 from ipp_toolkit.config.files import config_to_dict
+from ipp_toolkit.config.limits import check_mission
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch, write_json
 from ipp_toolkit.planning import Planner, planner_views
 from ipp_toolkit.runs.cli_flags import comm_range_list, int_list, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import progress_bar, report_interrupt
+from ipp_toolkit.runs.progress import progress_bar, run_reporting
+from ipp_toolkit.runs.result_store import check_raster_unchanged, raster_digest
 from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
 from ipp_toolkit.sim.driver import fly_missions, start_missions
 from ipp_toolkit.world.seeding import planner_seed
+from ipp_toolkit.world.terrain import check_raster_file
 
 from ..heuristics.spatial_gain import SpatialGainPlanner
 from .planner import LearnedPriorPlanner
 
-__all__ = ["PriorTrainingConfig", "collect_states", "main", "train_prior"]
+__all__ = ["PriorTrainingConfig", "check_inputs", "collect_states", "main", "train_prior"]
 
 TRAINING_FORMAT = "ipp-toolkit/field-prior-training"
 PRIOR_COMMAND = "ipp-train prior"
@@ -278,20 +282,36 @@ def train_prior(config: PriorTrainingConfig, env_config: EnvConfig, out: str | P
 
     Raises:
         ValueError: ``out`` holds another run, or a run while ``resume`` is False, or nothing
-            to resume.
+            to resume; a mission over a limit (:func:`check_inputs`); a raster file replaced
+            since the run began (named with both sha256 digests).
         CheckpointError: a damaged ``last.pt``.
     """
     import torch
 
     torch.set_num_threads(1)
     out = Path(out)
+    check_inputs(config, env_config)
     record = {"command": command, "training": config.to_json(),
               "env": config_to_dict(env_config)}
+    digest = raster_digest(env_config)
+    if digest is not None:
+        record["raster_sha256"] = digest
     with claim(out, PRIOR_COMMAND) as folder:
         state = _open_run(out, record, resume, folder.found - {LOCK_NAME, RECORD_NAME})
         if announce:
             print(announce, file=sys.stderr)
         return _train(config, env_config, out, record, state, progress)
+
+
+def check_inputs(config: PriorTrainingConfig, env_config: EnvConfig) -> None:
+    """Refuse (ValueError naming the value) the missions of any team setting before a run's
+    folder is claimed or anything written: a size over its limit by its estimate (at
+    r_M = 1e-300 m the smoother's tables were built for ever), a raster file that cannot be
+    read or is over a limit by its check (it was refused only at the first mission, leaving
+    a folder no rerun would take)."""
+    for agents, comm in team_settings(config):
+        check_mission(env_config.replace(team={"n_agents": agents, "comm_range": comm}))
+    check_raster_file(env_config.terrain, env_config.world)
 
 
 def _train(config: PriorTrainingConfig, env_config: EnvConfig, out: Path,
@@ -417,6 +437,8 @@ def _open_run(out: Path, record: dict[str, Any], resume: bool, found: frozenset[
             if stored.get(key) != json.loads(json.dumps(record[key])):
                 raise ValueError(f"--resume: the settings differ from the run in {str(out)!r} "
                                  f"(section {key!r}); resume with the run's own flags")
+        check_raster_unchanged(stored.get("raster_sha256"), record.get("raster_sha256"),
+                               record["env"]["terrain"]["raster"], f"run folder {str(out)!r}")
         return load_torch(out / "last.pt", TRAINING_FORMAT)
     if found:
         raise ValueError(f"--out {str(out)!r} exists and is not an empty folder; use --resume "
@@ -499,7 +521,8 @@ def main(argv: list[str] | None = None) -> int:
     """``ipp-train prior [options]``; 0 on success, 2 on bad input, 130 when interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(argv)
-    try:
+
+    def work() -> int:
         values = {f.name: getattr(args, f.name) for f in fields(PriorTrainingConfig)
                   if f.name not in ("team_sizes", "comm_ranges")}
         config = PriorTrainingConfig(
@@ -511,13 +534,10 @@ def main(argv: list[str] | None = None) -> int:
                            progress=not args.no_progress,
                            command=shlex.join(["ipp-train", "prior", *argv]),
                            announce=setting_line(env_config, args.config))
-    except (ValueError, CheckpointError) as error:
-        print(f"ipp-train prior: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return report_interrupt("ipp-train prior", f"continue with --resume --out {args.out}")
-    print(f"saved {path}")
-    return 0
+        print(f"saved {path}")
+        return 0
+
+    return run_reporting("ipp-train prior", work, f"continue with --resume --out {args.out}")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """The settings of one ``ipp-train rllib`` run (:class:`RLlibTrainConfig`) and what its files
 record of them: the checks a resumed run must pass (:func:`same_run`), the env config as
-stored (:func:`env_record`) and the network's size limit (:func:`check_sizes`).
+stored (:func:`env_record`) and the size limits of its missions, batches and network
+(:func:`check_sizes`).
 
 Shared by the command line (:mod:`baselines.rllib.training`, which never imports Ray) and the
 run itself (:mod:`baselines.rllib.run`, which does).
@@ -13,6 +14,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from ipp_toolkit.config.files import check_same_run, config_from_dict, config_to_dict
+from ipp_toolkit.config.limits import check_mission, check_rollout
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.sim.features import actor_plane_names
 
@@ -114,9 +116,17 @@ class RLlibTrainConfig:
 
 
 def check_sizes(config: RLlibTrainConfig, env_cfg: EnvConfig) -> None:
-    """Refuse (before any work) a network whose parameter count exceeds the project's limit."""
-    check_policy_size(len(actor_plane_names(env_cfg.features)), env_cfg.world.grid_points,
-                      config.width, config.features_dim, config.hidden, "an RLlib policy")
+    """Refuse (LimitError, before any work and before Ray is needed) a run over a limit: the
+    simulator copies stepped at once (every runner's, on one machine at worst), one
+    iteration's batch of observations, or a network whose parameter count exceeds it."""
+    check_mission(env_cfg, at_once=max(1, config.num_env_runners) * config.envs_per_runner)
+    channels = len(actor_plane_names(env_cfg.features))
+    check_rollout(float(config.train_batch) * env_cfg.team.n_agents, channels,
+                  env_cfg.world.grid_points,
+                  f"a train batch of {config.train_batch} team steps x {env_cfg.team.n_agents} "
+                  "UAVs")
+    check_policy_size(channels, env_cfg.world.grid_points, config.width, config.features_dim,
+                      config.hidden, "an RLlib policy")
 
 
 

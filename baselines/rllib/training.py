@@ -31,9 +31,8 @@ from pathlib import Path
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
 from ipp_toolkit.extras import install_command, require_extra
-from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.runs.progress import run_reporting
 
 from ..sb3.ppo_training import (
     add_mission_flags,
@@ -173,26 +172,23 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = shlex.join(["ipp-train", "rllib", *argv])
     args = _parser().parse_args(argv)  # exits with status 2 on malformed options
-    try:
+    folder = {"out": args.out or "runs/rllib-ALGO"}
+
+    def work() -> int:
         config, env_config = _config_from_args(args)
-    except ValueError as error:
-        print(f"ipp-train rllib: error: {error}", file=sys.stderr)
-        return 2
-    out = args.out or f"runs/rllib-{config.algo.lower()}"
-    try:
+        out = folder["out"] = args.out or f"runs/rllib-{config.algo.lower()}"
         path = train_rllib(config, env_config, out, address=args.address,
                            progress=not args.no_progress, resume=args.resume,
                            time_limit_s=None if args.time_limit is None
                            else args.time_limit * 60,
                            command=command, announce=setting_line(env_config, args.config))
-    except (ValueError, CheckpointError, ConnectionError) as error:
-        print(f"ipp-train rllib: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return report_interrupt("ipp-train rllib", f"continue with the same command plus "
-                                f"--resume --out {out} (from the last checkpoint)")
-    print(f"saved {path}")
-    return 0
+        print(f"saved {path}")
+        return 0
+
+    return run_reporting("ipp-train rllib", work,
+                         lambda: f"continue with the same command plus --resume --out "
+                                 f"{folder['out']} (from the last checkpoint)",
+                         errors=(ConnectionError,))
 
 
 if __name__ == "__main__":

@@ -23,10 +23,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 from ipp_toolkit.config.limits import check_mission, check_rollout
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 from ipp_toolkit.config.settings import build_env_config, setting_line
-from ipp_toolkit.io import CheckpointError
 from ipp_toolkit.runs.cli_flags import comm_range, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.runs.progress import run_reporting
 from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.sim.team import N_ACTIONS
 
@@ -158,7 +157,7 @@ def train_ppo(config: PPOTrainConfig, env_config: EnvConfig, out_dir: str | Path
         make_env=make_env, make_model=make_model,
         payload=lambda model: model_payload(model, config, env_cfg),
         check_resume=check_resume, extra_record=extra, progress=progress, resume=resume,
-        time_limit_s=time_limit_s, announce=announce)
+        time_limit_s=time_limit_s, announce=announce, env_config=env_cfg)
 
 
 # --------------------------------------------------------------------------------------------
@@ -363,25 +362,26 @@ def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
     args = _parser(known.preset, prog).parse_args(argv)
     from .ppo import policy_kwargs
 
-    try:
+    def work() -> int:
         env_config, run_fields = run_config_from_args(args, PPOTrainConfig())
         hyper = {"n_steps": args.n_steps, "batch_size": args.batch_size, "lr": args.lr,
                  "ent_coef": args.ent_coef, **ppo_overrides(args.set, argv)}
         config = PPOTrainConfig(**run_fields, **hyper, masked=args.masked,
                                 gain_prior=args.gain_prior)
-        policy_kwargs(config, training_env_config(config, env_config))  # validate before work
+        env_cfg = training_env_config(config, env_config)
+        # The missions' size first: an absurd area or resolution is named by this estimate,
+        # not by the network it would also make too large.
+        check_training_memory(env_cfg, config.n_envs, config.n_steps)
+        policy_kwargs(config, env_cfg)  # validate before work
         path = train_ppo(config, env_config, args.out, progress=not args.no_progress,
                          resume=args.resume, announce=setting_line(env_config, args.config),
                          time_limit_s=None if args.time_limit is None else args.time_limit * 60,
                          command=command)
-    except (ValueError, CheckpointError) as error:
-        print(f"{prog}: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return report_interrupt(prog, f"continue with --resume --out {args.out} "
-                                "(from the last checkpoint)")
-    print(f"saved {path}")
-    return 0
+        print(f"saved {path}")
+        return 0
+
+    return run_reporting(prog, work, f"continue with --resume --out {args.out} "
+                         "(from the last checkpoint)")
 
 
 if __name__ == "__main__":

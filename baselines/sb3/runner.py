@@ -8,7 +8,8 @@ does the rest, identically for every algorithm:
 * ``OUT/checkpoint.pt`` (+ ``.json``): the policy's state dict, its optimiser state, the step
   and episode counts and the training seconds, written atomically every
   ``checkpoint_every`` agent-transitions and at the end; ``resume=True`` carries on from it
-  (its configs must match the given ones);
+  (its configs must match the given ones, and a raster file the terrain reads must be the
+  one it began on: its sha256 is recorded in every checkpoint and policy);
 * ``OUT/policy.pt`` (+ ``.json``): the final policy (state dict + records), written atomically;
 * ``OUT/tb/``: TensorBoard logs: SB3's own (``rollout/ep_rew_mean`` counts one episode per
   UAV slot) and the task's, ``rollout/final_entropy`` and ``rollout/final_f1`` of the
@@ -40,6 +41,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import load_torch, save_checkpoint
 from ipp_toolkit.runs.process_pool import limit_blas_threads, retain_freed_memory
 from ipp_toolkit.runs.progress import progress_bar
+from ipp_toolkit.runs.result_store import check_raster_unchanged, raster_digest
 from ipp_toolkit.runs.run_folder import claim
 
 __all__ = ["RunFormat", "run_sb3_training", "progress_callback", "task_metrics_callback",
@@ -192,6 +194,7 @@ def run_sb3_training(
     resume: bool = False,
     time_limit_s: float | None = None,
     announce: str = "",
+    env_config: EnvConfig | None = None,
 ) -> Path:
     """Train (fresh, or resumed from ``out_dir/checkpoint.pt``) and write ``out_dir/policy.pt``.
 
@@ -216,13 +219,16 @@ def run_sb3_training(
         time_limit_s: stop after this many seconds of this call and save what was learnt.
         announce: a line printed to stderr once the run folder is checked, before any work
             (the command line's ``setting:`` line); nothing when empty.
+        env_config: the missions the run trains on: the sha256 of a raster file their terrain
+            reads is recorded in every file (``raster_sha256``) and checked on a resume.
 
     Returns:
         the path of ``policy.pt``.
 
     Raises:
         ValueError: a bad time limit, an existing run without ``resume``, nothing to resume,
-            or a checkpoint whose configs differ (from ``check_resume``).
+            a checkpoint whose configs differ (from ``check_resume``), or a raster file
+            replaced since the run began (named with both digests).
         ipp_toolkit.io.CheckpointError: a corrupt or foreign ``checkpoint.pt``.
     """
     if time_limit_s is not None and (isinstance(time_limit_s, bool)
@@ -232,11 +238,21 @@ def run_sb3_training(
     torch.set_num_threads(1)  # two shared cores: more intra-op threads collapse throughput
     limit_blas_threads()
     retain_freed_memory()  # large freed buffers are reused, not faulted in anew
+    raster = _Raster(None, None) if env_config is None else \
+        _Raster(env_config.terrain.raster, raster_digest(env_config))
     # Held for the whole run: a second run into the folder is refused, naming this process.
     with claim(out_dir, run_format.command) as run:
         return _run_claimed(run.path, run_format, seed, total_timesteps, checkpoint_every,
                             make_env, make_model, payload, check_resume, extra_record,
-                            progress, resume, time_limit_s, announce)
+                            progress, resume, time_limit_s, announce, raster)
+
+
+@dataclass(frozen=True)
+class _Raster:
+    """The raster file a run's terrain reads and its sha256 (None, None: none)."""
+
+    path: str | None
+    sha256: str | None
 
 
 def _restore(model: Any, state: dict[str, Any]) -> None:
@@ -251,26 +267,48 @@ def _restore(model: Any, state: dict[str, Any]) -> None:
     model._episode_num = int(state.get("episodes", 0))
 
 
+def _resume_state(out_dir: Path, run_format: RunFormat,
+                  check_resume: Callable[[dict[str, Any], Path], None], resume: bool,
+                  raster: _Raster) -> dict[str, Any] | None:
+    """The checkpoint to go on from (None: a new run), refused (ValueError) when there is
+    none to resume, when a new run would overwrite one, or when it belongs to another run:
+    other configs (``check_resume``), or another content of the raster file."""
+    ckpt_path = out_dir / "checkpoint.pt"
+    if not resume:
+        if ckpt_path.exists() or (out_dir / "policy.pt").exists():
+            raise ValueError(f"{str(out_dir)!r} already holds a {run_format.algo_label} run; "
+                             "pass resume=True (--resume) or choose another output folder")
+        return None
+    if not ckpt_path.is_file():
+        raise ValueError(f"nothing to resume: {str(ckpt_path)!r} does not exist (drop "
+                         "--resume to start a new run)")
+    state = load_torch(ckpt_path, run_format.training_kind)
+    check_resume(state, ckpt_path)
+    check_raster_unchanged(state.get("raster_sha256"), raster.sha256, raster.path,
+                           f"checkpoint {str(ckpt_path)!r}")
+    return state
+
+
 def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timesteps: int,
                  checkpoint_every: int, make_env: Callable[[int], VecEnv],
                  make_model: Callable[[VecEnv, int, str, int], Any],
                  payload: Callable[[Any], dict[str, Any]],
                  check_resume: Callable[[dict[str, Any], Path], None],
                  extra_record: dict[str, Any] | None, progress: bool, resume: bool,
-                 time_limit_s: float | None, announce: str) -> Path:
+                 time_limit_s: float | None, announce: str, raster: _Raster) -> Path:
     """:func:`run_sb3_training` once ``out_dir`` is claimed."""
     ckpt_path = out_dir / "checkpoint.pt"
     extra_record = dict(extra_record or {})
-    state = None
-    if resume:
-        if not ckpt_path.is_file():
-            raise ValueError(f"nothing to resume: {str(ckpt_path)!r} does not exist (drop "
-                             "--resume to start a new run)")
-        state = load_torch(ckpt_path, run_format.training_kind)
-        check_resume(state, ckpt_path)
-    elif ckpt_path.exists() or (out_dir / "policy.pt").exists():
-        raise ValueError(f"{str(out_dir)!r} already holds a {run_format.algo_label} run; pass "
-                         "resume=True (--resume) or choose another output folder")
+    state = _resume_state(out_dir, run_format, check_resume, resume, raster)
+
+    def file_payload(model: Any) -> dict[str, Any]:
+        """What a checkpoint or policy file holds: the trainer's payload and the raster's
+        digest (in the payload, which a resume reads; so in every JSON record too)."""
+        data = payload(model)
+        if raster.sha256 is not None:
+            data["raster_sha256"] = raster.sha256
+        return data
+
     if announce:
         print(announce, file=sys.stderr)
 
@@ -290,7 +328,7 @@ def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timestep
             return elapsed_before + time.perf_counter() - started
 
         def checkpoint_now() -> None:
-            data = payload(model)
+            data = file_payload(model)
             optimizer = getattr(model.policy, "optimizer", None)
             if optimizer is not None:
                 data["optimizer"] = optimizer.state_dict()
@@ -312,7 +350,7 @@ def _run_claimed(out_dir: Path, run_format: RunFormat, seed: int, total_timestep
             model.learn(total_timesteps=remaining, callback=callbacks,
                         reset_num_timesteps=state is None, tb_log_name=run_format.tb_log_name)
         checkpoint_now()
-        final = payload(model)
+        final = file_payload(model)
         policy_path = out_dir / "policy.pt"
         return save_checkpoint(policy_path, final, run_format.policy_kind,
                                run_format.metadata(final, train_seconds=round(seconds(), 1),

@@ -35,9 +35,9 @@ from typing import TYPE_CHECKING, Any
 from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
-from ipp_toolkit.io import CheckpointError, save_checkpoint
+from ipp_toolkit.io import save_checkpoint
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
-from ipp_toolkit.runs.progress import report_interrupt
+from ipp_toolkit.runs.progress import run_reporting
 from ipp_toolkit.sim.features import actor_plane_names
 
 # The policies (torch), SB3 and the simulator's SB3 view are imported where a model is built:
@@ -401,7 +401,8 @@ def train_sb3(config: SB3TrainConfig, env_config: EnvConfig, out_dir: str | Path
         payload=lambda model: sb3_model_payload(model, config, env_cfg),
         check_resume=check_resume,
         extra_record={} if command is None else {"command": str(command)},
-        progress=progress, resume=resume, time_limit_s=time_limit_s, announce=announce)
+        progress=progress, resume=resume, time_limit_s=time_limit_s, announce=announce,
+        env_config=env_cfg)
 
 
 # --------------------------------------------------------------------------------------------
@@ -482,7 +483,8 @@ def main(argv: list[str] | None = None) -> int:
         return ppo_main(rest + masked, prog=f"ipp-train sb3 --algo {algo}", command=command)
     args = _parser().parse_args(argv)  # exits with status 2 on malformed options
     out = args.out or f"runs/sb3-{algo.lower()}"
-    try:
+
+    def work() -> int:
         env_config, run_fields = run_config_from_args(args, SB3TrainConfig(algo=algo))
         config = SB3TrainConfig(algo=algo, **run_fields,
                                 hyperparameters=_hyperparameters(algo, args))
@@ -491,14 +493,11 @@ def main(argv: list[str] | None = None) -> int:
                          resume=args.resume, announce=setting_line(env_config, args.config),
                          time_limit_s=None if args.time_limit is None else args.time_limit * 60,
                          command=command)
-    except (ValueError, CheckpointError) as error:
-        print(f"ipp-train sb3: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return report_interrupt("ipp-train sb3", f"continue with the same command plus "
-                                f"--resume --out {out} (from the last checkpoint)")
-    print(f"saved {path}")
-    return 0
+        print(f"saved {path}")
+        return 0
+
+    return run_reporting("ipp-train sb3", work, f"continue with the same command plus "
+                         f"--resume --out {out} (from the last checkpoint)")
 
 
 if __name__ == "__main__":

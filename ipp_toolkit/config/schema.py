@@ -20,7 +20,7 @@ import numpy as np
 from .field_types import check_field_types, short_repr
 from .limits import MAX_REWARD_SCALE
 from .starts import START_POSITIONS, fixed_start_waypoints, fixed_starts_fit
-from .terrain_checks import check_blob_lattice, terrain_range
+from .terrain_checks import check_blob_lattice, check_fractal_lattice, terrain_range
 
 __all__ = ["WorldConfig", "SensorConfig", "TerrainConfig", "TeamConfig", "RewardConfig",
            "FeatureConfig", "EnvConfig", "terrain_kinds", "start_for_team_size",
@@ -534,6 +534,7 @@ class EnvConfig:
             _fail("features", "agent_id_scale", self.features.agent_id_scale,
                   f"smaller than the team ({self.team.n_agents} agents)")
         check_blob_lattice(self.terrain, self.world)
+        check_fractal_lattice(self.terrain, self.world)
 
     def replace(self, **sections: Any) -> EnvConfig:
         """Copy with some fields replaced, e.g. ``cfg.replace(team={"n_agents": 8})``.

@@ -1,12 +1,18 @@
 """Checks of terrain fields for :mod:`ipp_toolkit.config.schema`: a range given as a number
-or a pair (:func:`terrain_range`) and the smoothing lattice a ``blobs`` terrain implies,
-bounded before a mission is built.
+or a pair (:func:`terrain_range`) and the lattices the ``blobs`` and ``fractal`` terrains
+imply, bounded before a mission is built.
 
 :func:`ipp_toolkit.world.terrain.blob_field` draws white noise on a lattice in metres (1 m
 spacing, ``blob_scale / 2`` below 2 m), padded by 5 kernel stds on each side, and smooths it
 with an FFT. A ``terrain.blob_scale`` far below a map's cells (1e-6 m, 0.002 m) makes that
 lattice too fine, one far above the map (1e6 m) pads it too wide: either exhausts memory or
 time. :func:`check_blob_lattice` refuses both with the range of ``blob_scale`` the map allows.
+
+:func:`ipp_toolkit.world.families.fractal_field` draws white noise on a periodic lattice of
+1 m spacing twice the area's side and filters it with an FFT: its size follows from
+``world.area_size`` alone (a 20 km area asks for 40,002 x 40,002 nodes, 12.8 GB per array).
+:func:`check_fractal_lattice` refuses an area whose lattice exceeds the same bound, naming
+the largest area the ``fractal`` kind allows.
 """
 
 from __future__ import annotations
@@ -19,13 +25,16 @@ from .field_types import short_repr
 if TYPE_CHECKING:
     from .schema import TerrainConfig, WorldConfig
 
-__all__ = ["BLOB_LATTICE_SPACING", "BLOB_PADDING_SIGMAS", "MAX_LATTICE_NODES",
-           "blob_lattice", "blob_scale_range", "check_blob_lattice", "terrain_range"]
+__all__ = ["BLOB_LATTICE_SPACING", "BLOB_PADDING_SIGMAS", "FRACTAL_LATTICE_SPACING",
+           "MAX_LATTICE_NODES", "blob_lattice", "blob_scale_range", "check_blob_lattice",
+           "check_fractal_lattice", "drawn_kinds", "fractal_area_limit", "fractal_lattice",
+           "terrain_range"]
 
 BLOB_LATTICE_SPACING = 1.0  # metres; finer only when blob_scale is below 2 spacings
 BLOB_PADDING_SIGMAS = 5.0  # padding of the lattice on each side, in kernel stds
+FRACTAL_LATTICE_SPACING = 1.0  # metres: the fractal field ignores r_M
 MAX_LATTICE_NODES = 8192
-"""Nodes per side of the smoothing lattice (8192 x 8192 float64: 512 MiB per array)."""
+"""Nodes per side of a terrain's lattice (8192 x 8192 float64: 512 MiB per array)."""
 
 
 def terrain_range(name: str, value: Any, low: float, high: float,
@@ -76,9 +85,7 @@ def check_blob_lattice(terrain: TerrainConfig, world: WorldConfig) -> None:
     """ValueError naming ``terrain.blob_scale`` and its allowed range when the terrain draws
     ``blobs`` (itself or in its ``mixture``) on a lattice of more than
     :data:`MAX_LATTICE_NODES` nodes per side."""
-    kinds = [kind for kind, _ in terrain.mixture_weights()] if terrain.kind == "mixture" \
-        else [terrain.kind]
-    if "blobs" not in kinds:
+    if "blobs" not in drawn_kinds(terrain):
         return
     if terrain.blob_scale >= 1e15 or world.area_size / terrain.blob_scale >= 1e15:
         nodes = math.inf  # past any lattice, and past math.ceil's ints
@@ -93,3 +100,41 @@ def check_blob_lattice(terrain: TerrainConfig, world: WorldConfig) -> None:
     raise ValueError(f"invalid config: terrain.blob_scale = {terrain.blob_scale!r}: its "
                      f"smoothing lattice would have {nodes:.3g} nodes per side, more than "
                      f"{MAX_LATTICE_NODES} (too fine or too coarse for the map); {where}")
+
+
+def drawn_kinds(terrain: TerrainConfig) -> list[str]:
+    """The kinds a terrain draws missions from: its own, or those of its ``mixture``."""
+    return [kind for kind, _ in terrain.mixture_weights()] if terrain.kind == "mixture" \
+        else [terrain.kind]
+
+
+def fractal_lattice(area_size: float) -> tuple[int, int]:
+    """Nodes covering [0, ``area_size``] and nodes per side of the periodic lattice of a
+    ``fractal`` field (twice as many, so the field does not wrap around inside the area)."""
+    inside = math.ceil(area_size / FRACTAL_LATTICE_SPACING - 1e-9) + 1
+    return inside, 2 * inside
+
+
+def fractal_area_limit() -> float:
+    """The largest ``world.area_size`` (metres) whose ``fractal`` lattice fits
+    :data:`MAX_LATTICE_NODES` per side: 2 (A + 1) <= nodes."""
+    return (MAX_LATTICE_NODES // 2 - 1) * FRACTAL_LATTICE_SPACING
+
+
+def check_fractal_lattice(terrain: TerrainConfig | None, world: WorldConfig) -> None:
+    """ValueError naming ``world.area_size`` and the largest area allowed when the terrain
+    draws ``fractal`` (itself or in its ``mixture``; ``terrain`` None: it does) on a lattice
+    of more than :data:`MAX_LATTICE_NODES` nodes per side; checked before it is allocated."""
+    if terrain is not None and "fractal" not in drawn_kinds(terrain):
+        return
+    area = world.area_size
+    # Past 1e15 lattice steps math.ceil's ints grow without bound: such an area is refused.
+    nodes = math.inf if area / FRACTAL_LATTICE_SPACING >= 1e15 else fractal_lattice(area)[1]
+    if nodes <= MAX_LATTICE_NODES:
+        return
+    raise ValueError(f"invalid config: world.area_size = {area!r}: the fractal terrain's "
+                     f"lattice ({FRACTAL_LATTICE_SPACING:g} m spacing, twice the area's side) "
+                     f"would have {nodes:.6g} nodes per side, more than {MAX_LATTICE_NODES}; "
+                     f"terrain kind 'fractal' (itself or in a mixture) allows an area of up to "
+                     f"{fractal_area_limit():g} m: use a smaller world.area_size or another "
+                     "terrain kind")

@@ -8,17 +8,21 @@ each time another ``every`` percent is done (and at the end)::
 
     evaluate: 0% (0/200 missions, 0 s)
     evaluate: 25% (50/200 missions, 12 s)
+
+How a long command ends early is here too: :func:`report_interrupt` (Ctrl-C) and
+:func:`run_reporting`, the error and interrupt handling every trainer's ``main`` shares.
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from typing import IO, Any
 
 from tqdm import tqdm
 
-__all__ = ["LineProgress", "progress_bar", "report_interrupt"]
+__all__ = ["LineProgress", "progress_bar", "report_interrupt", "run_reporting"]
 
 
 class LineProgress:
@@ -96,3 +100,31 @@ def report_interrupt(tool: str, how_to_continue: str) -> int:
     """
     print(f"\n{tool}: interrupted; {how_to_continue}", file=sys.stderr)
     return 130
+
+
+def run_reporting(tool: str, work: Callable[[], int], how_to_continue: str | Callable[[], str],
+                  errors: tuple[type[BaseException], ...] = ()) -> int:
+    """Run a command's ``work`` and return its exit code, reporting how it ends early alike in
+    every command: bad input as one line ``TOOL: error: MESSAGE`` and exit code 2, never a
+    traceback; Ctrl-C as :func:`report_interrupt` (130).
+
+    Bad input is any ValueError: the limits' ``LimitError`` and a damaged checkpoint's
+    ``CheckpointError`` are ValueErrors, so a limit refused anywhere in the work is reported as
+    a bad flag is.
+
+    Args:
+        tool: the command, e.g. ``ipp-train ppo``.
+        work: the command's work once its flags are parsed; returns its exit code.
+        how_to_continue: the rest of the interrupt's sentence, or a function giving it (called
+            only on an interrupt, so it may name what the work found out, e.g. its folder).
+        errors: more exception types reported as bad input (``ConnectionError``: no Ray at
+            ``--address``; ``FileExistsError``: a folder that holds a run).
+    """
+    try:
+        return work()
+    except (ValueError, *errors) as error:
+        print(f"{tool}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return report_interrupt(tool, how_to_continue if isinstance(how_to_continue, str)
+                                else how_to_continue())

@@ -34,16 +34,17 @@ from ..config.files import config_from_dict, config_to_dict
 from ..config.limits import check_limit
 from ..config.schema import EnvConfig
 from ..config.settings import safe_name
+from ..config.terrain_checks import drawn_kinds
 from ..io import atomic_write, check_regular_file, write_json
 
 if TYPE_CHECKING:
     from ..planning.specs import PlannerSpec
 
 __all__ = ["RESULT_COLUMNS", "EvaluationError", "folder_identity", "read_identity", "check_folder",
-           "check_label", "check_finite_row", "raster_digest", "run_key", "shard_checksum",
-           "shard_path", "trajectory_path", "stored_planners", "read_shard", "read_stored_missions",
-           "write_shard", "write_trajectory", "read_trajectory", "write_results_csv",
-           "read_results_csv"]
+           "check_label", "check_finite_row", "check_raster_unchanged", "raster_digest", "run_key",
+           "shard_checksum", "shard_path", "trajectory_path", "stored_planners", "read_shard",
+           "read_stored_missions", "write_shard", "write_trajectory", "read_trajectory",
+           "write_results_csv", "read_results_csv"]
 
 RESULT_COLUMNS = ("planner", "agents", "comm", "terrain", "seed", "mission", "step",
                   "entropy", "f1", "rmse", "reward", "plan_ms")
@@ -80,18 +81,35 @@ def folder_identity(config: EnvConfig, seed: int, namespace: str) -> dict[str, A
 def raster_digest(config: EnvConfig) -> str | None:
     """The sha256 of the raster file the terrain reads (``raster``, or a ``mixture`` with
     it), so that a folder refuses missions of another content under the same file name;
-    None when no raster file is read. ValueError/OSError naming an unreadable file."""
+    None when no raster file is read. ValueError naming a file that cannot be read."""
     terrain = config.terrain
-    kinds = [kind for kind, _ in terrain.mixture_weights()] if terrain.kind == "mixture" \
-        else [terrain.kind]
-    if "raster" not in kinds or not isinstance(terrain.raster, str):
+    if "raster" not in drawn_kinds(terrain) or not isinstance(terrain.raster, str):
         return None
-    check_regular_file(terrain.raster, "terrain.raster")
     digest = hashlib.sha256()
-    with open(terrain.raster, "rb") as file:
-        for block in iter(lambda: file.read(1 << 20), b""):
-            digest.update(block)
+    try:
+        check_regular_file(terrain.raster, "terrain.raster")
+        with open(terrain.raster, "rb") as file:
+            for block in iter(lambda: file.read(1 << 20), b""):
+                digest.update(block)
+    except OSError as err:  # bad input, as the terrain's own read reports it
+        raise ValueError(f"cannot read raster file {terrain.raster!r}: "
+                         f"{err.strerror or err}") from None
     return digest.hexdigest()
+
+
+def check_raster_unchanged(recorded: Any, current: str | None, raster: Any, where: str,
+                           error: type[ValueError] = ValueError) -> None:
+    """Refuse (``error`` naming the file and both digests) to go on with a run or folder
+    ``where`` that recorded the sha256 ``recorded`` of its raster file ``raster`` when the
+    file's is now ``current`` (:func:`raster_digest`): the file was replaced since, and the
+    missions it makes are not those the run began on. Nothing to compare (no raster file, or
+    a record written before digests were) passes."""
+    if recorded is None or current is None or recorded == current:
+        return
+    raise error(f"{where} was made with another content of the raster file "
+                f"{raster!r} (sha256 {str(recorded)[:64]}, the file's is now "
+                f"{current}): the file was replaced since; use the file it was made with, or "
+                "another folder")
 
 
 def _flat_differences(old: Any, new: Any, prefix: str) -> list[str]:
@@ -187,13 +205,9 @@ def check_folder(folder: Path, identity: dict[str, Any],
 def _check_raster(folder: Path, stored: Mapping[str, Any], identity: Mapping[str, Any]) -> None:
     """Refuse a folder made with another content of the same raster file (a folder written
     before the digest was recorded is not checked)."""
-    old, new = stored.get("raster_sha256"), identity.get("raster_sha256")
-    if old is not None and new is not None and old != new:
-        raster = identity["config"]["terrain"]["raster"]
-        raise EvaluationError(
-            f"out_dir {str(folder)!r} holds results of another content of the raster file "
-            f"{raster!r} (sha256 {str(old)[:12]}..., the file's now {new[:12]}...): the file "
-            "was replaced since; use another folder or the file it was made with")
+    check_raster_unchanged(stored.get("raster_sha256"), identity.get("raster_sha256"),
+                           identity["config"]["terrain"]["raster"], f"out_dir {str(folder)!r}",
+                           EvaluationError)
 
 
 _MAX_LABEL_BYTES = 120  # of the file-name stem; trajectories add "_mission<k>.png"

@@ -30,12 +30,12 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..config.schema import TerrainConfig, WorldConfig
+from ..config.terrain_checks import FRACTAL_LATTICE_SPACING, check_fractal_lattice, fractal_lattice
 from .registry import RASTER_FOLDER, raster_manifest, real_raster_names
 from .terrain import _bilinear_weights, generate_terrain, register_terrain, resample_area_average
 
@@ -45,7 +45,6 @@ __all__ = ["RealRaster", "real_rasters", "real_raster_names", "real_crop", "frac
 DEFAULT_THRESHOLD_QUANTILE = (0.4, 0.9)
 """Quantile range of ``fractal`` and ``real`` when ``terrain.threshold_quantile`` is unset."""
 
-_FRACTAL_SPACING = 1.0  # lattice spacing in metres: the field ignores r_M
 _MIN_VALID_SHARE = 0.5  # a map cell is data when at least half of it lies on data pixels
 _MAX_ATTEMPTS = 50
 
@@ -105,8 +104,10 @@ def fractal_field(exponent: float, world: WorldConfig, rng: np.random.Generator)
     f^(-exponent / 2) (the mean removed) and read bilinearly at the cell centres of one
     quadrant, so the field does not wrap around inside the area.
     """
-    inside = math.ceil(world.area_size / _FRACTAL_SPACING - 1e-9) + 1
-    nodes = 2 * inside
+    # A WorldConfig alone does not know its terrain, so the EnvConfig's check may not have
+    # run (generate_terrain called directly): refuse an oversized lattice before allocating.
+    check_fractal_lattice(None, world)
+    nodes = fractal_lattice(world.area_size)[1]
     noise = rng.standard_normal((nodes, nodes))
     fy = np.fft.fftfreq(nodes)[:, np.newaxis]
     fx = np.fft.rfftfreq(nodes)[np.newaxis, :]
@@ -114,7 +115,7 @@ def fractal_field(exponent: float, world: WorldConfig, rng: np.random.Generator)
     radius[0, 0] = np.inf  # no mean
     spectrum = np.fft.rfft2(noise) * radius ** (-exponent / 2.0)
     field = np.fft.irfft2(spectrum, s=noise.shape)
-    centres = (np.arange(world.map_cells) + 0.5) * world.resolution / _FRACTAL_SPACING
+    centres = (np.arange(world.map_cells) + 0.5) * world.resolution / FRACTAL_LATTICE_SPACING
     weights = _bilinear_weights(centres, nodes)
     return weights @ field @ weights.T
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..config.limits import LimitError, check_raster_cells, check_resampling
 from ..config.schema import NAN_POLICIES, TerrainConfig, WorldConfig
-from ..config.terrain_checks import blob_lattice
+from ..config.terrain_checks import blob_lattice, drawn_kinds
 from . import registry
 from .registry import (
     ENTRY_POINT_GROUP,
@@ -52,6 +52,7 @@ __all__ = [
     "prepare_raster",
     "resample_area_average",
     "resampled_raster",
+    "check_raster_file",
 ]
 
 TerrainGenerator = Callable[
@@ -484,6 +485,15 @@ def resampled_raster(path: str | os.PathLike[str], shape: tuple[int, int],
     entry = _file_entry(path, shape, nan_policy)
     _warn_if_stretched(entry, repr(os.fspath(path)), stacklevel=2)
     return entry.values.copy()
+
+
+def check_raster_file(config: TerrainConfig, world: WorldConfig) -> None:
+    """Read and resample the raster file a terrain draws from (kind ``raster``, or a
+    ``mixture`` with it) onto the map of ``world``, so that a run refuses a file that cannot
+    be read or is over a limit (ValueError naming it) before it writes anything, not at its
+    first mission; the result is cached for the missions. Nothing to do without a file."""
+    if "raster" in drawn_kinds(config) and config.raster is not None:
+        _file_entry(config.raster, (world.map_cells, world.map_cells), config.nan_policy)
 
 
 @register_terrain("raster")
