@@ -9,6 +9,11 @@ default):
   ``Box(-1, 1, (C, G, G), float32)`` planes alone, which SuperSuit's observation wrappers
   (``black_death_v3``, ``frame_stack_v1``, ``normalize_obs_v0``, ``flatten_v0``, ...) take,
   and the mask is in ``info["action_mask"]`` ((6,) int8) and :meth:`IPPEnv.action_mask`.
+  With ``features.observation = "rllib"`` it is the layout of RLlib's action-masking
+  examples (its ``ActionMaskingTorchRLModule``): ``Dict(observations=Box(-1, 1, (C*G*G,),
+  float32), action_mask=Box(0, 1, (6,), int8))``, the same planes flattened (RLlib's
+  default encoders take a flat ``Box``) and the same mask (int8, as Gymnasium's masked
+  ``sample`` and PettingZoo's API test want it; that module's log of it is a float).
 * infos: flat, numeric and with the same keys at reset and at every step (so TorchRL's
   ``PettingZooWrapper`` and BenchMARL can turn them into tensors): ``step`` (int),
   ``blocked`` (bool, held back by the same-target rule this step), ``invalid_action`` (bool,
@@ -101,8 +106,8 @@ class IPPEnv(ParallelEnv):
         invalid_action: what a masked action does: ``hold`` (default: the UAV stays for the
             step, ``info["invalid_action"]`` is True) or ``raise`` (an ``InvalidActionError``,
             for strict use). A config that says ``team.invalid_action="hold"`` holds either way.
-        observation: ``dict`` or ``box`` (see the module docstring); None (default): the
-            config's ``features.observation``.
+        observation: ``dict``, ``box`` or ``rllib`` (see the module docstring); None
+            (default): the config's ``features.observation``.
     """
 
     metadata = {"name": "ipp_v0", "render_modes": ["human", "rgb_array"],
@@ -141,8 +146,15 @@ class IPPEnv(ParallelEnv):
             raise ValueError(f"observation must be one of {OBSERVATION_KINDS}, got "
                              f"{self.observation_kind!r}")
         planes = spaces.Box(-1.0, 1.0, (len(actor_plane_names(features)), g, g), dtype=np.float32)
-        self._observation_space = planes if self.observation_kind == "box" else spaces.Dict({
-            "observation": planes, "action_mask": spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8)})
+        if self.observation_kind == "box":
+            self._observation_space: spaces.Space = planes
+        else:
+            mask = spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8)
+            self._observation_space = spaces.Dict({"observation": planes, "action_mask": mask}) \
+                if self.observation_kind == "dict" else spaces.Dict({
+                    "observations": spaces.Box(-1.0, 1.0, (int(np.prod(planes.shape)),),
+                                               dtype=np.float32),
+                    "action_mask": mask})
         self._action_space = spaces.Discrete(N_ACTIONS)
         self.state_space = spaces.Box(0.0, 1.0, (len(state_plane_names(features)), g, g),
                                       dtype=np.float32)
@@ -266,6 +278,10 @@ class IPPEnv(ParallelEnv):
         planes[~self.mission.alive] = 0.0  # a failed UAV observes nothing
         if self.observation_kind == "box":
             return {agent: planes[self._index[agent]] for agent in agents}
+        if self.observation_kind == "rllib":
+            return {agent: {"observations": planes[self._index[agent]].reshape(-1),
+                            "action_mask": masks[self._index[agent]]}
+                    for agent in agents}
         return {agent: {"observation": planes[self._index[agent]],
                         "action_mask": masks[self._index[agent]]} for agent in agents}
 

@@ -16,7 +16,12 @@ longer takes. :func:`make_torchrl_env` builds the env so that neither happens:
   ``("uav", "action_mask")`` at every step; the caller's transforms follow it. TorchRL's
   ``RandomPolicy`` (a collector's ``policy=None``) samples from a copy of the action spec
   made when the collector starts; here every copy of the UAVs' action spec is that spec
-  itself, so random collection follows the masks too.
+  itself, so random collection follows the masks too;
+* ``parallel=True`` batches the copies in a ``ParallelEnv`` that completes the nesting of the
+  tensordicts a collector resets it with (see :func:`_complete_resets`): TorchRL's own
+  crashes on them (``TypeError: Multiple dispatch failed for 'torch.Tensor.copy_'``), since
+  the observation key ``("uav", "observation", "observation")`` nests a leaf under a
+  sub-tensordict of the same name.
 
 Keys (group ``uav``, N agents): ``("uav", "observation", "observation")`` (C, G, G) planes,
 ``("uav", "action_mask")`` (6,) bool, ``("uav", "action")``, ``("uav", "reward")``,
@@ -92,11 +97,35 @@ def make_torchrl_env(config: ConfigLike = None, *, num_envs: int = 1, seed: int 
     if num_envs == 1:
         base = makers[0]()
     else:
-        base = (envs.ParallelEnv if parallel else envs.SerialEnv)(num_envs, makers, device=device)
+        base = (_complete_resets(envs) if parallel else envs.SerialEnv)(num_envs, makers,
+                                                                         device=device)
     mask = _following_action_mask(envs)
     env = envs.TransformedEnv(base, envs.Compose(mask, *transforms))
     mask.action_spec  # noqa: B018  (makes the spec follow the masks before any collector)
     return env
+
+
+def _complete_resets(envs: Any) -> type:
+    """TorchRL's ``ParallelEnv``, resettable with a partial tensordict (a collector's).
+
+    A collector resets with ``{"_reset", "uav": {}}``. ``ParallelEnv._reset`` copies it into
+    its shared buffers with tensordict's ``apply_(..., default=None)``, which stands in for
+    a missing sub-tensordict with an empty copy of the *parent* level: under
+    ``("uav", "observation")`` that stand-in holds ``observation`` as a sub-tensordict where
+    the buffer holds the planes, and ``Tensor.copy_(TensorDict)`` raises. Given every
+    sub-tensordict of the buffers (empty where the caller had none), it finds no stand-in
+    to make; the leaves sent to the workers are the caller's alone, as before.
+    """
+
+    class CompleteResetParallelEnv(envs.ParallelEnv):
+        def _reset(self, tensordict: Any, **kwargs: Any) -> Any:
+            if tensordict is not None and not tensordict.is_empty():
+                full = self.shared_tensordict_parent.empty(recurse=True)
+                full.update(tensordict)
+                tensordict = full
+            return super()._reset(tensordict, **kwargs)
+
+    return CompleteResetParallelEnv
 
 
 def _following_action_mask(envs: Any) -> Any:

@@ -42,7 +42,7 @@ def test_the_box_observation_is_the_planes_with_the_mask_in_the_infos():
         parallel_api_test(IPPEnv(BOX), num_cycles=20)
     with pytest.raises(ValueError, match=r"features.observation = 'image'"):
         EnvConfig().replace(features={"observation": "image"})
-    with pytest.raises(ValueError, match=r"observation must be one of \('dict', 'box'\)"):
+    with pytest.raises(ValueError, match=r"observation must be one of \('dict', 'box', 'rllib'\)"):
         IPPEnv(BOX, observation="image")
 
 

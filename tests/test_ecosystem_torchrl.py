@@ -1,5 +1,6 @@
-"""TorchRL collectors with ``policy=None`` follow the masks; the MAPPO example's policy flies
-as the ``torchrl`` planner."""
+"""TorchRL collectors with ``policy=None`` or a random policy follow the masks, over one copy,
+serial copies and worker processes (``parallel=True``); the MAPPO example's policy flies as the
+``torchrl`` planner."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ pytest.importorskip("torchrl", reason="torchrl is not installed (optional extra 
 
 from torchrl.collectors import Collector  # noqa: E402
 from torchrl.envs import FlattenObservation  # noqa: E402
+from torchrl.envs.utils import RandomPolicy  # noqa: E402
 
 from ipp_toolkit.torchrl_env import GROUP, make_torchrl_env  # noqa: E402
 
@@ -38,6 +40,32 @@ def test_a_collector_without_a_policy_draws_only_valid_actions(num_envs):
         assert drawn == 2 * 120 * num_envs
     finally:
         collector.shutdown()  # closes the env too
+
+
+@pytest.mark.slow  # about 50 s: two worker processes start and import the toolkit
+def test_collectors_over_worker_processes_draw_only_valid_actions():
+    # TorchRL's ParallelEnv crashed on a collector's first reset (a partial tensordict under
+    # the nested ("uav", "observation", "observation") key), with or without a policy.
+    torch.manual_seed(0)
+    env = make_torchrl_env(SMALL, num_envs=2, seed=0, parallel=True, invalid_action="raise")
+    try:
+        for policy in (None, RandomPolicy(env.full_action_spec)):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # TorchRL's notes on its own defaults
+                collector = Collector(env, policy=policy, frames_per_batch=60,
+                                      total_frames=120)
+            drawn = 0
+            for batch in collector:
+                actions = batch[GROUP, "action"].unsqueeze(-1)
+                masks = batch[GROUP, "action_mask"]
+                assert not masks.all()  # some actions were masked: the check below has teeth
+                assert masks.gather(-1, actions).all()
+                drawn += actions.numel()
+            # 120 frames of 2 UAVs, past the resets of the 15-step missions.
+            assert drawn == 2 * 120
+            collector.shutdown(close_env=False)
+    finally:
+        env.close(raise_if_closed=False)  # the last collector may have closed it
 
 
 def test_the_mappo_actor_is_saved_and_flies_as_the_torchrl_planner(tmp_path):

@@ -79,12 +79,14 @@ def test_config_round_trips_and_refuses_unknown_keys() -> None:
 
 
 def test_default_imports_leave_ray_alone() -> None:
-    code = ("import sys, baselines.rllib.planner, baselines.rllib.training, reports.cli; "
+    code = ("import sys, baselines.rllib.planner, baselines.rllib.training, "
+            "baselines.rllib.env_config, reports.cli; "
             "loaded = [m for m in sys.modules if m == 'ray' or m.startswith('ray.')]; "
             "assert not loaded, loaded")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
 
 
+@pytest.mark.rllib
 @pytest.mark.parametrize("algo", ["PPO", "APPO", "IMPALA"])
 def test_an_iteration_is_one_train_batch_for_every_algorithm(algo: str) -> None:
     # APPO and IMPALA default to iterations of at least 10 s (min_time_s_per_iteration):
@@ -137,6 +139,7 @@ def test_planner_refuses_missing_and_foreign_files(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.rllib
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None
                     or importlib.util.find_spec("ray.rllib") is None,
                     reason="needs ray[rllib] (pip install -c constraints-rllib.txt -e .[rllib])")
@@ -165,6 +168,7 @@ def test_one_iteration_on_a_local_ray_flies_through_ipp_compare(
 
 
 @pytest.mark.slow
+@pytest.mark.rllib
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None
                     or importlib.util.find_spec("ray.rllib") is None,
                     reason="needs ray[rllib] (pip install -c constraints-rllib.txt -e .[rllib])")

@@ -1,12 +1,21 @@
 """What ``ipp-train rllib`` hands to RLlib: the multi-agent env, the masked RLModule, the
-episode callback. Imports Ray: only :mod:`baselines.rllib.training` imports this module, and
-only once Ray is known to be importable.
+episode callback. Imports Ray: the command line imports this module only once Ray is known
+to be importable; the default install never does.
+
+Importing it registers the env with RLlib (``register_env``) as :data:`ENV_NAME`
+(``ipp_toolkit_multi_agent``), so ``PPOConfig().environment("ipp_toolkit_multi_agent",
+env_config={...})`` and ``Algorithm.from_checkpoint(RUN/checkpoint)`` find it, as RLlib's
+docs show for custom envs (a checkpoint of ``ipp-train rllib`` imports it itself: its
+RLModule's class lives here).
 
 * :class:`IPPMultiAgentEnv`: :class:`ipp_toolkit.env.IPPEnv` as an RLlib ``MultiAgentEnv``.
-  Each UAV is one agent (``uav_0`` ...); all map to the one shared policy
-  (:data:`SHARED_POLICY`). Every agent gets the team reward. Seeding: copy ``v`` of env
-  runner ``w`` flies missions 0, 1, 2, ... of run ``base_seed + w * envs_per_runner + v``
-  (``base_seed`` is the run seed plus the agent-steps done before a resume).
+  Each UAV is one agent (``uav_0`` ...); ``ipp-train rllib`` maps all to the one shared
+  policy (:data:`SHARED_POLICY`). Every agent gets the team reward. Its ``env_config``
+  (every key has a default; :mod:`baselines.rllib.env_config`): ``env``, ``observation``,
+  ``base_seed``, ``envs_per_runner``, ``invalid_action``. Seeding: copy ``v`` of env runner
+  ``w`` flies missions 0, 1, 2, ... of run ``base_seed + w * envs_per_runner + v``
+  (``ipp-train rllib``'s ``base_seed`` is the run seed plus the agent-steps done before a
+  resume).
 * :class:`IPPMaskedRLModule`: a ``TorchRLModule`` around
   :class:`baselines.rllib.policy.MaskedConvPolicy` (the conv encoder of the (C, 11, 11)
   planes, masked logits, a value head); it implements the ``ValueFunctionAPI`` (PPO, APPO,
@@ -22,6 +31,7 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
+from ray._private import worker as ray_worker
 from ray.rllib.callbacks.callbacks import RLlibCallback
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.utils import make_target_network
@@ -32,10 +42,11 @@ from ray.rllib.core.rl_module.apis import (
 )
 from ray.rllib.core.rl_module.torch import TorchRLModule
 from ray.rllib.env.multi_agent_env import MultiAgentEnv
+from ray.tune.registry import register_env
 
-from ipp_toolkit.config.files import config_from_dict
 from ipp_toolkit.env import IPPEnv
 
+from .env_config import ENV_NAME, env_settings
 from .policy import MaskedConvPolicy, RLlibArchitecture
 
 __all__ = ["SHARED_POLICY", "ENV_NAME", "IPPMultiAgentEnv", "make_env", "IPPMaskedRLModule",
@@ -43,8 +54,6 @@ __all__ = ["SHARED_POLICY", "ENV_NAME", "IPPMultiAgentEnv", "make_env", "IPPMask
 
 SHARED_POLICY = "shared"
 """The id of the one policy (RLModule) every UAV maps to."""
-ENV_NAME = "ipp_toolkit_multi_agent"
-"""The name the env is registered under with Ray's Tune registry."""
 
 _COPIES: dict[int, itertools.count] = defaultdict(itertools.count)
 """Per env-runner index: env copies made in this process so far (their vector index)."""
@@ -54,19 +63,23 @@ class IPPMultiAgentEnv(MultiAgentEnv):
     """:class:`ipp_toolkit.env.IPPEnv` as an RLlib multi-agent env (see the module docstring).
 
     Args:
-        env_config: RLlib's env config: ``env`` (an :func:`~ipp_toolkit.config.files.
-            config_to_dict` dict), ``base_seed`` (int), ``envs_per_runner`` (int); the
-            runner's ``worker_index`` is read from it when it is an ``EnvContext``.
+        env_config: RLlib's env config (:mod:`baselines.rllib.env_config`: ``env``,
+            ``observation``, ``base_seed``, ``envs_per_runner``, ``invalid_action``; each
+            has a default, so ``{}`` or None is the paper's mission); the runner's
+            ``worker_index`` is read from it when it is an ``EnvContext``.
+
+    Raises:
+        ValueError: an unknown key (named) or a bad value.
     """
 
-    def __init__(self, env_config: Any) -> None:
+    def __init__(self, env_config: Any = None) -> None:
         super().__init__()
+        settings = env_settings(env_config)
         worker = int(getattr(env_config, "worker_index", 0) or 0)
         copy = next(_COPIES[worker])
-        self.run_seed = (int(env_config["base_seed"])
-                         + worker * int(env_config["envs_per_runner"]) + copy)
-        # The masked RLModule reads the Dict observation, whatever features.observation says.
-        self.env = IPPEnv(config_from_dict(env_config["env"]), observation="dict")
+        self.run_seed = settings.base_seed + worker * settings.envs_per_runner + copy
+        self.env = IPPEnv(settings.env, observation=settings.observation,
+                          invalid_action=settings.invalid_action)
         self.possible_agents = list(self.env.possible_agents)
         self.agents = list(self.possible_agents)
         self.observation_spaces = {a: self.env.observation_space(a) for a in self.agents}
@@ -102,9 +115,26 @@ def make_env(env_config: Any) -> IPPMultiAgentEnv:
     return IPPMultiAgentEnv(env_config)
 
 
+def _register() -> None:
+    register_env(ENV_NAME, make_env)
+
+
+# At import, as RLlib's docs register a custom env: a script (or Algorithm.from_checkpoint)
+# names it by its string; Ray sends the registration to its workers once it starts.
+_register()
+# Ray keeps a registration in the running cluster only, so after ray.shutdown() the next
+# ray.init() of this process (a second run, a resume) would no longer know the name. Ray's own
+# registry flushes through the same hooks at every ray.init(); register again there.
+# The hook list is private to Ray (pinned by the extra); without it, runs still register in
+# algorithm_config().
+_HOOKS = getattr(ray_worker, "_post_init_hooks", None)
+if isinstance(_HOOKS, list):
+    _HOOKS.append(_register)
+
+
 class IPPMaskedRLModule(TorchRLModule, ValueFunctionAPI, TargetNetworkAPI):
     """The shared policy: :class:`MaskedConvPolicy` over the Dict observation
-    ``{"observation": (C, G, G), "action_mask": (6,)}``.
+    ``{"observation": (C, G, G), "action_mask": (6,)}`` (the env's ``observation="dict"``).
 
     ``model_config``: ``width``, ``features_dim``, ``hidden`` (the sizes of
     :class:`~baselines.rllib.policy.RLlibArchitecture`).

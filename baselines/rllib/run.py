@@ -50,11 +50,16 @@ def algorithm_config(config: RLlibTrainConfig, env_cfg: EnvConfig, base_seed: in
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
     from ray.tune.registry import register_env
 
+    # Again, with Ray's public call: .module registers at import and at every ray.init()
+    # through a private hook of Ray's, which a later Ray may lack.
     register_env(ENV_NAME, make_env)
     config_class = {"PPO": PPOConfig, "APPO": APPOConfig, "IMPALA": IMPALAConfig}[config.algo]
     rl_config = (
         config_class()
-        .environment(ENV_NAME, env_config={"env": env_record(env_cfg), "base_seed": base_seed,
+        # The Dict observation, whatever features.observation says: IPPMaskedRLModule reads
+        # the planes and the mask from it.
+        .environment(ENV_NAME, env_config={"env": env_record(env_cfg), "observation": "dict",
+                                           "base_seed": base_seed,
                                            "envs_per_runner": config.envs_per_runner},
                      disable_env_checking=True)
         .framework("torch")

@@ -71,7 +71,8 @@ def train_rllib(config: RLlibTrainConfig, env_config: EnvConfig, out_dir: str | 
         config: algorithm, length, sizes and resources.
         env_config: the mission configuration (team size, range and resolution are
             ``config``'s).
-        out_dir: the run folder (created).
+        out_dir: the run folder (created); a relative one is taken from the working
+            directory.
         address: a Ray cluster (``HOST:PORT`` as printed by ``ray start --head``, or
             ``auto``); None starts a local Ray with ``num_env_runners + 1`` CPUs.
         progress: show a progress bar over iterations.
@@ -107,7 +108,10 @@ def train_rllib(config: RLlibTrainConfig, env_config: EnvConfig, out_dir: str | 
     require_rllib()
     from . import run as rllib_run  # imports Ray
 
-    return rllib_run.run(config, env_cfg, Path(out_dir), address=address, progress=progress,
+    # Absolute from here on: RLlib takes a relative checkpoint path for a URI and refuses it
+    # ("URI has empty scheme") at the first checkpoint, after the first iterations.
+    out = Path(out_dir).expanduser().resolve()
+    return rllib_run.run(config, env_cfg, out, address=address, progress=progress,
                          resume=resume, time_limit_s=time_limit_s, command=command,
                          announce=announce)
 

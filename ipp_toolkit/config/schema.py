@@ -30,7 +30,7 @@ REAL_SOURCES = ("mission", "train", "validation", "test", "all")
 DEFAULT_MIXTURE = (("split", 1.0), ("blobs", 1.0), ("fractal", 1.0), ("real", 1.0))
 NAN_POLICIES = ("raise", "min", "max", "mean")
 _NO_QUANTILE = ("split", "split-axis", "blobs")  # kinds that draw their own share
-OBSERVATION_KINDS = ("dict", "box")  # IPPEnv's observation per agent (features.observation)
+OBSERVATION_KINDS = ("dict", "box", "rllib")  # IPPEnv's observation (features.observation)
 
 
 def check_int(name: str, value: Any, minimum: int) -> int:
@@ -443,8 +443,10 @@ class FeatureConfig:
             (``false_positive_steps``); 0 (default): at every step.
         agent_id_scale: the id plane holds (id + 1) / agent_id_scale, so a policy trained with
             N agents reads valid ids for any team of up to this many agents.
-        observation: ``IPPEnv``'s per-agent observation: ``dict`` (planes and mask) or ``box``
-            (the planes alone; the mask in ``info["action_mask"]``).
+        observation: ``IPPEnv``'s per-agent observation: ``dict`` (planes and mask),
+            ``box`` (the planes alone; the mask in ``info["action_mask"]``) or ``rllib``
+            (RLlib's action-masking layout: ``observations``, the planes flattened, and
+            ``action_mask``).
     """
 
     budget: bool = True
