@@ -8,7 +8,7 @@ Importing ``baselines.rllib.module`` registers the env as ``ipp_toolkit_multi_ag
 "action_mask": floats}``), and ``invalid_action: raise``: a masked action stops the run, so a
 finished run shows that no masked action was sampled. Every UAV maps to one shared module.
 
-    python examples/06_rllib_action_masking.py --iterations 5 --out runs/rllib-masking
+    python examples/06_rllib_action_masking.py --iterations 5
 
 Needs the optional RLlib extra (docs/rllib.md): pip install -c constraints-rllib.txt -e
 ".[rllib]". ``--quick`` trains 2 small iterations (the test suite runs it).
@@ -79,7 +79,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--train-batch", type=int, default=512,
                         help="team steps sampled per iteration")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default="runs/rllib-masking")
+    parser.add_argument("--out", default="examples-output/06_rllib_action_masking",
+                        help="folder of the checkpoint (default: %(default)s)")
     parser.add_argument("--quick", action="store_true", help="2 iterations of 64 team steps")
     args = parser.parse_args(argv)
     iterations, train_batch = (2, 64) if args.quick else (args.iterations, args.train_batch)

@@ -65,7 +65,8 @@ def _argument_default(example: Path, flag: str) -> object:
     return None
 
 
-WRITERS = ["02_uav_advantages.py", "04_real_terrain.py", "05_torchrl_mappo.py"]
+WRITERS = ["02_uav_advantages.py", "04_real_terrain.py", "05_torchrl_mappo.py",
+           "06_rllib_action_masking.py"]
 
 
 @pytest.mark.parametrize("name", sorted(p.name for p in EXAMPLES.glob("*.py")))
@@ -78,6 +79,8 @@ def test_an_example_that_writes_files_names_its_own_folder(name, monkeypatch, ca
     assert default == f"examples-output/{Path(name).stem}"
     if name == "05_torchrl_mappo.py":
         pytest.importorskip("torchrl", reason="torchrl is not installed (optional extra)")
+    if name == "06_rllib_action_masking.py":
+        pytest.importorskip("ray.rllib", reason="RLlib is not installed (optional extra)")
     monkeypatch.setenv("COLUMNS", "300")  # argparse would break the path at its hyphen
     with pytest.raises(SystemExit) as exit_:
         run_example(name, ["--help"], monkeypatch, capsys)

@@ -11,7 +11,7 @@ import ipp_toolkit
 ROOT = Path(ipp_toolkit.__file__).parent
 #: Rank of each top-level part of the package; a module may import its own rank or lower.
 LAYERS = {
-    "probability": 0, "io": 0, "_native": 0, "extras": 0,
+    "probability": 0, "io": 0, "_native": 0, "extras": 0, "plugins": 0,
     "config": 1,
     "world": 2,
     "belief": 3,
