@@ -200,20 +200,8 @@ def default_planners(note: Callable[[str], None] | None = None,
 
 
 def _current_planners() -> list[str]:
-    """Every registered planner but deprecated aliases (``--planners all``)."""
-    import warnings
-
-    names = []
-    for name in available_planners():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            try:
-                if getattr(planner_factory(name), "deprecated", ""):
-                    continue
-            except ImportError:
-                pass
-        names.append(name)
-    return names
+    """Every registered planner (``--planners all``)."""
+    return list(available_planners())
 
 
 def resolve_planners(planners: str | Sequence[str | PlannerSpec] | None,

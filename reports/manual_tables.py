@@ -16,7 +16,6 @@ the test suite until the table is written again. The run folders go to
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import re
 import sys
@@ -28,7 +27,7 @@ from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.settings import build_env_config
 from ipp_toolkit.io import atomic_write
 
-from .compare import DEFAULT_PLANNERS
+from .compare import DEFAULT_PLANNERS, planner_checkpoints
 
 __all__ = ["TABLES", "TITLES", "table_config", "current_checkpoints", "write_table",
            "read_record", "stale_reasons", "main"]
@@ -58,13 +57,10 @@ def table_config(name: str) -> dict[str, Any]:
 def current_checkpoints(planners: Sequence[str] = DEFAULT_PLANNERS) -> dict[str, str]:
     """``{planner: sha256}`` of the weights each planner flies by default (those with any)."""
     from ipp_toolkit.planning import make_planner
+    from ipp_toolkit.planning.specs import PlannerSpec
 
-    found = {}
-    for name in planners:
-        path = getattr(make_planner(name), "checkpoint", None)
-        if path is not None and Path(path).is_file():
-            found[name] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    return found
+    built = [(PlannerSpec(name), make_planner(name)) for name in planners]
+    return {label: entry["sha256"] for label, entry in planner_checkpoints(built).items()}
 
 
 def write_table(name: str, docs: Path, workers: int = 2, progress: bool = True) -> Path:
