@@ -2,6 +2,10 @@
 
 * No dated log lines and no raw CSVs: measurements with dates live in the research record
   (``experiments/``), which the manual points to but never depends on.
+* No measured-results tables outside ``docs/results/`` (written by ``python -m
+  reports.manual_tables`` from the current defaults): a table row with a ``mean ± SE``
+  value, a cell that is a timing, or two final-entropy-like scores (``0.389``) belongs in the
+  research record, with a sentence of what it showed in the manual.
 * MkDocs cannot link outside ``docs/``: a page points at the README, the record or a source
   file by its repository path in code format, not by a relative link; and every page of
   ``docs/`` is in the site's navigation (``mkdocs.yml``), so the strict build has nothing to
@@ -49,6 +53,63 @@ def test_the_date_pattern_finds_log_dates_only():
     assert ISO_DATE.search("measured 2026-12-02 on a 2-core VM")
     assert ISO_DATE.search("(2026-11)")
     assert not ISO_DATE.search("--team-sizes 2,4,8 and 1,738,016 agent-transitions, 0.2026")
+
+
+# Tables of measured results, outside the generated ones
+GENERATED = ("results", "reference")  # docs/results/: python -m reports.manual_tables
+PLUS_MINUS = re.compile(r"\d\s*±\s*[+-]?\d")
+TIMING_CELL = re.compile(r"~?(?:about )?\d[\d.,]*(?:\s*\[[^\]]*\])?\s*(?:ms|s|min)")
+SCORE_CELL = re.compile(r"[+-]?\d+\.\d{3}")
+
+
+def measured_row(line: str) -> bool:
+    """Whether a line is a Markdown table row of measured results: a ``mean ± SE`` value, a
+    cell holding only a timing (``72 s``, ``7.7 [7.3-10.4] s``), or two cells holding only a
+    score with three decimals (final entropy, F1: ``0.389``)."""
+    if not line.lstrip().startswith("|"):
+        return False
+    if PLUS_MINUS.search(line):
+        return True
+    cells = [cell.strip().strip("*").strip() for cell in line.strip().strip("|").split("|")]
+    return (any(TIMING_CELL.fullmatch(cell) for cell in cells)
+            or sum(bool(SCORE_CELL.fullmatch(cell)) for cell in cells) >= 2)
+
+
+def hand_written_pages(root: Path = ROOT) -> list[Path]:
+    """The README and the pages of ``docs/`` that no command writes."""
+    docs = root / "docs"
+    return [root / "README.md", *sorted(page for page in docs.rglob("*.md")
+                                        if page.relative_to(docs).parts[0] not in GENERATED)]
+
+
+def measured_rows(page: Path) -> list[int]:
+    """Line numbers of the measured table rows of a page (fenced code left out)."""
+    text = FENCED.sub(lambda block: "\n" * block.group().count("\n"), _text(page))
+    return [number for number, line in enumerate(text.splitlines(), 1) if measured_row(line)]
+
+
+def test_the_measured_row_rule_finds_results_not_defaults():
+    for row in ("| split | 0.389 | 0.288 | **-0.058 ± 0.010** | **-0.070 ± 0.009** |",
+                "| 4 | 25 m | 0.529 | 0.518 | 0.565 | 0.605 |",
+                "| local, 2 processes | `--workers 2` | 7.7 [7.7-8.0] s | 9.5 s |",
+                "| `ig` | 0.584 ± 0.098 / 0.637 | 0.389±0.068 / 0.797 |"):
+        assert measured_row(row), row
+    for row in ("| `lookahead_discount` | 0.5 | weight per step further along the path |",
+                "| size of a YAML config file | 4 MiB | `IPP_MAX_CONFIG_BYTES` |",
+                "| `--address` where nothing answers | an error within 5 s, nothing written |",
+                "| 0.0001 | 0.2 | 3 | **E ± S** | **G ± S** | s0 E0 (G0) |",
+                "| reward sign | alpha = 22 > 0, beta = -0.5 | `reward.alpha` |",
+                "mean 0.461 ± 0.027 in prose, not a table"):
+        assert not measured_row(row), row
+
+
+def test_measured_tables_live_in_the_record_or_the_generated_pages():
+    found = [f"{page.relative_to(ROOT)}:{number}" for page in hand_written_pages()
+             for number in measured_rows(page)]
+    assert not found, ("tables of measured results belong in the research record "
+                       "(experiments/<question>/README.md, with the command and date) or in "
+                       "docs/results/ (python -m reports.manual_tables); the manual says in a "
+                       f"sentence what they showed and names the record page: {found}")
 
 
 def test_docs_hold_no_csv_files():
