@@ -25,6 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
+from ipp_toolkit.config.field_types import check_integers, is_integer, is_real
 from ipp_toolkit.config.limits import check_layer_size
 from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 
@@ -46,8 +47,7 @@ PRECISIONS = ("float32", "bfloat16")
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) \
-        and math.isfinite(value)
+    return is_real(value) and math.isfinite(value)
 
 
 def _float_or_text(text: str) -> float | str:
@@ -61,7 +61,7 @@ def _float_or_text(text: str) -> float | str:
 def _resolutions(value: Any) -> tuple[float, ...]:
     """``validation_resolutions`` as a tuple of metres, from a list, one number
     (``--set validation_resolutions=0.1``) or a ``+``-separated text (``0.1+0.5``)."""
-    if isinstance(value, int | float) and not isinstance(value, bool):
+    if is_real(value):
         value = (value,)
     if isinstance(value, str):
         value = tuple(_float_or_text(t) for t in value.split("+") if t)
@@ -78,6 +78,14 @@ def _resolutions(value: Any) -> tuple[float, ...]:
 
 def _fail(name: str, value: Any, why: str) -> NoReturn:
     raise ValueError(f"invalid COMA config: {name} = {value!r}: {why}")
+
+
+def _check_counts(config: Any, names: tuple[str, ...], minimum: int, why: str,
+                  prefix: str = "") -> None:
+    """:func:`_fail`'s refusal of the first field of ``names`` that is not a Python integer
+    >= ``minimum`` (``prefix``: the section's, as in ``warm_start.``)."""
+    check_integers(config, dict.fromkeys(names, minimum),
+                   f"invalid COMA config: {prefix}{{name}} = {{value!r}}: {why}", numpy=False)
 
 
 #: The flat names older configs gave the warm start's fields (still read, never written), by
@@ -115,10 +123,8 @@ class WarmStartConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.planner, str) or any(c in self.planner for c in " ,="):
             _fail("warm_start.planner", self.planner, "must be a planner name or ''")
-        for name in ("missions", "missions_per_batch", "epochs", "minibatch_size"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                _fail(f"warm_start.{name}", value, "must be an integer >= 1")
+        _check_counts(self, ("missions", "missions_per_batch", "epochs", "minibatch_size"), 1,
+                      "must be an integer >= 1", prefix="warm_start.")
         if not _is_number(self.lr) or self.lr <= 0:
             _fail("warm_start.lr", self.lr, "must be a positive finite number")
         if not _is_number(self.holdout) or not 0 <= self.holdout < 1:
@@ -297,13 +303,12 @@ class COMAConfig:
             else:
                 _fail(name, value, "must be a list of values")
         for size in self.team_sizes:
-            if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+            if not is_integer(size, 1, numpy=False):
                 _fail("team_sizes", self.team_sizes, f"{size!r} is not an integer >= 1")
         if len(set(self.team_sizes)) != len(self.team_sizes):
             _fail("team_sizes", self.team_sizes, "repeats a value")
         for radius in self.comm_ranges:
-            if isinstance(radius, bool) or not isinstance(radius, int | float) \
-                    or math.isnan(radius) or radius < 0:
+            if not is_real(radius) or math.isnan(radius) or radius < 0:
                 _fail("comm_ranges", self.comm_ranges,
                       f"{radius!r} is not a range >= 0 (inf allowed)")
         if len(set(self.comm_ranges)) != len(self.comm_ranges):
@@ -312,15 +317,13 @@ class COMAConfig:
             _fail("init_policy", self.init_policy, "must be a file path or ''")
         if self.variant not in VARIANTS:
             _fail("variant", self.variant, f"choose from {list(VARIANTS)}")
-        for name in ("width", "hidden", "missions", "missions_per_update", "minibatch_size",
-                     "epochs", "target_update_transitions", "eval_every", "eval_missions",
-                     "checkpoint_every"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                _fail(name, value, "must be an integer >= 1")
+        _check_counts(self, ("width", "hidden", "missions", "missions_per_update",
+                             "minibatch_size", "epochs", "target_update_transitions",
+                             "eval_every", "eval_missions", "checkpoint_every"), 1,
+                      "must be an integer >= 1")
         for name in ("width", "hidden"):
             check_layer_size(name, getattr(self, name), "invalid COMA config")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+        if not is_integer(self.seed, 0, numpy=False):
             _fail("seed", self.seed, "must be a non-negative integer")
         for name in ("lr_actor", "lr_critic", "max_grad_norm"):
             value = getattr(self, name)
@@ -340,10 +343,8 @@ class COMAConfig:
             value = getattr(self, name)
             if not _is_number(value) or not 0 <= value < 1:
                 _fail(name, value, "must lie in [0, 1)")
-        for name in ("eps_anneal_missions", "critic_warmup_updates"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                _fail(name, value, "must be a non-negative integer")
+        _check_counts(self, ("eps_anneal_missions", "critic_warmup_updates"), 0,
+                      "must be a non-negative integer")
 
     def replace(self, **changes: Any) -> COMAConfig:
         """Copy with some fields changed (validated; unknown names are refused).

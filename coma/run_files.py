@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ipp_toolkit.config.field_types import is_integer
 from ipp_toolkit.io import CheckpointError, atomic_write
 from ipp_toolkit.runs.progress_csv import read_progress_csv
 from ipp_toolkit.runs.result_store import check_raster_unchanged
@@ -85,7 +86,7 @@ def check_counters(path: Path, progress: dict[str, Any], total_missions: int,
     as they are, 10^9 updates would build a history of 10^9 rows."""
     update, missions = progress["update"], progress["missions"]
     for name, value in (("update", update), ("missions", missions)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        if not is_integer(value, 0, numpy=False):
             raise CheckpointError(f"checkpoint {str(path)!r} has {name} = {value!r}, not an "
                                   "integer >= 0: it is damaged; start a new folder")
     if missions > total_missions or missions != update * missions_per_update:

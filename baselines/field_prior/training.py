@@ -54,6 +54,7 @@ from ipp_toolkit.belief.field_prior import (
     prior_inputs,
 )
 from ipp_toolkit.belief.interest import interest_smoother
+from ipp_toolkit.config.field_types import check_integers, is_integer
 from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.limits import check_mission
 from ipp_toolkit.config.schema import EnvConfig
@@ -117,18 +118,16 @@ class PriorTrainingConfig:
     cleanup: bool = False
 
     def __post_init__(self) -> None:
-        for name in POSITIVE_FIELDS:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        check_integers(self, dict.fromkeys(POSITIVE_FIELDS, 1),
+                       "{name} must be a positive integer, got {value!r}", numpy=False)
+        check_integers(self, {"seed": 0}, "{name} must be a non-negative integer, got {value!r}",
+                       numpy=False)
         if not isinstance(self.cleanup, bool):
             raise ValueError(f"cleanup must be True or False, got {self.cleanup!r}")
         if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
             raise ValueError(f"learning_rate must be a positive number, "
                              f"got {self.learning_rate!r}")
-        if not self.team_sizes or any(isinstance(n, bool) or not isinstance(n, int) or n < 1
+        if not self.team_sizes or any(not is_integer(n, 1, numpy=False)
                                       for n in self.team_sizes):
             raise ValueError(f"team_sizes must be positive integers, got {self.team_sizes!r}")
         if not self.comm_ranges or any(not c >= 0 for c in self.comm_ranges):

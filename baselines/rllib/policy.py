@@ -22,6 +22,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from ipp_toolkit.config.field_types import check_integers
 from ipp_toolkit.config.files import config_from_dict, config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError, load_torch, save_checkpoint
@@ -59,9 +60,9 @@ class RLlibArchitecture:
     hidden: int = 64
 
     def __post_init__(self) -> None:
-        for name, value in asdict(self).items():
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"RLlib policy {name} must be an integer >= 1, got {value!r}")
+        check_integers(self, dict.fromkeys(asdict(self), 1),
+                       "RLlib policy {name} must be an integer >= {minimum}, got {value!r}",
+                       numpy=False)
 
     def to_dict(self) -> dict[str, int]:
         """JSON-safe dict."""

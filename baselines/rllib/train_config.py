@@ -10,15 +10,16 @@ run itself (:mod:`baselines.rllib.run`, which does).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
+from ipp_toolkit.config.field_types import check_integers, is_real
 from ipp_toolkit.config.files import check_same_run, config_from_dict, config_to_dict
 from ipp_toolkit.config.limits import check_mission, check_rollout
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.sim.features import actor_plane_names
 
-from ..sb3.run_config import check_policy_size
+from ..sb3.run_config import check_policy_size, config_from_record, config_record
 
 __all__ = ["RLLIB_ALGORITHMS", "RLlibTrainConfig", "canonical_rllib_algo", "check_sizes",
            "same_run", "env_record"]
@@ -77,15 +78,11 @@ class RLlibTrainConfig:
         minimum = {"iterations": 1, "seed": 0, "n_agents": 1, "width": 1, "features_dim": 1,
                    "hidden": 1, "num_env_runners": 0, "envs_per_runner": 1, "train_batch": 2,
                    "checkpoint_every": 1}
-        for name, low in minimum.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"invalid RLlib config: {name} must be an integer >= {low}, "
-                                 f"got {value!r}")
+        check_integers(self, minimum, "invalid RLlib config: {name} must be an integer >= "
+                       "{minimum}, got {value!r}", numpy=False)
         for name in ("comm_range", "resolution", "lr", "gamma"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) \
-                    or math.isnan(value) or value <= 0:
+            if not is_real(value) or math.isnan(value) or value <= 0:
                 raise ValueError(f"invalid RLlib config: {name} must be a number > 0, got "
                                  f"{value!r}")
         if not math.isfinite(self.lr) or self.gamma > 1:
@@ -94,21 +91,12 @@ class RLlibTrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict (an infinite comm_range becomes ``"inf"``)."""
-        values = asdict(self)
-        if math.isinf(self.comm_range):
-            values["comm_range"] = "inf"
-        return values
+        return config_record(self)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> RLlibTrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys are refused."""
-        unknown = set(values) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"unknown RLlib config keys {sorted(unknown)}")
-        values = dict(values)
-        if values.get("comm_range") == "inf":
-            values["comm_range"] = math.inf
-        return cls(**values)
+        return config_from_record(cls, values, "RLlib", "unknown RLlib config keys {keys}")
 
     def model_config(self) -> dict[str, int]:
         """The RLModule's ``model_config`` (the network's sizes)."""

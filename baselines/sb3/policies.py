@@ -41,6 +41,7 @@ from sb3_contrib.qrdqn.policies import QRDQNPolicy
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.dqn.policies import DQNPolicy
 
+from ipp_toolkit.config.field_types import check_integers
 from ipp_toolkit.config.limits import check_layer_size
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.io import CheckpointError
@@ -126,9 +127,8 @@ class PolicyArchitecture:
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-                raise ValueError(f"invalid architecture: {name} must be an integer >= 1, "
-                                 f"got {value!r}")
+            check_integers(self, {name: 1}, "invalid architecture: {name} must be an integer "
+                           ">= {minimum}, got {value!r}")
             check_layer_size(name, int(value), "invalid architecture")
 
     def to_dict(self) -> dict[str, int]:

@@ -16,8 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from ipp_toolkit.config.field_types import check_integers, is_real
 from ipp_toolkit.config.limits import check_layer_size, check_parameters
 from ipp_toolkit.planning import resolve_shipped
 from ipp_toolkit.sim.team import N_ACTIONS
@@ -64,27 +63,32 @@ def config_record(config: Any) -> dict[str, Any]:
     return values
 
 
-def config_from_record(cls: type, values: Mapping[str, Any], what: str) -> Any:
-    """Inverse of :func:`config_record` for dataclass ``cls``; unknown keys are rejected."""
+def config_from_record(cls: type, values: Mapping[str, Any], what: str,
+                       unknown_keys: str = "invalid {what} config: unknown key(s) {keys}") -> Any:
+    """Inverse of :func:`config_record` for dataclass ``cls``; unknown keys are rejected.
+
+    Raises:
+        ValueError: keys that are not fields of ``cls``: ``unknown_keys`` formatted with
+            ``what`` and the sorted list of ``keys``.
+    """
     known = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(values) - known)
     if unknown:
-        raise ValueError(f"invalid {what} config: unknown key(s) {unknown}")
+        raise ValueError(unknown_keys.format(what=what, keys=unknown))
     values = dict(values)
     if values.get("comm_range") == "inf":
         values["comm_range"] = math.inf
     return cls(**values)
 
 
-def _check_integer(what: str, name: str, value: Any, minimum: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise ValueError(f"invalid {what} config: {name} must be an integer >= {minimum}, "
-                         f"got {value!r}")
+def _check_integers(config: Any, what: str, names: tuple[str, ...], minimum: int) -> None:
+    check_integers(config, dict.fromkeys(names, minimum),
+                   f"invalid {what} config: {{name}} must be an integer >= {{minimum}}, "
+                   "got {value!r}")
 
 
 def _check_number(what: str, name: str, value: Any, positive: bool) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float) \
-            or not math.isfinite(value) or (value <= 0 if positive else value < 0):
+    if not is_real(value) or not math.isfinite(value) or (value <= 0 if positive else value < 0):
         raise ValueError(f"invalid {what} config: {name} must be "
                          f"{'a positive number' if positive else 'a number >= 0'}, "
                          f"got {value!r}")
@@ -134,17 +138,14 @@ class SB3RunConfig:
 
     def _check_run_fields(self, what: str) -> None:
         """Validate the shared fields; errors start with ``invalid {what} config``."""
-        for name in ("total_timesteps", "n_envs", "width", "features_dim", "hidden",
-                     "n_agents", "checkpoint_every"):
-            _check_integer(what, name, getattr(self, name), 1)
+        _check_integers(self, what, ("total_timesteps", "n_envs", "width", "features_dim",
+                                     "hidden", "n_agents", "checkpoint_every"), 1)
         for name in ("width", "features_dim", "hidden"):
             check_layer_size(name, getattr(self, name), f"invalid {what} config")
-        for name in ("seed", "num_cpus"):
-            _check_integer(what, name, getattr(self, name), 0)
+        _check_integers(self, what, ("seed", "num_cpus"), 0)
         _check_number(what, "resolution", self.resolution, positive=True)
         _check_number(what, "invalid_penalty", self.invalid_penalty, positive=False)
-        if isinstance(self.comm_range, bool) or not isinstance(self.comm_range, int | float) \
-                or math.isnan(self.comm_range) or self.comm_range < 0:
+        if not is_real(self.comm_range) or math.isnan(self.comm_range) or self.comm_range < 0:
             raise ValueError(f"invalid {what} config: comm_range must be >= 0 (inf allowed), "
                              f"got {self.comm_range!r}")
 
@@ -195,8 +196,7 @@ class PPOTrainConfig(SB3RunConfig):
 
     def __post_init__(self) -> None:
         self._check_run_fields("PPO")
-        for name in ("n_steps", "batch_size", "n_epochs"):
-            _check_integer("PPO", name, getattr(self, name), 1)
+        _check_integers(self, "PPO", ("n_steps", "batch_size", "n_epochs"), 1)
         for name in ("lr", "clip_range", "max_grad_norm"):
             _check_number("PPO", name, getattr(self, name), positive=True)
         for name in ("gamma", "gae_lambda"):

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ipp_toolkit.config.field_types import is_real
 from ipp_toolkit.config.files import config_to_dict
 from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
@@ -135,7 +136,7 @@ def _check_hyperparameter(algo: str, name: str, value: Any) -> int | float:
     if name not in known:
         raise ValueError(f"unknown hyper-parameter {name!r} for {algo}; known: "
                          f"{', '.join(sorted(known))}")
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if not is_real(value):
         raise ValueError(f"{algo} hyper-parameter {name} must be a number, got {value!r}")
     if name in _INT_MIN:
         if isinstance(value, float) and value.is_integer():

@@ -5,6 +5,10 @@ A YAML file or a dict can put any value anywhere: ``prior: abc``, ``fov_deg: wid
 true). Each section of :mod:`ipp_toolkit.config.schema` calls :func:`check_field_types` first
 in its ``__post_init__``, so a wrong type is refused naming the field and the value before
 the range checks compare it with numbers (a TypeError deep inside otherwise).
+
+The predicates :func:`is_integer` and :func:`is_real`, and :func:`check_integers` that runs the
+first over named fields, are the one place the configs of the trainers (COMA, SB3, RLlib, the
+field prior) and the mission's sections test a count or a number: a bool is neither.
 """
 
 from __future__ import annotations
@@ -17,7 +21,9 @@ import reprlib
 from collections.abc import Callable, Mapping
 from typing import Any
 
-__all__ = ["check_field_types", "short_repr"]
+import numpy as np
+
+__all__ = ["check_field_types", "check_integers", "is_integer", "is_real", "short_repr"]
 
 _REPR = reprlib.Repr()
 _REPR.maxstring = 60
@@ -29,6 +35,35 @@ _REPR.maxlevel = 3
 def short_repr(value: Any) -> str:
     """``repr(value)`` cut to a readable length (a message never echoes a whole file)."""
     return _REPR.repr(value)
+
+
+def is_integer(value: Any, minimum: int, *, numpy: bool = True) -> bool:
+    """Whether ``value`` is an integer of at least ``minimum``. A bool is not one; a numpy
+    integer is one unless ``numpy`` is false (fields that only JSON or Python fill)."""
+    kinds = (int, np.integer) if numpy else int
+    return not isinstance(value, bool) and isinstance(value, kinds) and value >= minimum
+
+
+def is_real(value: Any) -> bool:
+    """Whether ``value`` is a plain int or float, not a bool (nan and inf included: the caller
+    says which it takes)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def check_integers(owner: Any, minimums: Mapping[str, int], message: str, *,
+                   numpy: bool = True) -> None:
+    """Refuse the first attribute of ``owner`` named in ``minimums`` that is not an integer of
+    at least its minimum (:func:`is_integer`).
+
+    Raises:
+        ValueError: ``message`` formatted with the field's ``name``, ``value`` and
+            ``minimum``, e.g. ``"invalid RLlib config: {name} must be an integer >= {minimum},
+            got {value!r}"``.
+    """
+    for name, minimum in minimums.items():
+        value = getattr(owner, name)
+        if not is_integer(value, minimum, numpy=numpy):
+            raise ValueError(message.format(name=name, value=value, minimum=minimum))
 
 
 class _Bad(Exception):

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .field_types import check_field_types, short_repr
+from .field_types import check_field_types, is_integer, short_repr
 from .limits import MAX_REWARD_SCALE
 from .starts import START_POSITIONS, fixed_start_waypoints, fixed_starts_fit
 from .terrain_checks import check_blob_lattice, check_fractal_lattice, terrain_range
@@ -36,7 +36,7 @@ OBSERVATION_KINDS = ("dict", "box", "rllib")  # IPPEnv's observation (features.o
 def check_int(name: str, value: Any, minimum: int) -> int:
     """``value`` as an int if it is an integer >= ``minimum`` (not a bool); else a ValueError
     naming ``name`` and the value."""
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+    if not is_integer(value, minimum):
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
 
@@ -489,7 +489,7 @@ class FeatureConfig:
                   "of a field-prior file (`ipp-train prior` writes RUN/best.pt); no such file")
         for name, least in (("agent_id_scale", 1), ("gain_false_positive_steps", 0)):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
+            if not is_integer(value, least):
                 _fail("features", name, value, f"must be an integer >= {least}")
         if not any(getattr(self, name) for name in ACTOR_PLANES):
             _fail("features", "actor planes", "all off", "the actor needs at least one plane")

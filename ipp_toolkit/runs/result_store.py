@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..config.field_types import is_real
 from ..config.files import config_from_dict, config_to_dict
 from ..config.limits import check_limit
 from ..config.schema import EnvConfig
@@ -257,8 +258,7 @@ def check_finite_row(row: Mapping[str, Any], where: str) -> None:
     columns = ("entropy", "f1", "rmse") + (("reward", "plan_ms") if row["step"] else ())
     for column in columns:
         value = row[column]
-        if isinstance(value, bool) or not isinstance(value, int | float) \
-                or not math.isfinite(value):
+        if not is_real(value) or not math.isfinite(value):
             raise ValueError(f"{where} has {column} = {value!r}, not a finite number")
 
 

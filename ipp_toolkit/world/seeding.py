@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config.field_types import is_integer
+
 __all__ = ["NAMESPACES", "MissionStreams", "check_namespace", "mission_streams", "planner_seed"]
 
 NAMESPACES = {"train": 0, "validation": 1, "test": 2}
@@ -61,7 +63,7 @@ class MissionStreams:
 def mission_streams(namespace: str, seed: int, mission: int) -> MissionStreams:
     """The independent streams of mission ``mission`` of run ``seed`` in ``namespace``."""
     for name, value in (("seed", seed), ("mission", mission)):
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+        if not is_integer(value, 0):
             raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
     root = np.random.SeedSequence([_namespace_id(namespace), int(seed), int(mission)])
     terrain, starts, sensor, drops = root.spawn(4)
