@@ -297,3 +297,22 @@ def test_the_prior_answers_the_same_squares_again_without_a_second_forward_pass(
     np.testing.assert_array_equal(other[0], again[0])
     prior.square_values(squares, 0.25, 100)  # another resolution: another prediction
     assert len(forwards) == 3
+
+
+def test_the_planning_prior_predicts_what_the_file_predicts_in_channels_last_order():
+    """The shared prior of planning steps runs its convolutions in channels-last order (about
+    twice as fast on one thread); its predictions match a freshly loaded prior's to float32
+    rounding, and loading (what training and its validation use) keeps the default order."""
+    import torch
+
+    planning = shared_prior("learned")
+    plain = FieldPrior.load(SHIPPED_PRIOR)
+    assert planning._channels_last and not plain._channels_last
+    weight = plain.network.enc1[0].weight
+    assert weight.is_contiguous() and not weight.is_contiguous(
+        memory_format=torch.channels_last)
+    rng = np.random.default_rng(1)
+    prob = rng.random((4, 250, 250), dtype=np.float32)
+    ours, theirs = planning.predict(prob, 0.2), plain.predict(prob, 0.2)
+    assert ours.dtype == np.float32 and ours.shape == theirs.shape
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-5)

@@ -92,6 +92,38 @@ def test_views_list_heard_teammates():
     assert view.teammate_positions.shape == (3, 3) and view.teammate_footprints.shape == (3, 4)
 
 
+def test_square_means_of_views_are_block_means_to_the_bit():
+    from ipp_toolkit.belief.interest import block_means, square_cells
+
+    # 0.25 m cells: squares of 2 x 2 cells, summed again where a step touched them.
+    config = small_config(comm_range=float("inf"), resolution=0.25, team={"budget": 6})
+    block = square_cells(config.world.map_cells, config.world.resolution)
+    assert block == 2
+    state = reset_mission(config, seed=3)
+    planner = make_planner("random")
+    planner.reset(config, seed=3)
+    kept = []
+    while not state.done:
+        views = agent_views(state, with_observations=False)
+        assert views[0].team_squares is views[3].team_squares  # one per team and step
+        for view in views:
+            means = view.square_means(block)
+            assert means.base is not None and not means.flags.writeable
+            np.testing.assert_array_equal(means.view(np.uint32), block_means(
+                view.local_prob, block).view(np.uint32))
+        kept.append(views[1])
+        step_mission(state, planner.act(views))
+    assert state.block_mean_cache.incremental
+    # A view asked after its step, or for another square size, sums its own map.
+    stale = kept[0]
+    assert stale.team_squares.means(block) is None
+    np.testing.assert_array_equal(stale.square_means(block),
+                                  block_means(stale.local_prob, block))
+    assert kept[-1].team_squares.means(2 * block) is None
+    # Views built without local maps, or by hand, carry none.
+    assert agent_views(state, with_local_maps=False)[0].team_squares is None
+
+
 def test_registry_errors():
     with pytest.raises(ValueError, match="unknown planner 'nope'; registered planners: .*"
                                          "test-first-valid"):

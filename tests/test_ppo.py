@@ -213,6 +213,22 @@ def test_every_shipped_policy_loads_by_name_and_flies(name):
     run_mission(small_config(), planner, seed=0, mission=0)
 
 
+def test_the_discounting_planner_reads_its_logits_from_the_latent_of_one_forward_pass():
+    from baselines.sb3.planner import _gain_prior_latent
+    from ipp_toolkit.planning import policy_inputs
+
+    planner = PPOPlanner()  # the default policy has a gain prior and discounts
+    assert planner._discounts
+    state = reset_mission(small_config(), seed=1)
+    planner.reset(state.config, seed=1)
+    observations, _ = policy_inputs(agent_views(state, features=planner.observation_features))
+    latent, gains = _gain_prior_latent(planner.policy, observations)
+    with torch.no_grad():
+        logits = planner.policy.action_net(latent)
+    assert torch.equal(logits, ppo.actor_logits(planner.policy, observations))
+    assert gains.shape == (4, 6)
+
+
 def test_default_ppo_is_the_default_shipped_policy_and_names_resolve_for_sb3_too():
     from baselines.sb3.planner import SB3Planner
 

@@ -36,7 +36,6 @@ from pathlib import Path
 import numpy as np
 
 from ipp_toolkit.belief.field_prior import SHIPPED_PRIOR, prior_file, shared_prior
-from ipp_toolkit.belief.interest import block_means
 from ipp_toolkit.planning import AgentView
 from ipp_toolkit.planning.discount import OVERLAP_DISCOUNT
 from ipp_toolkit.planning.lookahead import LOOKAHEAD_DISCOUNT, LOOKAHEAD_STEPS
@@ -99,9 +98,9 @@ class LearnedPriorPlanner(SpatialGainPlanner):
         if self._config is None:
             raise RuntimeError("call reset(config, seed) before act()")
         world = self._config.world
-        # The maps' square means map by map (no copy of the team's maps): the prior's
-        # inputs, and its prediction on those squares (the interest blocks' side).
-        squares = np.stack([block_means(view.local_prob, self.block_cells) for view in views])
+        # The maps' square means, as the mission keeps them: the prior's inputs, and its
+        # prediction on those squares (the interest blocks' side).
+        squares = np.stack([view.square_means(self.block_cells) for view in views])
         self._fine = self.prior.square_values(squares, world.resolution, world.map_cells)
         return super().act(views)
 

@@ -124,7 +124,7 @@ class SpatialGainPlanner(InformationGainPlanner):
         metres. The extension point of this family: a planner that knows better (a learned
         prior, ``ig_learned``) overrides it and keeps the rest."""
         assert self._smoother is not None
-        return self._smoother.block_values(view.local_prob)
+        return self._smoother.smooth(view.square_means(self._smoother.block))
 
     def cell_gains(self, view: AgentView, altitude: int,
                    cells: tuple[slice, slice]) -> np.ndarray:

@@ -157,31 +157,42 @@ class SB3Planner(Planner):
             states = None  # another team: a new mission without reset()
         inputs = observations if self.meta.normalization is None \
             else self.meta.normalization.apply(observations)  # as VecNormalize fed it
+        if self.in_order and self._discounts:
+            if self._discount is None:
+                raise RuntimeError("call reset(config, seed) before act()")
+            latent, gains = _gain_prior_latent(self.policy, observations)
+            if inputs is observations:  # the latent's forward pass gives the logits too
+                with torch.no_grad():
+                    scores = self.policy.action_net(latent).cpu().numpy()
+            else:
+                scores = action_scores(self.policy, self.algo, inputs)[0].cpu().numpy()
+            return choose_for_views(scores, views, _discounted_rescore(
+                self.policy, latent, gains, masks, views, scores, self._discount))
         scores, states = action_scores(self.policy, self.algo, inputs, states)
         self._lstm_states = states if self.algo in RECURRENT_ALGORITHMS else None
         if self.in_order:
-            rescore = None
-            if self._discounts:
-                if self._discount is None:
-                    raise RuntimeError("call reset(config, seed) before act()")
-                rescore = _discounted_rescore(self.policy, observations, masks, views,
-                                              scores.cpu().numpy(), self._discount)
-            return choose_for_views(scores.cpu().numpy(), views, rescore)
+            return choose_for_views(scores.cpu().numpy(), views)
         return masked_argmax(scores, masks)
 
 
-def _discounted_rescore(policy: Any, observations: np.ndarray, masks: np.ndarray,
-                        views: list[AgentView], scores: np.ndarray,
-                        discount: TeammateDiscount) -> Callable[[int, np.ndarray], np.ndarray]:
-    """``rescore(k, targets)`` for :func:`~ipp_toolkit.planning.choose_for_views`: a
-    gain-prior policy's logits for agent k with the six relative gains its action layer
-    reads recomputed from its planes' gains discounted under ``targets``' footprints."""
+def _gain_prior_latent(policy: Any, observations: np.ndarray) -> tuple[torch.Tensor, np.ndarray]:
+    """A gain-prior policy's (B, hidden + 6) actor latent of (B, C, G, G) planes (what its
+    action layer reads) and the (B, 6) option gains its planes hold, in one forward pass."""
     with torch.no_grad():
         obs = torch.as_tensor(observations, dtype=torch.float32, device=policy.device)
         extractor = policy.pi_features_extractor
         assert isinstance(extractor, GainPriorExtractor)
         latent = policy.mlp_extractor.forward_actor(policy.extract_features(obs, extractor))
-        gains = extractor.plane_gains(obs).cpu().numpy()
+        return latent, extractor.plane_gains(obs).cpu().numpy()
+
+
+def _discounted_rescore(policy: Any, latent: torch.Tensor, gains: np.ndarray,
+                        masks: np.ndarray, views: list[AgentView], scores: np.ndarray,
+                        discount: TeammateDiscount) -> Callable[[int, np.ndarray], np.ndarray]:
+    """``rescore(k, targets)`` for :func:`~ipp_toolkit.planning.choose_for_views`: a
+    gain-prior policy's logits for agent k with the six relative gains its action layer
+    reads recomputed from its planes' ``gains`` discounted under ``targets``' footprints
+    (``latent``: :func:`_gain_prior_latent`)."""
 
     def logits_of(k: int, discounted: np.ndarray) -> np.ndarray:
         with torch.no_grad():

@@ -260,6 +260,7 @@ class FieldPrior:
         # The last square_values call: (resolution, size, squares, result). The gain planes
         # and a planner's teammate discount ask for the same team's squares in one step.
         self._last_squares: tuple[float, int, np.ndarray, np.ndarray] | None = None
+        self._channels_last = False
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> FieldPrior:
@@ -303,7 +304,22 @@ class FieldPrior:
         import torch
 
         with torch.inference_mode():
-            return torch.sigmoid(self.network(torch.from_numpy(planes))).numpy()
+            inputs = torch.from_numpy(planes)
+            if self._channels_last:
+                inputs = inputs.contiguous(memory_format=torch.channels_last)
+            return torch.sigmoid(self.network(inputs)).numpy()
+
+    def for_planning(self) -> FieldPrior:
+        """This prior with its weights in channels-last order, for the predictions of
+        planning steps: a few small convolutions of a handful of maps each, which take
+        about half the time in that order on one CPU thread. The predictions differ from
+        the default order's in the last bits of float32 (about 1e-6). Changes this object
+        (the network is converted in place); returns it."""
+        import torch
+
+        self.network = self.network.to(memory_format=torch.channels_last)
+        self._channels_last = True
+        return self
 
     def fine_values(self, prob: np.ndarray, resolution: float, fine_cells: int) -> np.ndarray:
         """(N, H / f, W / f) float32 prior on blocks of ``fine_cells`` = f cells per side.
@@ -383,4 +399,4 @@ def shared_prior(name: str | os.PathLike[str]) -> FieldPrior:
 @functools.lru_cache(maxsize=8)
 def _load_once(path: str, mtime_ns: int, size: int) -> FieldPrior:
     # mtime and size are part of the key so a retrained file is not served stale.
-    return FieldPrior.load(path)
+    return FieldPrior.load(path).for_planning()

@@ -32,16 +32,18 @@ from typing import Any
 
 import numpy as np
 
+from ..belief.interest import block_means, square_cells
 from ..config.schema import EnvConfig, FeatureConfig
 from ..io import CheckpointError
 from ..plugins import entry_points
-from ..sim.features import actor_observations
+from ..sim.features import actor_observations, square_means
 from ..sim.mission import MissionState
 from ..sim.team import choose_in_order
 
 __all__ = [
     "FEATURES_NOTE",
     "AgentView",
+    "TeamSquareMeans",
     "Planner",
     "PlannerFactory",
     "agent_views",
@@ -132,6 +134,8 @@ class AgentView:
         teammate_footprints: (K, 4) int their latest footprint rectangles.
         footprint: (4,) int the agent's own latest footprint rectangle.
         observation: (C, G, G) float32 the actor observation planes (for learned planners).
+        team_squares: where the view was built from a mission state, the team's kept square
+            means of this step (:meth:`square_means` reads them); None otherwise.
     """
 
     index: int
@@ -147,6 +151,47 @@ class AgentView:
     teammate_footprints: np.ndarray
     footprint: np.ndarray
     observation: np.ndarray
+    team_squares: TeamSquareMeans | None = dataclasses.field(default=None, repr=False,
+                                                             compare=False)
+
+    def square_means(self, block: int) -> np.ndarray:
+        """(H / block, W / block) float32 means of ``local_prob`` over block x block squares:
+        :func:`~ipp_toolkit.belief.interest.block_means`, to the bit. At the ~0.5 m squares
+        of :func:`~ipp_toolkit.belief.interest.square_cells` a view built from a mission
+        reads the means the mission keeps up to date (the blocks a step touched are summed
+        again, not the whole map); any other block, or a view built by hand, sums the map.
+        """
+        if self.team_squares is not None:
+            kept = self.team_squares.means(block)
+            if kept is not None:
+                return kept[self.index]
+        return block_means(self.local_prob, block)
+
+
+class TeamSquareMeans:
+    """The team's :func:`~ipp_toolkit.sim.features.square_means` at one decision point,
+    read from the mission state on the first request (a planner that never asks costs
+    nothing) and kept for the other agents' views. Asked after the state has moved on, or
+    for another square size, it answers None (the view then sums its own map)."""
+
+    def __init__(self, state: MissionState) -> None:
+        self._state, self._step = state, state.step
+        world = state.config.world
+        self.block = square_cells(world.map_cells, world.resolution)
+        self._means: np.ndarray | None = None
+
+    def means(self, block: int) -> np.ndarray | None:
+        """(N, H / block, W / block) read-only float32 means, or None (see the class)."""
+        if block != self.block or self._state.step != self._step:
+            return None
+        if self._means is None:
+            means = square_means(self._state)
+            if not self._state.block_mean_cache.incremental:
+                # Means of the stacked maps, which need not match each map's to the bit.
+                self._step = -1
+                return None
+            self._means = _read_only(means.copy())
+        return self._means
 
 
 _NO_MAP = _read_only(np.zeros((0, 0), dtype=np.float32))
@@ -174,6 +219,7 @@ def agent_views(state: MissionState, with_observations: bool = True,
     features = state.config.features if features is None else features
     planes = (actor_observations(state, features) if with_observations
               else np.zeros((n, 0, g, g), dtype=np.float32))
+    squares = TeamSquareMeans(state) if with_local_maps else None
     views = []
     for k in range(n):
         heard = np.flatnonzero(state.heard[k])
@@ -192,6 +238,7 @@ def agent_views(state: MissionState, with_observations: bool = True,
             teammate_footprints=_read_only(state.footprints[mates].copy()),
             footprint=_read_only(state.footprints[k].copy()),
             observation=_read_only(planes[k]),
+            team_squares=squares,
         ))
     return views
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..belief.field_prior import shared_prior
 from ..belief.gain import objective_table
-from ..belief.interest import block_means, interest_smoother
+from ..belief.interest import interest_smoother
 from ..belief.mapping import false_positive_term_applies
 from ..config.schema import GAIN_INTEREST_SMOOTHED, EnvConfig, FeatureConfig
 from ..sim.features import gain_normaliser, plane_objective
@@ -177,8 +177,8 @@ class TeammateDiscount:
         if any(view.local_prob.shape != (self._size, self._size) for view in views):
             raise ValueError("TeammateDiscount needs the views' local maps (a planner that "
                              "uses it sets needs_local_maps)")
-        # Map by map (the same means to the bit) rather than a copy of the team's maps.
-        means = np.stack([block_means(view.local_prob, self._block) for view in views])
+        # The means the mission keeps (those of the gain planes, to the bit).
+        means = np.stack([view.square_means(self._block) for view in views])
         if self.features.gain_interest != GAIN_INTEREST_SMOOTHED:
             blocks = shared_prior(self.features.gain_interest).square_values(
                 means, self._resolution, self._size)

@@ -33,6 +33,7 @@ __all__ = [
     "footprint_gain",
     "gain_normaliser",
     "plane_objective",
+    "square_means",
     "gain_planes",
     "state_plane_names",
     "critic_plane_names",
@@ -251,15 +252,13 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     if objective == "interesting":
         world = state.config.world
         block = square_cells(world.map_cells, world.resolution)
-        means = state.block_mean_cache
-        if means is None or means.maps is not state.maps or means.block != block:
-            means = state.block_mean_cache = BlockMeanCache(state.maps, state.n_agents, block)
+        squares = square_means(state)
         if learned:
-            weight = shared_prior(interest).square_values(means.means(), world.resolution,
+            weight = shared_prior(interest).square_values(squares, world.resolution,
                                                           world.map_cells)
         else:
             weight = interest_smoother(world.map_cells, world.resolution,
-                                       smoothing).smooth(means.means())
+                                       smoothing).smooth(squares)
         sums = cache.weighted_sums(weight, block)
         if false_positive > 0:
             checking = _footprint_cache(state, "false_positive_cache", "false_positive")
@@ -267,6 +266,20 @@ def footprint_gain(state: MissionState, smoothing: float | None = None,
     else:
         sums = cache.sums()
     return (sums / gain_normaliser(reward, state.geometry.camera, objective)).astype(np.float32)
+
+
+def square_means(state: MissionState) -> np.ndarray:
+    """(N, H / s, W / s) float32 the agents' local maps' means over squares of s =
+    :func:`~ipp_toolkit.belief.interest.square_cells` cells (about 0.5 m): ``block_means`` of
+    the maps to the bit, kept on the state and summed again only where the maps changed
+    (:class:`~ipp_toolkit.belief.interest.BlockMeanCache`). The array is the cache's own:
+    the next call may change it in place."""
+    world = state.config.world
+    block = square_cells(world.map_cells, world.resolution)
+    means = state.block_mean_cache
+    if means is None or means.maps is not state.maps or means.block != block:
+        means = state.block_mean_cache = BlockMeanCache(state.maps, state.n_agents, block)
+    return means.means()
 
 
 def plane_objective(smoothing: float, interest: str) -> str:
