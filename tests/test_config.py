@@ -81,6 +81,18 @@ def test_env_rejects_non_config():
         IPPEnv({"team": {"agents": 2}})
 
 
+def test_a_grid_too_fine_for_indices_has_no_fixed_starts_and_no_cast_warning():
+    import warnings
+
+    from ipp_toolkit.config.schema import WorldConfig, fixed_start_waypoints
+
+    world = WorldConfig(grid_spacing=1e-300)  # refused later, by the missions' memory check
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert fixed_start_waypoints(world, 4) is None
+    assert fixed_start_waypoints(WorldConfig(grid_spacing=1e-6), 4) is not None
+
+
 def test_altitudes_are_independent_of_the_waypoint_spacing_and_fixed_starts_snap():
     from ipp_toolkit.config.schema import fixed_start_waypoints
 

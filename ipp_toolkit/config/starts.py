@@ -36,8 +36,12 @@ def fixed_start_waypoints(world: WorldConfig, n_agents: int) -> np.ndarray | Non
     if starts is None:
         return None
     metres = np.asarray(starts, dtype=np.float64)
-    waypoints = np.clip(np.floor(metres / world.grid_spacing + 0.5), 0,
-                        world.grid_points - 1).astype(np.int64)
+    # A grid too fine for int64 indices (refused later by the memory check) gets no fixed
+    # starts: its snapped indices are capped where a cast cannot overflow.
+    top = min(world.grid_points - 1, 2 ** 62)
+    waypoints = np.clip(np.floor(metres / world.grid_spacing + 0.5), 0, top).astype(np.int64)
+    if waypoints.max() >= 2 ** 62:
+        return None
     if len({tuple(w) for w in waypoints.tolist()}) < n_agents:
         return None
     return waypoints
