@@ -49,6 +49,7 @@ from ipp_toolkit.runs.cli_flags import (
     positive_int,
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
+from ipp_toolkit.runs.progress import sigterm_as_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
 from ipp_toolkit.runs.run_folder import allow_foreign_files, check_out_path, claim
 
@@ -371,7 +372,7 @@ def compare_main(argv: list[str] | None = None) -> int:
         return error(err)
     print(setting_line(env_config, args.config), file=sys.stderr)
     try:
-        with allow_foreign_files(args.force):
+        with allow_foreign_files(args.force), sigterm_as_interrupt():
             comparison = compare(
                 planners=args.planners, trials=args.trials, seed=args.seed,
                 workers=args.workers, out=out_dir, config=env_config,
@@ -379,8 +380,8 @@ def compare_main(argv: list[str] | None = None) -> int:
                 backend=args.backend, address=args.address, reference=args.reference)
     except (ValueError, OSError) as err:  # ConnectionError (no Ray at --address) included
         return error(err)
-    except KeyboardInterrupt:
-        return interrupted("ipp-compare", out_dir)
+    except KeyboardInterrupt as interrupt:
+        return interrupted("ipp-compare", out_dir, interrupt)
     # Everything left lives until the process exits: the interpreter's last collection would
     # walk it all (torch's and matplotlib's objects, about 1 s); frozen objects are skipped.
     gc.freeze()

@@ -161,13 +161,14 @@ DEFAULT_PLANNERS = ("ig", "ig_spatial", "ig_learned", "coverage", "random", "com
 """What ``ipp-compare`` flies without ``--planners``."""
 
 
-def interrupted(tool: str, out_dir: Path) -> int:
-    """Ctrl-C: one line saying how to continue (exit code 130, as a shell reports SIGINT).
+def interrupted(tool: str, out_dir: Path, interrupt: BaseException | None = None) -> int:
+    """Ctrl-C (or SIGTERM): one line saying how to continue (exit code 130, or 143 for SIGTERM,
+    as a shell reports the signals; :func:`~ipp_toolkit.runs.progress.report_interrupt`).
 
     Every mission is stored atomically as it ends, so the same command flies only the rest.
     """
     return report_interrupt(tool, f"the missions already flown are kept in {str(out_dir)!r}: "
-                            "run the same command again to continue")
+                            "run the same command again to continue", interrupt)
 
 
 def default_planners(note: Callable[[str], None] | None = None,

@@ -23,6 +23,7 @@ from ipp_toolkit.runs.cli_flags import (
     positive_int,
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
+from ipp_toolkit.runs.progress import sigterm_as_interrupt
 from ipp_toolkit.runs.ray_backend import RayUnavailableError, check_backend_flags
 from ipp_toolkit.runs.run_folder import allow_foreign_files, claim
 
@@ -50,14 +51,15 @@ def main(argv: list[str] | None = None) -> int:
     comm = [0.0, 25.0, float("inf")] if args.comm is None else args.comm
     try:
         # The study's folder holds the folders of its runs: one study at a time.
-        with allow_foreign_files(args.force), claim(out, f"ipp-study {args.study}"):
+        with (allow_foreign_files(args.force), claim(out, f"ipp-study {args.study}"),
+              sigterm_as_interrupt()):
             return _study(args, out, backend, seed, agents, comm)
     except (ValueError, OSError, argparse.ArgumentTypeError) as err:
         # OSError: ConnectionError (no Ray at --address) included
         print(f"ipp-study: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return interrupted("ipp-study", Path(out))
+    except KeyboardInterrupt as interrupt:
+        return interrupted("ipp-study", Path(out), interrupt)
 
 
 def _check_flags(args: argparse.Namespace) -> None:

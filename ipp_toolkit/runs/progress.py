@@ -9,20 +9,25 @@ each time another ``every`` percent is done (and at the end)::
     evaluate: 0% (0/200 missions, 0 s)
     evaluate: 25% (50/200 missions, 12 s)
 
-How a long command ends early is here too: :func:`report_interrupt` (Ctrl-C) and
-:func:`run_reporting`, the error and interrupt handling every trainer's ``main`` shares.
+How a long command ends early is here too: :func:`report_interrupt` (Ctrl-C, or SIGTERM
+turned into :class:`Terminated` by :func:`sigterm_as_interrupt`) and :func:`run_reporting`, the
+error and interrupt handling every trainer's ``main`` shares.
 """
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import IO, Any
 
 from tqdm import tqdm
 
-__all__ = ["LineProgress", "progress_bar", "report_interrupt", "run_reporting"]
+__all__ = ["LineProgress", "Terminated", "progress_bar", "report_interrupt", "run_reporting",
+           "sigterm_as_interrupt"]
 
 
 class LineProgress:
@@ -91,22 +96,53 @@ def progress_bar(total: int, desc: str, unit: str, initial: int = 0, disable: bo
     return LineProgress(total, desc, unit, initial=initial, file=stream)
 
 
-def report_interrupt(tool: str, how_to_continue: str) -> int:
-    """Ctrl-C in a long run: one line on stderr saying how to continue; returns 130 (SIGINT).
+class Terminated(KeyboardInterrupt):
+    """SIGTERM during a command's work (``kill PID``, a scheduler ending a job), raised where
+    Ctrl-C raises KeyboardInterrupt, so the run stops the same orderly way: worker processes
+    stopped, what is stored kept, one line saying how to continue."""
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` in the main thread instead of
+    ending the process at once; the previous handler is restored after it. Elsewhere than in
+    the main thread (where Python runs signal handlers) it changes nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum: int, frame: Any) -> None:
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def report_interrupt(tool: str, how_to_continue: str,
+                     interrupt: BaseException | None = None) -> int:
+    """Ctrl-C in a long run: one line on stderr saying how to continue; returns 130 (SIGINT),
+    or for a :class:`Terminated` ``interrupt`` says "terminated" and returns 143 (SIGTERM), as
+    a shell reports the two signals.
 
     Args:
         tool: the command, e.g. ``ipp-compare``.
         how_to_continue: the rest of the sentence, e.g. ``continue with --resume --out RUN``.
+        interrupt: the KeyboardInterrupt caught, if any.
     """
-    print(f"\n{tool}: interrupted; {how_to_continue}", file=sys.stderr)
-    return 130
+    terminated = isinstance(interrupt, Terminated)
+    print(f"\n{tool}: {'terminated' if terminated else 'interrupted'}; {how_to_continue}",
+          file=sys.stderr)
+    return 143 if terminated else 130
 
 
 def run_reporting(tool: str, work: Callable[[], int], how_to_continue: str | Callable[[], str],
                   errors: tuple[type[BaseException], ...] = ()) -> int:
     """Run a command's ``work`` and return its exit code, reporting how it ends early alike in
     every command: bad input as one line ``TOOL: error: MESSAGE`` and exit code 2, never a
-    traceback; Ctrl-C as :func:`report_interrupt` (130).
+    traceback; Ctrl-C as :func:`report_interrupt` (130), and SIGTERM likewise (143).
 
     Bad input is any ValueError: the limits' ``LimitError`` and a damaged checkpoint's
     ``CheckpointError`` are ValueErrors, so a limit refused anywhere in the work is reported as
@@ -121,10 +157,11 @@ def run_reporting(tool: str, work: Callable[[], int], how_to_continue: str | Cal
             ``--address``; ``FileExistsError``: a folder that holds a run).
     """
     try:
-        return work()
+        with sigterm_as_interrupt():
+            return work()
     except (ValueError, *errors) as error:
         print(f"{tool}: error: {error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as interrupt:
         return report_interrupt(tool, how_to_continue if isinstance(how_to_continue, str)
-                                else how_to_continue())
+                                else how_to_continue(), interrupt)
