@@ -46,7 +46,7 @@ from ipp_toolkit.runs.cli_flags import (
     positive_int,
 )
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import run_reporting
+from ipp_toolkit.runs.progress import continue_hint, run_reporting
 from ipp_toolkit.runs.ray_backend import check_backend_flags, probe
 from ipp_toolkit.runs.run_folder import COMA_COMMAND, check_out_path, claim
 
@@ -300,9 +300,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     # ImportError: a planner or Ray that cannot be imported; FileExistsError: --out holds a
     # run; ConnectionError: no Ray at --address.
-    return run_reporting("ipp-train coma", lambda: _run(args),
-                         f"continue with --resume --out {args.out} (from the last checkpoint)",
-                         errors=(ImportError, FileExistsError, ConnectionError))
+    return run_reporting("ipp-train coma", lambda: _run(args), continue_hint(
+        args.out, "last.pt", f"continue with --resume --out {args.out} (from the last checkpoint)"),
+        errors=(ImportError, FileExistsError, ConnectionError))
 
 
 def _run(args: argparse.Namespace) -> int:

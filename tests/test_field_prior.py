@@ -205,6 +205,51 @@ def test_ipp_train_prior_repeats_itself_and_continues_after_an_interruption(tmp_
         assert torch.equal(value, b.network.state_dict()[key])
 
 
+def test_ipp_train_prior_stopped_before_its_first_checkpoint_starts_again(tmp_path,
+                                                                          monkeypatch, capsys):
+    import baselines.field_prior.training as training
+    from reports.cli import train_main
+
+    out = tmp_path / "run"
+    epochs = training.train_epoch
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt  # in the first epoch: before last.pt is written
+
+    monkeypatch.setattr(training, "train_epoch", stopped)
+    assert train_main(["prior", "--out", str(out), *TINY]) == 130
+    err = capsys.readouterr().err
+    assert "no checkpoint was written yet" in err and "start afresh" in err
+    assert not (out / "last.pt").exists() and (out / "config.json").is_file()
+    monkeypatch.setattr(training, "train_epoch", epochs)
+    # Nothing to resume, said precisely; the same command starts the run again.
+    assert train_main(["prior", "--out", str(out), *TINY, "--resume"]) == 2
+    assert "the run stopped before its first checkpoint" in capsys.readouterr().err
+    assert train_main(["prior", "--out", str(out), *TINY]) == 0
+    assert (out / "best.pt").is_file()
+    # A folder holding anything else is still refused.
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "config.json").write_text('{"kind": "ipp-train prior"}')
+    (other / "notes.txt").write_text("mine")
+    assert train_main(["prior", "--out", str(other), *TINY, "--force"]) == 2
+    assert "not an empty folder" in capsys.readouterr().err
+
+
+def test_continue_hint_names_resume_only_where_a_checkpoint_was_written(tmp_path):
+    from ipp_toolkit.runs.progress import continue_hint
+
+    hint = continue_hint(tmp_path / "run", "last.pt", "continue with --resume")
+    assert "no checkpoint was written yet" in hint()  # no folder at all
+    (tmp_path / "run" / "stage-1-a").mkdir(parents=True)
+    assert "start afresh" in hint()
+    (tmp_path / "run" / "stage-1-a" / "last.pt").write_bytes(b"")
+    assert hint() == "continue with --resume"  # a recipe's stage folder
+    (tmp_path / "run" / "stage-1-a" / "last.pt").unlink()
+    (tmp_path / "run" / "last.pt").write_bytes(b"")
+    assert hint() == "continue with --resume"
+
+
 @pytest.mark.parametrize("flags, message", [
     (["--width", "0"], "argument --width: must be an integer >= 1, got '0'"),
     (["--team-sizes", "2,x"], "argument --team-sizes: must be an integer >= 1, got 'x'"),

@@ -63,7 +63,7 @@ from ipp_toolkit.io import CheckpointError, atomic_write, load_torch, save_torch
 from ipp_toolkit.planning import Planner, planner_views
 from ipp_toolkit.runs.cli_flags import comm_range_list, int_list, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import progress_bar, run_reporting
+from ipp_toolkit.runs.progress import continue_hint, progress_bar, run_reporting
 from ipp_toolkit.runs.result_store import check_raster_unchanged, raster_digest
 from ipp_toolkit.runs.run_folder import LOCK_NAME, RECORD_NAME, claim
 from ipp_toolkit.sim.driver import fly_missions, start_missions
@@ -410,12 +410,33 @@ def _load_rounds(out: Path, rounds: int) -> tuple[list[dict], list[dict]]:
     return train, validation
 
 
+#: What a prior's training writes before its first checkpoint (``last.pt``).
+_BEFORE_FIRST_CHECKPOINT = frozenset({"config.json", "progress.csv", "data"})
+
+
+def _stopped_before_checkpoint(out: Path, found: frozenset[str]) -> bool:
+    """Whether ``out`` (holding ``found``) holds only a prior's training that stopped before
+    its first checkpoint: nothing to resume and nothing trained, so a new run starts there
+    (as the other trainers' do) instead of refusing both a new run and ``--resume``."""
+    if "config.json" not in found or not found <= _BEFORE_FIRST_CHECKPOINT:
+        return False
+    try:
+        stored = json.loads((out / "config.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(stored, dict) and stored.get("kind") == PRIOR_COMMAND
+
+
 def _open_run(out: Path, record: dict[str, Any], resume: bool, found: frozenset[str]
               ) -> dict[str, Any] | None:
     """Check ``out`` (holding the files ``found``) and write its ``config.json``; the
     ``last.pt`` state when resuming."""
     config_path = out / "config.json"
     if resume:
+        if _stopped_before_checkpoint(out, found):
+            raise ValueError(f"nothing to resume: {str(out / 'last.pt')!r} does not exist (the "
+                             "run stopped before its first checkpoint); drop --resume to start "
+                             "it again")
         if not config_path.is_file() or not (out / "last.pt").is_file():
             raise ValueError(f"nothing to resume in {str(out)!r} (no config.json and last.pt "
                              "of a prior's training)")
@@ -439,7 +460,7 @@ def _open_run(out: Path, record: dict[str, Any], resume: bool, found: frozenset[
         check_raster_unchanged(stored.get("raster_sha256"), record.get("raster_sha256"),
                                record["env"]["terrain"]["raster"], f"run folder {str(out)!r}")
         return load_torch(out / "last.pt", TRAINING_FORMAT)
-    if found:
+    if found and not _stopped_before_checkpoint(out, found):
         raise ValueError(f"--out {str(out)!r} exists and is not an empty folder; use --resume "
                          "to continue the run in it, or another folder")
     write_json(config_path, {"kind": PRIOR_COMMAND, **record})
@@ -536,7 +557,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"saved {path}")
         return 0
 
-    return run_reporting("ipp-train prior", work, f"continue with --resume --out {args.out}")
+    return run_reporting("ipp-train prior", work, continue_hint(
+        args.out, "last.pt", f"continue with --resume --out {args.out}"))
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ from ipp_toolkit.config.schema import EnvConfig, start_for_team_size
 from ipp_toolkit.config.settings import build_env_config, setting_line
 from ipp_toolkit.runs.cli_flags import comm_range, positive_float, positive_int
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version
-from ipp_toolkit.runs.progress import run_reporting
+from ipp_toolkit.runs.progress import continue_hint, run_reporting
 from ipp_toolkit.sim.features import actor_plane_names
 from ipp_toolkit.sim.team import N_ACTIONS
 
@@ -380,8 +380,9 @@ def main(argv: list[str] | None = None, prog: str = "ipp-train ppo",
         print(f"saved {path}")
         return 0
 
-    return run_reporting(prog, work, f"continue with --resume --out {args.out} "
-                         "(from the last checkpoint)")
+    return run_reporting(prog, work, continue_hint(
+        args.out, "checkpoint.pt", f"continue with --resume --out {args.out} (from the last "
+        "checkpoint)"))
 
 
 if __name__ == "__main__":

@@ -38,7 +38,7 @@ from ipp_toolkit.config.schema import EnvConfig
 from ipp_toolkit.config.settings import setting_line
 from ipp_toolkit.io import save_checkpoint
 from ipp_toolkit.runs.cli_help import HelpFormatter, add_version, version_line
-from ipp_toolkit.runs.progress import run_reporting
+from ipp_toolkit.runs.progress import continue_hint, run_reporting
 from ipp_toolkit.sim.features import actor_plane_names
 
 # The policies (torch), SB3 and the simulator's SB3 view are imported where a model is built:
@@ -497,8 +497,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"saved {path}")
         return 0
 
-    return run_reporting("ipp-train sb3", work, f"continue with the same command plus "
-                         f"--resume --out {out} (from the last checkpoint)")
+    return run_reporting("ipp-train sb3", work, continue_hint(
+        out, "checkpoint.pt", f"continue with the same command plus --resume --out {out} (from "
+        "the last checkpoint)"))
 
 
 if __name__ == "__main__":

@@ -17,17 +17,19 @@ error and interrupt handling every trainer's ``main`` shares.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import IO, Any
 
 from tqdm import tqdm
 
-__all__ = ["LineProgress", "Terminated", "progress_bar", "report_interrupt", "run_reporting",
-           "sigterm_as_interrupt"]
+__all__ = ["LineProgress", "Terminated", "continue_hint", "progress_bar", "report_interrupt",
+           "run_reporting", "sigterm_as_interrupt"]
 
 
 class LineProgress:
@@ -136,6 +138,23 @@ def report_interrupt(tool: str, how_to_continue: str,
     print(f"\n{tool}: {'terminated' if terminated else 'interrupted'}; {how_to_continue}",
           file=sys.stderr)
     return 143 if terminated else 130
+
+
+def continue_hint(folder: str | os.PathLike[str], checkpoint: str, resume: str
+                  ) -> Callable[[], str]:
+    """How an interrupted training run goes on, for :func:`run_reporting`: ``resume`` (e.g.
+    ``continue with --resume --out RUN``) where a ``checkpoint`` file (e.g. ``last.pt``) lies in
+    ``folder`` or in a folder inside it (a recipe's stages); else that none was written yet,
+    so the same command starts the run again (a rerun into such a folder starts afresh)."""
+
+    def hint() -> str:
+        root = Path(folder)
+        if (root / checkpoint).is_file() or next(root.glob(f"*/{checkpoint}"), None):
+            return resume
+        return (f"no checkpoint was written yet in {os.fspath(folder)!r}: run the same command "
+                "again (without --resume) to start afresh")
+
+    return hint
 
 
 def run_reporting(tool: str, work: Callable[[], int], how_to_continue: str | Callable[[], str],
