@@ -19,8 +19,12 @@ workers' exit, the tables, the curves, the process's exit).
 Measure on an otherwise idle machine: a second job on a 2-core machine takes the core one
 evaluation worker needs. Where the machine's speed drifts (shared virtual machines), time
 against a fixed reference in the same minutes: ``--reference TREE`` alternates every run
-with the same run of another source tree's code (e.g. ``git worktree add /tmp/ref e7668be``,
-the last five-planner default) in the same virtual environment and prints the ratio.
+with the same run of another source tree's code (e.g. ``git worktree add /tmp/ref HEAD~1``)
+in the same virtual environment and prints the ratio. The reference finds its planners through
+this environment's entry points, so it must keep its planner modules where this tree keeps them:
+a tree from before the planners moved into ``baselines/heuristics`` and its siblings (e.g.
+e7668be, the last five-planner default) flies only the planners it can find there, and needs a
+virtual environment of its own to be measured.
 """
 
 from __future__ import annotations
